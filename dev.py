@@ -1,0 +1,65 @@
+#!/usr/bin/env python3
+"""Set up the project's own venv if needed, then run the demo or the test suite.
+
+    python3 dev.py demo [epp_demo options]    # live demo on the built-in simulated pump
+    python3 dev.py test [pytest options]      # the whole test suite
+    python3 dev.py bench [epp_bench options]  # the benchmarks
+
+The venv (.venv/) is rebuilt from requirements.txt only when that file, setup.py or
+setup.cfg changed since the last run, so a second run starts at once.
+Needs nothing but Python >= 3.10.
+"""
+import hashlib
+import os
+import subprocess
+import sys
+import venv
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent
+VENV = ROOT / '.venv'
+PYTHON = VENV / 'bin' / 'python'
+STAMP = VENV / '.epp-ros-stamp'
+INPUTS = ('requirements.txt', 'setup.py', 'setup.cfg')
+
+
+def _fingerprint():
+    digest = hashlib.sha256()
+    for name in INPUTS:
+        digest.update((ROOT / name).read_bytes())
+    digest.update(sys.version.encode())
+    return digest.hexdigest()
+
+
+def ensure_venv():
+    """Create or update .venv so that it matches requirements.txt; return its python."""
+    fingerprint = _fingerprint()
+    if PYTHON.exists() and STAMP.exists() and STAMP.read_text() == fingerprint:
+        return PYTHON
+    print('dev.py: preparing .venv (first run or changed requirements) ...', flush=True)
+    if not PYTHON.exists():
+        venv.EnvBuilder(with_pip=True).create(VENV)
+    pip = [str(PYTHON), '-m', 'pip', 'install', '--quiet', '--disable-pip-version-check']
+    subprocess.run(pip + ['-r', str(ROOT / 'requirements.txt')], check=True)
+    subprocess.run(pip + ['--no-deps', '--no-build-isolation', '-e', str(ROOT)], check=True)
+    STAMP.write_text(fingerprint)
+    return PYTHON
+
+
+def main(argv):
+    if not argv or argv[0] not in ('demo', 'test', 'bench'):
+        print(__doc__.strip())
+        return 2
+    python = ensure_venv()
+    command, rest = argv[0], argv[1:]
+    env = dict(os.environ, AMENT_PREFIX_PATH=str(VENV), VIRTUAL_ENV=str(VENV))
+    if command == 'test':
+        args = [str(python), '-m', 'pytest'] + rest
+    else:
+        script = {'demo': 'epp_demo', 'bench': 'epp_bench'}[command]
+        args = [str(VENV / 'bin' / script)] + rest
+    return subprocess.run(args, cwd=ROOT, env=env).returncode
+
+
+if __name__ == '__main__':
+    sys.exit(main(sys.argv[1:]))

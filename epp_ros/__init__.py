@@ -1,0 +1,1 @@
+"""epp_ros: live boom posture of a concrete pump from UWB ranges."""

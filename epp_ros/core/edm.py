@@ -1,0 +1,155 @@
+"""Euclidean distance matrix helpers: cone projection, rank penalty, classical MDS, alignment.
+
+An EDM here is a matrix of *squared* distances, ``D[i, j] = ||x_i - x_j||^2``.
+"""
+import numpy as np
+
+__all__ = ['squared_distances', 'centering_matrix', 'project_edm_cone', 'rank_penalty',
+           'classical_mds', 'align_to_known']
+
+
+def squared_distances(points):
+    """Squared-distance matrix of ``points`` (n, d) -> (n, n)."""
+    points = np.asarray(points, dtype=float)
+    gram = points @ points.T
+    norms = np.diag(gram)
+    return np.maximum(norms[:, None] + norms[None, :] - 2.0 * gram, 0.0)
+
+
+def centering_matrix(q):
+    """Orthogonal projector ``I - q q^T / q^T q`` onto the complement of ``q`` (n,) -> (n, n).
+
+    ``q = ones(n)`` gives the usual geometric centering matrix J.
+    """
+    q = np.asarray(q, dtype=float)
+    return np.eye(q.size) - np.outer(q, q) / (q @ q)
+
+
+def project_edm_cone(matrix, q=None):
+    """Project a symmetric matrix onto ``K_-(q) = {Y : Y is NSD on q-perp}``.
+
+    With ``q = ones`` this is the cone ``K^n_-`` of conditionally negative semidefinite
+    matrices that, with a zero diagonal, are exactly the EDMs; the projection is closed form
+    (Hayden & Wells 1988): ``Pi(A) = A - Pi_{S+}(J A J)``.
+
+    Parameters
+    ----------
+    matrix : ndarray, shape (n, n), symmetric
+    q : ndarray, shape (n,), optional
+        Centering direction; ones by default.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+    """
+    matrix = np.asarray(matrix, dtype=float)
+    n = matrix.shape[0]
+    centering = centering_matrix(np.ones(n) if q is None else q)
+    centred = centering @ matrix @ centering
+    eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (centred + centred.T))
+    positive = np.maximum(eigenvalues, 0.0)
+    return matrix - (eigenvectors * positive) @ eigenvectors.T
+
+
+def rank_penalty(edm, rank):
+    """Rank penalty ``p(D) = sum_{i > r} lambda_i(-J D J)`` and the top-r eigenvectors.
+
+    Zero iff the points generating ``edm`` (an EDM or near one) span at most ``rank``
+    dimensions. It is concave in D: linearising it at D^k gives the majorisation used by
+    the penalty method, ``p(D) <= <D, -J (I - U) J>`` with ``U = P1 P1^T``.
+
+    Returns
+    -------
+    penalty : float
+        Sum of the eigenvalues of ``-J D J`` beyond the r-th (negatives count as zero).
+    trace : float
+        Sum of the positive eigenvalues, to turn ``penalty`` into a relative rank error.
+    leading : ndarray, shape (n, rank)
+        Eigenvectors of the r largest eigenvalues.
+    """
+    n = edm.shape[0]
+    centering = centering_matrix(np.ones(n))
+    gram = -centering @ edm @ centering
+    eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (gram + gram.T))
+    eigenvalues = eigenvalues[::-1]
+    eigenvectors = eigenvectors[:, ::-1]
+    positive = np.maximum(eigenvalues, 0.0)
+    return float(positive[rank:].sum()), float(positive.sum()), eigenvectors[:, :rank]
+
+
+def classical_mds(edm, dim):
+    """Classical multidimensional scaling (Torgerson): points whose EDM is nearest ``edm``.
+
+    Parameters
+    ----------
+    edm : ndarray, shape (n, n)
+        Squared distances.
+    dim : int
+        Embedding dimension r.
+
+    Returns
+    -------
+    points : ndarray, shape (n, dim)
+        ``P1 diag(sqrt(lambda_1..r))`` from ``-1/2 J D J = P diag(lambda) P^T``, centred at
+        the origin; negative eigenvalues are clipped to zero.
+    """
+    n = edm.shape[0]
+    centering = centering_matrix(np.ones(n))
+    gram = -0.5 * centering @ edm @ centering
+    eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (gram + gram.T))
+    order = np.argsort(eigenvalues)[::-1][:dim]
+    return eigenvectors[:, order] * np.sqrt(np.maximum(eigenvalues[order], 0.0))
+
+
+def align_to_known(points, known_index, known_positions, pivot=None, up_axis=-1):
+    """Rigidly move an embedding so that its known points land on their true positions.
+
+    Orthogonal Procrustes with translation, reflections allowed, no scaling (the embedding
+    of an EDM is defined only up to a rigid motion and a reflection). With a ``pivot``, that
+    known point is matched exactly and the rotation about it fits the others.
+
+    When the known points do not span all dimensions (e.g. anchors in one plane), the
+    mirror image through their affine hull fits them equally well; then the solution that
+    puts the other points higher along ``up_axis`` is chosen (the boom is above the truck).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, d)
+        Embedded points.
+    known_index : ndarray of int, shape (k,)
+        Rows of ``points`` whose true positions are known.
+    known_positions : ndarray, shape (k, d)
+        Their true positions.
+    pivot : int, optional
+        Position in ``known_index`` of a point to match exactly (the boom's base pivot).
+    up_axis : int
+        Coordinate that points up, for the mirror rule.
+
+    Returns
+    -------
+    aligned : ndarray, shape (n, d)
+    """
+    points = np.asarray(points, dtype=float)
+    known_positions = np.asarray(known_positions, dtype=float)
+    source = points[known_index]
+    if pivot is None:
+        source_mean = source.mean(axis=0)
+        target_mean = known_positions.mean(axis=0)
+    else:
+        source_mean = source[pivot]
+        target_mean = known_positions[pivot]
+    u, s, vt = np.linalg.svd((source - source_mean).T @ (known_positions - target_mean))
+    rotation = u @ vt
+    aligned = (points - source_mean) @ rotation + target_mean
+    spread = np.linalg.svd(known_positions - target_mean, compute_uv=False)
+    degenerate = spread.size < points.shape[1] or spread[-1] <= 1e-9 * max(spread[0], 1.0)
+    if degenerate:
+        # Mirror through the known points' hull: flip along the direction they do not span.
+        _, _, hull_vt = np.linalg.svd(known_positions - target_mean)
+        normal = hull_vt[-1]
+        mirror = np.eye(points.shape[1]) - 2.0 * np.outer(normal, normal)
+        mirrored = (aligned - target_mean) @ mirror + target_mean
+        others = np.setdiff1d(np.arange(points.shape[0]), known_index)
+        if others.size and mirrored[others, up_axis].mean() > aligned[others, up_axis].mean():
+            aligned = mirrored
+    return aligned

@@ -1,0 +1,338 @@
+"""Posture estimators behind one interface, chosen by name.
+
+``PostureEstimator(model, method)`` turns each frame of tag-anchor ranges (p, m) into joint
+positions (p, 3), keeping the previous estimate as the warm start. Methods:
+
+- ``epp1``: the paper's NEDM model in 3-D without the arm-length constraints.
+- ``epp2``: the same with the arm lengths (base-joint 1 included) as equality constraints.
+- ``cepp``: EPP2 in the boom's vertical plane (rank 2) after projecting the ranges.
+"""
+import time
+
+import numpy as np
+
+from .edm import align_to_known, squared_distances
+from .multilateration import intersect_spheres, srls
+from .nedm import nearest_edm
+from .plane import fit_slew, from_plane, project_ranges, to_plane
+
+__all__ = ['PostureEstimator', 'METHODS', 'cold_start_guess']
+
+
+def clean_ranges(ranges, shape):
+    """Validate a (p, m) range frame; NaN, inf and negative entries become NaN (missing)."""
+    try:
+        array = np.array(ranges, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'ranges must be a numeric array of shape {shape}') from exc
+    if array.shape != shape:
+        raise ValueError(f'ranges must have shape {shape} (tags, anchors), got {array.shape}')
+    with np.errstate(invalid='ignore'):
+        array[~np.isfinite(array) | (array < 0)] = np.nan
+    return array
+
+
+def cold_start_guess(model, ranges):
+    """Joint positions from this frame's ranges alone, to seed a solver without a previous pose.
+
+    Each tag is located by SR-LS from its anchor ranges; a tag with too few of them also uses
+    its already located neighbours (or the base pivot) as spheres of radius the section
+    length, repeated outward until nothing more can be located. Tags still unlocated take
+    the position of the nearest located joint along the chain; they only seed the solver.
+
+    Returns
+    -------
+    joints : ndarray, shape (p, 3), or None when no tag can be located.
+    """
+    p = model.n_sections
+    lengths = model.arm_lengths
+    joints = np.full((p, 3), np.nan)
+
+    def neighbour_spheres(k):
+        centres, radii = [], []
+        inner = model.base if k == 0 else joints[k - 1]
+        if np.isfinite(inner[0]):
+            centres.append(inner)
+            radii.append(lengths[k])
+        if k + 1 < p and np.isfinite(joints[k + 1, 0]):
+            centres.append(joints[k + 1])
+            radii.append(lengths[k + 1])
+        return centres, radii
+
+    for use_neighbours in (False, True):
+        progress = True
+        while progress:
+            progress = False
+            for k in np.flatnonzero(~np.isfinite(joints[:, 0])):
+                valid = np.isfinite(ranges[k])
+                centres, radii = neighbour_spheres(k) if use_neighbours else ([], [])
+                centres = np.vstack([model.anchors[valid]] + [np.reshape(centres, (-1, 3))])
+                radii = np.concatenate([ranges[k, valid], radii])
+                position = _locate(centres, radii, allow_three=use_neighbours)
+                if position is not None:
+                    joints[k] = position
+                    progress = use_neighbours
+    located = np.flatnonzero(np.isfinite(joints[:, 0]))
+    if located.size == 0:
+        return None
+    for k in np.setdiff1d(np.arange(p), located):
+        joints[k] = joints[located[np.argmin(np.abs(located - k))]]
+    return joints
+
+
+def _locate(centres, radii, allow_three):
+    """A point at the given distances from distinct centres; the upper one if ambiguous."""
+    _, first = np.unique(np.round(centres, 9), axis=0, return_index=True)
+    first = np.sort(first)
+    centres, radii = centres[first], radii[first]
+    position = srls(centres, radii) if radii.size >= 4 else None
+    if position is None and allow_three and radii.size >= 3:
+        candidates = intersect_spheres(centres[:3], radii[:3])
+        position = None if candidates is None else candidates[0]
+    return position
+
+
+class _EDMMethod:
+    """Shared machinery of the NEDM estimators: build G, H and the fixed set; solve; embed."""
+
+    rank = 3
+    fix_lengths = True
+
+    def __init__(self, model, prior_weight=0.0, anchor_weight=10.0, tol=1e-6, max_iter=500):
+        self.model = model
+        self.prior_weight = float(prior_weight)
+        self.anchor_weight = float(anchor_weight)
+        self.tol = tol
+        self.max_iter = max_iter
+        base_anchor = model.base_anchor()
+        self._base_anchor = base_anchor
+        self._other_anchors = np.array([j for j in range(model.n_anchors) if j != base_anchor],
+                                       dtype=int)
+
+    def min_ranges(self):
+        """(per tag, in total) valid ranges the method needs."""
+        p = self.model.n_sections
+        # Without lengths each tag stands alone: r + 1 ranges, or its mirror image fits too.
+        return (1, (self.rank - 1) * p) if self.fix_lengths else (self.rank + 1, 3 * p)
+
+    def _known_columns(self, ranges):
+        """Ranges (p, k) from each tag to the known points: base first, then other anchors."""
+        p = self.model.n_sections
+        base_column = (ranges[:, self._base_anchor] if self._base_anchor is not None
+                       else np.full(p, np.nan))
+        return np.column_stack([base_column, ranges[:, self._other_anchors]])
+
+    def _solve_edm(self, known, tag_squared, tag_weights, prior):
+        """Solve the NEDM for tags given known points (k, d), squared ranges (p, k), prior."""
+        k, p = known.shape[0], prior.shape[0]
+        n = k + p
+        lengths_sq = self.model.arm_lengths ** 2
+        initial = squared_distances(np.vstack([known, prior]))
+        target = initial.copy()
+        weights = np.zeros((n, n))
+        # Known-known distances are weighted, not fixed: fixing all of them leaves the convex
+        # subproblem without a strictly feasible point whenever the known points outnumber
+        # their affine dimension + 1 (always in the plane), and its dual Newton method then
+        # converges sublinearly. The base pivot is pinned exactly by the alignment instead.
+        weights[:k, :k] = self.anchor_weight
+        fixed = np.zeros((n, n), bool)
+        tags = slice(k, n)
+        measured = np.isfinite(tag_squared)
+        target[tags, :k] = np.where(measured, tag_squared, target[tags, :k])
+        target[:k, tags] = target[tags, :k].T
+        weights[tags, :k] = np.where(measured, tag_weights, 0.0)
+        weights[:k, tags] = weights[tags, :k].T
+        weights[tags, tags] = self.prior_weight
+        if self.fix_lengths:
+            chain = np.r_[0, np.arange(k, n)]              # base, joint 1, ..., joint p
+            target[chain[:-1], chain[1:]] = target[chain[1:], chain[:-1]] = lengths_sq
+            fixed[chain[:-1], chain[1:]] = fixed[chain[1:], chain[:-1]] = True
+        result = nearest_edm(target, weights, rank=self.rank, fixed=fixed, initial=initial,
+                             tol=self.tol, max_iter=self.max_iter)
+        aligned = align_to_known(result.points, np.arange(k), known, pivot=0)
+        info = {'iterations': result.iterations, 'inner_iterations': result.inner_iterations,
+                'rank_error': result.rank_error, 'kkt_residual': result.kkt_residual,
+                'converged': result.converged}
+        return aligned[tags], info
+
+
+class EPP1(_EDMMethod):
+    """NEDM posture estimate in 3-D without arm-length constraints (the paper's EPP1)."""
+
+    fix_lengths = False
+
+    def solve(self, ranges, prior):
+        known = np.vstack([self.model.base, self.model.anchors[self._other_anchors]])
+        columns = self._known_columns(ranges)
+        return self._solve_edm(known, columns ** 2, np.ones_like(columns), prior)
+
+
+class EPP2(EPP1):
+    """NEDM posture estimate in 3-D with fixed arm lengths (the paper's EPP2)."""
+
+    fix_lengths = True
+
+
+class CEPP(_EDMMethod):
+    """EPP2 in the boom's vertical plane (the paper's CEPP).
+
+    The plane comes from the prior (previous estimate or cold start). Then, beyond the
+    paper, the slew is refined against the 3-D ranges and the plane problem re-solved until
+    the slew settles, so that a slewing boom is not held in last frame's plane.
+    """
+
+    rank = 2
+
+    def __init__(self, model, clip_weight=0.1, slew_iterations=2, slew_tol=1e-6, **options):
+        super().__init__(model, **options)
+        self.clip_weight = float(clip_weight)
+        self.slew_iterations = int(slew_iterations)
+        self.slew_tol = float(slew_tol)
+
+    def _solve_in_plane(self, ranges, prior, slew):
+        base = self.model.base
+        squared, clipped = project_ranges(ranges, self.model.anchors, base, slew)
+        weights = np.where(clipped, self.clip_weight, 1.0)
+        anchors_2d = to_plane(self.model.anchors, base, slew)
+        known = np.vstack([[0.0, base[2]], anchors_2d[self._other_anchors]])
+        columns = self._known_columns(squared)
+        column_weights = self._known_columns(weights)
+        coords, info = self._solve_edm(known, columns, column_weights,
+                                       to_plane(prior, base, slew))
+        return coords, info
+
+    def solve(self, ranges, prior):
+        slew = fit_slew(prior, self.model.base)
+        totals = {'iterations': 0, 'inner_iterations': 0}
+        for attempt in range(self.slew_iterations + 1):
+            coords, info = self._solve_in_plane(ranges, prior, slew)
+            for key in totals:
+                totals[key] += info[key]
+            joints = from_plane(coords, self.model.base, slew)
+            if attempt == self.slew_iterations:
+                break
+            step = slew_step(self.model, coords, ranges, slew)
+            if abs(step) <= self.slew_tol:
+                break
+            slew, prior = slew + step, joints
+        info.update(totals, slew=float(np.mod(slew + np.pi, 2 * np.pi) - np.pi))
+        return joints, info
+
+
+def slew_step(model, coords, ranges, slew):
+    """Gauss-Newton step on the slew for fixed in-plane coordinates, radians.
+
+    Minimises ``sum (||w_k(theta) - a_j|| - delta_kj)^2`` over the valid ranges, where
+    ``w_k(theta)`` puts the in-plane point ``coords[k]`` into the plane of ``theta``.
+    """
+    joints = from_plane(coords, model.base, slew)
+    difference = joints[:, None, :] - model.anchors[None, :, :]
+    distance = np.linalg.norm(difference, axis=-1)
+    valid = np.isfinite(ranges) & (distance > 1e-9)
+    tangent = coords[:, 0, None] * np.array([-np.sin(slew), np.cos(slew), 0.0])  # dw/dtheta
+    jac = np.einsum('kjc,kc->kj', difference, tangent) / np.where(valid, distance, 1.0)
+    residual = np.where(valid, distance - np.nan_to_num(ranges), 0.0)
+    jac = np.where(valid, jac, 0.0)
+    curvature = np.sum(jac ** 2)
+    return float(-np.sum(jac * residual) / curvature) if curvature > 1e-12 else 0.0
+
+
+METHODS = {'epp1': EPP1, 'epp2': EPP2, 'cepp': CEPP}
+
+
+class PostureEstimator:
+    """Frame-by-frame boom posture from UWB ranges.
+
+    Parameters
+    ----------
+    model : BoomModel
+    method : str
+        One of ``METHODS``: ``"epp1"``, ``"epp2"``, ``"cepp"``.
+    **options
+        Passed to the method (e.g. ``prior_weight``, ``tol``; CEPP: ``slew_iterations``).
+
+    Attributes
+    ----------
+    last_diagnostics : dict
+        Of the last :meth:`update`: ``status`` (``"ok"``, ``"insufficient_data"``,
+        ``"solver_failed"``), ``valid`` (positions come from this frame), ``method``,
+        ``cold_start``, ``arm_length_error`` (p,) and ``section_lengths`` (p,) in metres,
+        ``range_residual_rms`` (m), ``missing_links``, ``iterations``, ``solve_time`` (s),
+        and solver details (``rank_error``, ``kkt_residual``, ``converged``, ...).
+    """
+
+    def __init__(self, model, method='cepp', **options):
+        if method not in METHODS:
+            raise ValueError(f'method must be one of {sorted(METHODS)}, got {method!r}')
+        self.model = model
+        self.method = method
+        self._solver = METHODS[method](model, **options)
+        self._previous = None
+        self.last_diagnostics = {}
+
+    def reset(self):
+        """Forget the warm start: the next frame is solved from scratch."""
+        self._previous = None
+
+    @property
+    def previous(self):
+        """The last valid estimate (p, 3), or None."""
+        return None if self._previous is None else self._previous.copy()
+
+    def _fallback(self):
+        if self._previous is not None:
+            return self._previous.copy()
+        # Nothing known yet: a straight horizontal boom along +x, flagged invalid.
+        return self.model.forward_kinematics(0.0, np.zeros(self.model.n_sections))
+
+    def update(self, ranges):
+        """Estimate the joint positions from one frame of ranges.
+
+        Parameters
+        ----------
+        ranges : array_like, shape (p, m)
+            Metres; row k is the tag on joint k+1, column j anchor j; NaN, inf or negative
+            entries count as missing.
+
+        Returns
+        -------
+        joints : ndarray, shape (p, 3)
+            Base outward, tip last. Never NaN: a frame that cannot be solved returns the
+            previous estimate, and ``last_diagnostics["valid"]`` is False.
+        """
+        start = time.perf_counter()
+        p, m = self.model.n_sections, self.model.n_anchors
+        ranges = clean_ranges(ranges, (p, m))
+        valid = np.isfinite(ranges)
+        per_tag, total = self._solver.min_ranges()
+        diagnostics = {'method': self.method, 'missing_links': int(p * m - valid.sum()),
+                       'cold_start': self._previous is None, 'iterations': 0}
+        prior = self._previous
+        if prior is None and valid.sum(axis=1).min() >= per_tag and valid.sum() >= total:
+            prior = cold_start_guess(self.model, ranges)
+        if prior is None or valid.sum(axis=1).min() < per_tag or valid.sum() < total:
+            return self._finish(self._fallback(), 'insufficient_data', diagnostics, ranges,
+                                start)
+        try:
+            joints, info = self._solver.solve(ranges, prior)
+        except np.linalg.LinAlgError as exc:
+            diagnostics['error'] = str(exc)
+            return self._finish(self._fallback(), 'solver_failed', diagnostics, ranges, start)
+        diagnostics.update(info)
+        if not np.all(np.isfinite(joints)):
+            return self._finish(self._fallback(), 'solver_failed', diagnostics, ranges, start)
+        self._previous = joints.copy()
+        return self._finish(joints, 'ok', diagnostics, ranges, start)
+
+    def _finish(self, joints, status, diagnostics, ranges, start):
+        lengths = self.model.section_lengths(joints)
+        residual = self.model.ranges(joints) - ranges
+        valid = np.isfinite(residual)
+        diagnostics.update(
+            status=status, valid=status == 'ok', section_lengths=lengths,
+            arm_length_error=np.abs(lengths - self.model.arm_lengths),
+            range_residual_rms=float(np.sqrt(np.mean(residual[valid] ** 2))) if valid.any()
+            else float('nan'),
+            solve_time=time.perf_counter() - start)
+        self.last_diagnostics = diagnostics
+        return joints

@@ -1,0 +1,118 @@
+"""Boom geometry: section lengths, base pivot, anchors, and forward kinematics.
+
+Conventions (REP 103, SI): world frame in metres with z up. Sections are numbered from the
+base outward; section k (k = 1..p) has length ``arm_lengths[k-1]`` and joint k is its distal
+end, joint p the tip. One UWB tag sits on each joint, anchors are at known positions.
+"""
+import numpy as np
+
+__all__ = ['BoomModel']
+
+
+def _as_finite_array(value, field, ndim):
+    try:
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'{field} must be numeric, got {value!r}') from exc
+    if array.ndim != ndim:
+        raise ValueError(f'{field} must be a {ndim}-D array, got shape {array.shape}: {value!r}')
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f'{field} must be finite, got {value!r}')
+    return array
+
+
+class BoomModel:
+    """Geometry of a slewing, luffing boom and its UWB anchors.
+
+    Parameters
+    ----------
+    arm_lengths : array_like, shape (p,)
+        Section lengths in metres, base outward; finite and > 0, p >= 1.
+    base : array_like, shape (3,)
+        Base pivot (the first section's proximal joint) in the world frame, metres.
+    anchors : array_like, shape (m, 3)
+        Known anchor positions in the world frame, metres; m >= 3.
+
+    Raises
+    ------
+    ValueError
+        Naming the offending field and value.
+    """
+
+    def __init__(self, arm_lengths, base, anchors):
+        arm_lengths = _as_finite_array(arm_lengths, 'arm_lengths', 1)
+        if arm_lengths.size < 1:
+            raise ValueError('arm_lengths must hold at least one section, got []')
+        if np.any(arm_lengths <= 0):
+            raise ValueError(f'arm_lengths must be > 0, got {arm_lengths.tolist()}')
+        base = _as_finite_array(base, 'base', 1)
+        if base.shape != (3,):
+            raise ValueError(f'base must have shape (3,), got {base.shape}: {base.tolist()}')
+        anchors = _as_finite_array(anchors, 'anchors', 2)
+        if anchors.shape[1] != 3 or anchors.shape[0] < 3:
+            raise ValueError(f'anchors must have shape (m, 3) with m >= 3, got {anchors.shape}')
+        self.arm_lengths = arm_lengths
+        self.base = base
+        self.anchors = anchors
+        for array in (self.arm_lengths, self.base, self.anchors):
+            array.flags.writeable = False
+
+    @property
+    def n_sections(self):
+        """Number of sections (and tags), p."""
+        return self.arm_lengths.size
+
+    @property
+    def n_anchors(self):
+        """Number of anchors, m."""
+        return self.anchors.shape[0]
+
+    @property
+    def reach(self):
+        """Sum of the section lengths, metres."""
+        return float(self.arm_lengths.sum())
+
+    def base_anchor(self, atol=1e-9):
+        """Index of the anchor that sits at the base pivot, or None."""
+        hits = np.flatnonzero(np.linalg.norm(self.anchors - self.base, axis=1) <= atol)
+        return int(hits[0]) if hits.size else None
+
+    def forward_kinematics(self, slew, pitches):
+        """Joint positions of the boom.
+
+        Parameters
+        ----------
+        slew : float or ndarray, shape (...)
+            Turntable angle about z, radians, from the world x-axis.
+        pitches : ndarray, shape (..., p)
+            Elevation of each section above the horizontal, radians.
+
+        Returns
+        -------
+        joints : ndarray, shape (..., p, 3)
+            ``w_k = base + sum_{i<=k} L_i (cos phi_i cos theta, cos phi_i sin theta, sin phi_i)``.
+        """
+        slew = np.asarray(slew, dtype=float)
+        pitches = np.asarray(pitches, dtype=float)
+        if pitches.shape[-1] != self.n_sections:
+            raise ValueError(f'pitches must end in p={self.n_sections}, got {pitches.shape}')
+        reach = self.arm_lengths * np.cos(pitches)
+        steps = np.stack([reach * np.cos(slew)[..., None], reach * np.sin(slew)[..., None],
+                          self.arm_lengths * np.sin(pitches)], axis=-1)
+        return self.base + np.cumsum(steps, axis=-2)
+
+    def ranges(self, joints):
+        """Tag-to-anchor distances, shape (..., p, m), for joints of shape (..., p, 3)."""
+        joints = np.asarray(joints, dtype=float)
+        return np.linalg.norm(joints[..., :, None, :] - self.anchors, axis=-1)
+
+    def section_lengths(self, joints):
+        """Lengths ``||w_k - w_{k-1}||`` (w_0 = base) of an estimated boom, shape (..., p)."""
+        joints = np.asarray(joints, dtype=float)
+        base = np.broadcast_to(self.base, joints[..., :1, :].shape)
+        chain = np.concatenate([base, joints], axis=-2)
+        return np.linalg.norm(np.diff(chain, axis=-2), axis=-1)
+
+    def __repr__(self):
+        return (f'BoomModel(arm_lengths={self.arm_lengths.tolist()}, base={self.base.tolist()}, '
+                f'anchors={self.anchors.tolist()})')

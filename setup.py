@@ -1,0 +1,33 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'epp_ros'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(include=['epp_ros', 'epp_ros.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
+    ],
+    install_requires=['setuptools', 'numpy', 'scipy', 'pyserial', 'PyYAML'],
+    zip_safe=True,
+    maintainer='epp_ros developers',
+    maintainer_email='dev@epp-ros.invalid',
+    description='Live boom posture of a concrete pump from UWB ranges (EPP/CEPP).',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'uwb_driver = epp_ros.tools.pending:uwb_driver',
+            'posture_estimator = epp_ros.tools.pending:posture_estimator',
+            'uwb_emulator = epp_ros.tools.pending:uwb_emulator',
+            'epp_demo = epp_ros.tools.demo:main',
+            'epp_bench = epp_ros.tools.bench:main',
+            'epp_bag = epp_ros.tools.pending:epp_bag',
+        ],
+    },
+)

@@ -1,0 +1,22 @@
+"""Test-session environment: private ROS log dir and reliable, local-only Fast DDS discovery."""
+import os
+import random
+import sys
+import tempfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+def _configure_ros_environment():
+    log_dir = tempfile.mkdtemp(prefix='epp_ros_test_log_')
+    os.environ['ROS_LOG_DIR'] = log_dir
+    os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(HERE / 'fastdds_fast_discovery.xml')
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    os.environ['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
+    # A domain per run keeps parallel or leftover runs from hearing each other.
+    os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 100)))
+    os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
+
+
+_configure_ros_environment()
