@@ -19,8 +19,19 @@ from .plane import fit_slew, from_plane, project_ranges, to_plane
 __all__ = ['PostureEstimator', 'METHODS', 'cold_start_guess']
 
 
-def clean_ranges(ranges, shape):
-    """Validate a (p, m) range frame; NaN, inf and negative entries become NaN (missing)."""
+def clean_ranges(ranges, shape, max_ranges=None):
+    """Validate a (p, m) range frame and mark unusable entries missing.
+
+    NaN, inf and negative entries become NaN. So do entries longer than twice the longest
+    geometrically possible range plus 10 m (``max_ranges``, (p, m)): no noise or NLOS excess
+    explains them.
+
+    Returns
+    -------
+    ranges : ndarray, shape (p, m)
+    implausible : int
+        How many finite, non-negative entries were dropped as too long.
+    """
     try:
         array = np.array(ranges, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -29,7 +40,10 @@ def clean_ranges(ranges, shape):
         raise ValueError(f'ranges must have shape {shape} (tags, anchors), got {array.shape}')
     with np.errstate(invalid='ignore'):
         array[~np.isfinite(array) | (array < 0)] = np.nan
-    return array
+        too_long = (array > 2.0 * max_ranges + 10.0) if max_ranges is not None else \
+            np.zeros(shape, bool)
+    array[too_long] = np.nan
+    return array, int(too_long.sum())
 
 
 def cold_start_guess(model, ranges):
@@ -257,7 +271,8 @@ class PostureEstimator:
         Of the last :meth:`update`: ``status`` (``"ok"``, ``"insufficient_data"``,
         ``"solver_failed"``), ``valid`` (positions come from this frame), ``method``,
         ``cold_start``, ``arm_length_error`` (p,) and ``section_lengths`` (p,) in metres,
-        ``range_residual_rms`` (m), ``missing_links``, ``iterations``, ``solve_time`` (s),
+        ``range_residual_rms`` (m), ``missing_links`` (including ``implausible_links``,
+        those dropped as longer than the geometry allows), ``iterations``, ``solve_time`` (s),
         and solver details (``rank_error``, ``kkt_residual``, ``converged``, ...).
     """
 
@@ -267,6 +282,7 @@ class PostureEstimator:
         self.model = model
         self.method = method
         self._solver = METHODS[method](model, **options)
+        self._max_ranges = model.max_ranges()
         self._previous = None
         self.last_diagnostics = {}
 
@@ -291,8 +307,8 @@ class PostureEstimator:
         Parameters
         ----------
         ranges : array_like, shape (p, m)
-            Metres; row k is the tag on joint k+1, column j anchor j; NaN, inf or negative
-            entries count as missing.
+            Metres; row k is the tag on joint k+1, column j anchor j; NaN, inf, negative or
+            impossibly long entries count as missing.
 
         Returns
         -------
@@ -302,11 +318,12 @@ class PostureEstimator:
         """
         start = time.perf_counter()
         p, m = self.model.n_sections, self.model.n_anchors
-        ranges = clean_ranges(ranges, (p, m))
+        ranges, implausible = clean_ranges(ranges, (p, m), self._max_ranges)
         valid = np.isfinite(ranges)
         per_tag, total = self._solver.min_ranges()
         diagnostics = {'method': self.method, 'missing_links': int(p * m - valid.sum()),
-                       'cold_start': self._previous is None, 'iterations': 0}
+                       'implausible_links': implausible, 'cold_start': self._previous is None,
+                       'iterations': 0}
         prior = self._previous
         if prior is None and valid.sum(axis=1).min() >= per_tag and valid.sum() >= total:
             prior = cold_start_guess(self.model, ranges)

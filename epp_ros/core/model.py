@@ -106,6 +106,11 @@ class BoomModel:
         joints = np.asarray(joints, dtype=float)
         return np.linalg.norm(joints[..., :, None, :] - self.anchors, axis=-1)
 
+    def max_ranges(self):
+        """Longest possible tag-anchor distances, shape (p, m): anchor to base plus reach."""
+        to_base = np.linalg.norm(self.anchors - self.base, axis=1)
+        return np.cumsum(self.arm_lengths)[:, None] + to_base[None, :]
+
     def section_lengths(self, joints):
         """Lengths ``||w_k - w_{k-1}||`` (w_0 = base) of an estimated boom, shape (..., p)."""
         joints = np.asarray(joints, dtype=float)

@@ -142,7 +142,7 @@ def working_cycle(model, duration, rate, rng=None, slew_amplitude=np.radians(60.
 
     Slew follows ``s0 + A sin(2 pi t / 40 s)``; each section's pitch oscillates by 10 deg
     about an unfolded pose (55 deg at the base down to -45 deg at the tip) with its own
-    period (20-35 s) and phase. Velocities are at most ~0.1 rad/s, as on real pumps.
+    period (20-35 s) and phase; angular speeds stay below 0.17 rad/s, as on real pumps.
 
     Parameters
     ----------

@@ -1,0 +1,135 @@
+"""epp_bench: speed and accuracy of the estimators, next to the paper's published figures.
+
+Suites:
+  xie3dim   The authors' geometry at additive sigma = 1 m, cold start per trial: RMSE,
+            arm-length error and per-frame time of each method (published: one trial).
+  tracking  The simulated truck pump on a working cycle at 10 Hz, warm-started: RMSE and
+            per-frame time, the runtime case.
+Every table ends with the commit it was measured on.
+"""
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from epp_ros.core import METHODS, PostureEstimator
+from epp_ros.core.metrics import frame_rmse, pooled_rmse
+from epp_ros.core.simulate import XIE3DIM, RangeNoise, truck_pump, working_cycle, xie3dim
+
+PUBLISHED_XIE3DIM = {'cepp': ('EMBED/CEPP', XIE3DIM['published_rmse_m']['EMBED_CEPP'])}
+
+
+def commit():
+    try:
+        return subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True,
+                              text=True, cwd=Path(__file__).resolve().parent,
+                              check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return 'unknown'
+
+
+def run_frames(estimator, frames, truths):
+    """Feed frames to an estimator; per-frame RMSE, arm-length error and wall time."""
+    rmses, length_errors, times = [], [], []
+    for ranges, truth in zip(frames, truths):
+        start = time.perf_counter()
+        estimate = estimator.update(ranges)
+        times.append(time.perf_counter() - start)
+        rmses.append(float(frame_rmse(estimate, truth)))
+        length_errors.append(estimator.last_diagnostics['arm_length_error'])
+    return np.array(rmses), np.array(length_errors), np.array(times)
+
+
+def xie3dim_suite(methods, trials, seed):
+    model, truth = xie3dim()
+    rng = np.random.default_rng(seed)
+    frames = [RangeNoise(sigma=1.0).apply(model.ranges(truth), rng)[0] for _ in range(trials)]
+    rows = []
+    for method in methods:
+        results = [run_frames(PostureEstimator(model, method), [f], [truth]) for f in frames]
+        rmses = np.concatenate([r[0] for r in results])
+        lengths = np.concatenate([r[1] for r in results])
+        times = np.concatenate([r[2] for r in results])
+        label, published = PUBLISHED_XIE3DIM.get(method, ('', None))
+        rows.append({'method': method, 'rmse_m': pooled_rmse(rmses),
+                     'arm_length_error_m': lengths.mean(axis=0).tolist(),
+                     'ms_median': 1e3 * float(np.median(times)),
+                     'ms_p99': 1e3 * float(np.percentile(times, 99)),
+                     'published': None if published is None else f'{published} ({label})'})
+    return {'suite': 'xie3dim', 'trials': trials, 'sigma_m': 1.0, 'rows': rows}
+
+
+def tracking_suite(methods, seconds, seed):
+    model = truck_pump()
+    trajectory = working_cycle(model, seconds, 10.0, rng=np.random.default_rng(seed))
+    rng = np.random.default_rng(seed + 1)
+    noise = RangeNoise(sigma=0.1, dropout=0.05)
+    frames = [noise.apply(model.ranges(j), rng)[0] for j in trajectory.joints]
+    rows = []
+    for method in methods:
+        rmses, lengths, times = run_frames(PostureEstimator(model, method), frames,
+                                           trajectory.joints)
+        rows.append({'method': method, 'rmse_m': pooled_rmse(rmses),
+                     'arm_length_error_m': lengths.mean(axis=0).tolist(),
+                     'ms_median': 1e3 * float(np.median(times)),
+                     'ms_p99': 1e3 * float(np.percentile(times, 99)), 'published': None})
+    return {'suite': 'tracking', 'frames': len(frames), 'sigma_m': 0.1, 'dropout': 0.05,
+            'rows': rows}
+
+
+def markdown(report):
+    if report['suite'] == 'xie3dim':
+        title = (f'xie3dim (authors\' geometry), additive sigma = 1 m, {report["trials"]} '
+                 'trials, cold start')
+    else:
+        title = (f'truck pump, working cycle at 10 Hz, {report["frames"]} frames, sigma = '
+                 f'{report["sigma_m"]} m, {report["dropout"]:.0%} dropouts, warm start')
+    lines = [f'### {title}', '',
+             '| method | RMSE [m] | mean arm-length error [m] | ms/frame p50 | p99 | '
+             'published RMSE [m] |', '|---|---|---|---|---|---|']
+    for row in report['rows']:
+        lines.append(f'| {row["method"]} | {row["rmse_m"]:.3f} | '
+                     f'{max(row["arm_length_error_m"]):.1e} | {row["ms_median"]:.1f} | '
+                     f'{row["ms_p99"]:.1f} | {row["published"] or "-"} |')
+    if report['suite'] == 'xie3dim':
+        published = ', '.join(f'{name} {value}' for name, value
+                              in XIE3DIM['published_rmse_m'].items())
+        lines += ['', f'Published by the authors (one trial, MATLAB): {published}.']
+    return '\n'.join(lines)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog='epp_bench', description=__doc__.splitlines()[0],
+                                     epilog=__doc__.split('\n', 1)[1],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('suites', nargs='*', metavar='suite',
+                        help='xie3dim and/or tracking (default: both)')
+    parser.add_argument('--methods', nargs='+', choices=sorted(METHODS), default=sorted(METHODS))
+    parser.add_argument('--trials', type=int, default=200, help='xie3dim trials')
+    parser.add_argument('--seconds', type=float, default=60.0, help='tracking duration')
+    parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--json', action='store_true', help='also print the reports as JSON')
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    suites = args.suites or ['xie3dim', 'tracking']
+    unknown = sorted(set(suites) - {'xie3dim', 'tracking'})
+    if unknown:
+        parser.error(f'unknown suite(s) {unknown}; choose from xie3dim, tracking')
+    reports = []
+    for suite in suites:
+        if suite == 'xie3dim':
+            reports.append(xie3dim_suite(args.methods, args.trials, args.seed))
+        else:
+            reports.append(tracking_suite(args.methods, args.seconds, args.seed))
+        print(markdown(reports[-1]) + '\n', flush=True)
+    print(f'commit {commit()}, Python {sys.version.split()[0]}, numpy {np.__version__}')
+    if args.json:
+        print(json.dumps({'commit': commit(), 'reports': reports}))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

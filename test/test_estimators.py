@@ -1,0 +1,234 @@
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from epp_ros.core import METHODS, BoomModel, PostureEstimator
+from epp_ros.core.simulate import RangeNoise, random_posture, truck_pump, working_cycle, xie3dim
+
+DATA = Path(__file__).parent / 'data'
+GEOMETRIES = {'xie3dim': lambda: xie3dim()[0], 'truck': truck_pump}
+
+
+@pytest.mark.parametrize('geometry', sorted(GEOMETRIES))
+@pytest.mark.parametrize('method', sorted(METHODS))
+def test_noise_free_ranges_recover_random_postures(geometry, method):
+    model = GEOMETRIES[geometry]()
+    rng = np.random.default_rng(sum(map(ord, geometry + method)))
+    for _ in range(8):
+        joints = random_posture(model, rng)[2]
+        estimator = PostureEstimator(model, method)
+        estimate = estimator.update(model.ranges(joints))
+        assert estimator.last_diagnostics['status'] == 'ok'
+        assert estimator.last_diagnostics['cold_start']
+        np.testing.assert_allclose(estimate, joints, atol=1e-6)
+
+
+@pytest.mark.parametrize('method, tolerance', [('epp1', 1e-6), ('epp2', 1e-6), ('cepp', 1e-2)])
+def test_xie3dim_published_posture_is_recovered(method, tolerance):
+    """The published joints are rounded to 1 cm, so they are only nearly in one plane."""
+    model, joints = xie3dim()
+    reference = yaml.safe_load((DATA / 'xie3dim.yaml').read_text())
+    np.testing.assert_allclose(model.arm_lengths, reference['arm_lengths'], atol=1e-4)
+    estimate = PostureEstimator(model, method).update(model.ranges(joints))
+    np.testing.assert_allclose(estimate, reference['true_joints'], atol=tolerance)
+
+
+@pytest.mark.parametrize('geometry', sorted(GEOMETRIES))
+@pytest.mark.parametrize('method', ['epp2', 'cepp'])
+def test_arm_lengths_are_held_under_noise(geometry, method):
+    model = GEOMETRIES[geometry]()
+    rng = np.random.default_rng(3)
+    noise = RangeNoise(sigma=0.5, eta=0.02)
+    for _ in range(5):
+        joints = random_posture(model, rng)[2]
+        estimator = PostureEstimator(model, method)
+        estimate = estimator.update(noise.apply(model.ranges(joints), rng)[0])
+        assert estimator.last_diagnostics['status'] == 'ok'
+        np.testing.assert_allclose(model.section_lengths(estimate), model.arm_lengths,
+                                   atol=1e-6)
+        np.testing.assert_allclose(estimator.last_diagnostics['arm_length_error'], 0.0,
+                                   atol=1e-6)
+
+
+def test_noise_degrades_gracefully_and_lengths_help():
+    """EPP1 < EPP2 < CEPP in error at sigma = 1 m on the authors' geometry (the paper's order)."""
+    model, joints = xie3dim()
+    rng = np.random.default_rng(4)
+    frames = [RangeNoise(sigma=1.0).apply(model.ranges(joints), rng)[0] for _ in range(30)]
+    rmse = {}
+    for method in METHODS:
+        errors = [np.mean(np.sum((PostureEstimator(model, method).update(f) - joints) ** 2, 1))
+                  for f in frames]
+        rmse[method] = np.sqrt(np.mean(errors))
+    assert rmse['cepp'] < rmse['epp2'] < rmse['epp1'] < 3.0
+
+
+@pytest.mark.parametrize('method', sorted(METHODS))
+def test_missing_ranges_are_tolerated(method):
+    model = truck_pump()                      # six anchors: 15 % missing still determines
+    rng = np.random.default_rng(5)
+    solved = 0
+    for _ in range(8):
+        joints = random_posture(model, rng)[2]
+        ranges = model.ranges(joints)
+        ranges[rng.random(ranges.shape) < 0.15] = np.nan
+        estimator = PostureEstimator(model, method)
+        estimate = estimator.update(ranges)
+        diagnostics = estimator.last_diagnostics
+        assert diagnostics['missing_links'] == np.isnan(ranges).sum()
+        assert np.all(np.isfinite(estimate))
+        if diagnostics['status'] == 'ok':
+            solved += 1
+            np.testing.assert_allclose(estimate, joints, atol=1e-6)
+        else:
+            assert method == 'epp1' and diagnostics['status'] == 'insufficient_data'
+    assert solved >= 6
+
+
+def test_bad_entries_count_as_missing():
+    model = truck_pump()
+    joints = random_posture(model, np.random.default_rng(6))[2]
+    ranges = model.ranges(joints)
+    ranges[0, 1], ranges[2, 3], ranges[4, 0] = np.inf, -1.0, np.nan
+    estimator = PostureEstimator(model, 'epp2')
+    np.testing.assert_allclose(estimator.update(ranges), joints, atol=1e-6)
+    assert estimator.last_diagnostics['missing_links'] == 3
+
+
+@pytest.mark.parametrize('bad, message', [
+    (np.zeros((4, 6)), r'shape \(5, 6\)'),
+    (np.zeros((5, 6, 1)), 'shape'),
+    ([['a'] * 6] * 5, 'numeric'),
+])
+def test_wrong_input_raises_clear_error(bad, message):
+    with pytest.raises(ValueError, match=message):
+        PostureEstimator(truck_pump(), 'cepp').update(bad)
+
+
+def test_unknown_method_raises():
+    with pytest.raises(ValueError, match='method'):
+        PostureEstimator(truck_pump(), 'magic')
+
+
+@pytest.mark.parametrize('method', sorted(METHODS))
+def test_too_little_information_returns_previous_estimate_never_nan(method):
+    model = truck_pump()
+    rng = np.random.default_rng(7)
+    estimator = PostureEstimator(model, method)
+    # Nothing known yet and nothing measured: a finite placeholder, flagged invalid.
+    first = estimator.update(np.full((5, 6), np.nan))
+    assert np.all(np.isfinite(first)) and not estimator.last_diagnostics['valid']
+    assert estimator.last_diagnostics['status'] == 'insufficient_data'
+    joints = random_posture(model, rng)[2]
+    good = estimator.update(model.ranges(joints))
+    assert estimator.last_diagnostics['valid']
+    sparse = model.ranges(joints)
+    sparse[1:] = np.nan                        # tags 2..5 unheard: nobody can place them
+    held = estimator.update(sparse)
+    assert estimator.last_diagnostics['status'] == 'insufficient_data'
+    assert not estimator.last_diagnostics['valid']
+    np.testing.assert_array_equal(held, good)
+    assert np.isfinite(estimator.last_diagnostics['range_residual_rms'])
+
+
+def test_reset_forgets_the_warm_start():
+    model = truck_pump()
+    joints = random_posture(model, np.random.default_rng(8))[2]
+    estimator = PostureEstimator(model, 'cepp')
+    estimator.update(model.ranges(joints))
+    estimator.update(model.ranges(joints))
+    assert not estimator.last_diagnostics['cold_start']
+    estimator.reset()
+    assert estimator.previous is None
+    np.testing.assert_allclose(estimator.update(model.ranges(joints)), joints, atol=1e-6)
+    assert estimator.last_diagnostics['cold_start']
+
+
+@pytest.mark.parametrize('method', sorted(METHODS))
+def test_warm_start_tracks_a_moving_boom_exactly_when_converged(method):
+    model = truck_pump()
+    trajectory = working_cycle(model, duration=6.0, rate=5.0, rng=np.random.default_rng(9))
+    estimator = PostureEstimator(model, method, tol=1e-10,
+                                 **({'slew_iterations': 10, 'slew_tol': 1e-10}
+                                    if method == 'cepp' else {}))
+    for joints in trajectory.joints:
+        estimate = estimator.update(model.ranges(joints))
+        assert estimator.last_diagnostics['status'] == 'ok'
+        np.testing.assert_allclose(estimate, joints, atol=1e-5)
+    assert not estimator.last_diagnostics['cold_start']
+
+
+@pytest.mark.parametrize('method', sorted(METHODS))
+def test_default_tolerances_track_to_within_a_centimetre(method):
+    model = truck_pump()
+    trajectory = working_cycle(model, duration=6.0, rate=10.0, rng=np.random.default_rng(9))
+    estimator = PostureEstimator(model, method)
+    for joints in trajectory.joints:
+        np.testing.assert_allclose(estimator.update(model.ranges(joints)), joints, atol=1e-2)
+
+
+def test_cepp_follows_a_slewing_boom_under_noise():
+    """The paper's plane-from-last-frame locks onto the first plane; our slew update does not."""
+    model = truck_pump()
+    trajectory = working_cycle(model, duration=20.0, rate=5.0, rng=np.random.default_rng(10))
+    rng = np.random.default_rng(11)
+    errors = {}
+    for iterations in (0, 2):
+        estimator = PostureEstimator(model, 'cepp', slew_iterations=iterations)
+        sq = [np.mean(np.sum((estimator.update(RangeNoise(sigma=0.05).apply(
+            model.ranges(joints), rng)[0]) - joints) ** 2, axis=1))
+            for joints in trajectory.joints]
+        errors[iterations] = np.sqrt(np.mean(sq))
+    assert errors[2] < 0.5 < 5.0 < errors[0]
+
+
+def load_semiphysical():
+    data = yaml.safe_load((DATA / 'semiphysical.yaml').read_text())
+    distances = np.zeros((9, 9))
+    for i, row in enumerate(data['G_lower_cm']):
+        distances[i, :len(row)] = row
+    distances = (distances + distances.T) / 100.0
+    anchors = np.array(data['anchors_cm']) / 100.0
+    # The paper numbers points from the tip: point 5 is our joint 1; point 6 is the base.
+    ranges = distances[:5, 5:][::-1]
+    return BoomModel([data['arm_length_cm'] / 100.0] * 5, anchors[0], anchors), ranges
+
+
+@pytest.mark.parametrize('method', sorted(METHODS))
+def test_semiphysical_data_gives_finite_output_with_lengths_held(method):
+    model, ranges = load_semiphysical()
+    estimator = PostureEstimator(model, method)
+    estimate = estimator.update(ranges)
+    diagnostics = estimator.last_diagnostics
+    assert diagnostics['status'] == 'ok' and np.all(np.isfinite(estimate))
+    assert diagnostics['range_residual_rms'] < 1.5          # metres, on 1.5 m sections
+    if method != 'epp1':
+        np.testing.assert_allclose(diagnostics['arm_length_error'], 0.0, atol=1e-6)
+
+
+def test_diagnostics_content():
+    model = truck_pump()
+    joints = random_posture(model, np.random.default_rng(12))[2]
+    estimator = PostureEstimator(model, 'cepp')
+    estimator.update(model.ranges(joints))
+    diagnostics = estimator.last_diagnostics
+    for key in ('status', 'valid', 'method', 'arm_length_error', 'section_lengths',
+                'range_residual_rms', 'iterations', 'solve_time', 'missing_links', 'slew',
+                'rank_error', 'converged'):
+        assert key in diagnostics
+    assert diagnostics['arm_length_error'].shape == (5,)
+    assert diagnostics['solve_time'] > 0 and diagnostics['method'] == 'cepp'
+    assert diagnostics['range_residual_rms'] < 1e-6
+
+
+def test_impossibly_long_ranges_are_dropped_and_counted():
+    model = truck_pump()
+    joints = random_posture(model, np.random.default_rng(13))[2]
+    ranges = model.ranges(joints)
+    ranges[1, 2], ranges[3, 4] = 1e300, 500.0        # a 41 m boom cannot be 500 m away
+    estimator = PostureEstimator(model, 'cepp')
+    np.testing.assert_allclose(estimator.update(ranges), joints, atol=1e-6)
+    assert estimator.last_diagnostics['implausible_links'] == 2
+    assert estimator.last_diagnostics['missing_links'] == 2

@@ -1,0 +1,62 @@
+import numpy as np
+import pytest
+
+from epp_ros.core import BoomModel
+
+ANCHORS = [[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0], [0.0, 0.0, 10.0]]
+
+
+def test_forward_kinematics_known_postures():
+    model = BoomModel([2.0, 3.0], [1.0, 1.0, 1.0], ANCHORS)
+    horizontal = model.forward_kinematics(0.0, [0.0, 0.0])
+    np.testing.assert_allclose(horizontal, [[3.0, 1.0, 1.0], [6.0, 1.0, 1.0]], atol=1e-12)
+    # Slewed to +y, first section vertical, second horizontal.
+    bent = model.forward_kinematics(np.pi / 2, [np.pi / 2, 0.0])
+    np.testing.assert_allclose(bent, [[1.0, 1.0, 3.0], [1.0, 4.0, 3.0]], atol=1e-12)
+
+
+def test_forward_kinematics_batches_and_lengths():
+    model = BoomModel([9.0, 7.0, 7.0], [0.0, 0.0, 3.5], ANCHORS)
+    rng = np.random.default_rng(0)
+    slew = rng.uniform(-np.pi, np.pi, 4)
+    pitches = rng.uniform(-1.0, 1.0, (4, 3))
+    joints = model.forward_kinematics(slew, pitches)
+    assert joints.shape == (4, 3, 3)
+    np.testing.assert_allclose(model.section_lengths(joints), np.tile([9.0, 7.0, 7.0], (4, 1)))
+    np.testing.assert_allclose(joints[1], model.forward_kinematics(slew[1], pitches[1]))
+
+
+def test_ranges_are_distances():
+    model = BoomModel([1.0], [0.0, 0.0, 0.0], ANCHORS)
+    ranges = model.ranges([[3.0, 4.0, 0.0]])
+    np.testing.assert_allclose(ranges, [[5.0, np.hypot(7, 4), np.hypot(3, 6), np.sqrt(125)]])
+
+
+def test_base_anchor_found():
+    assert BoomModel([1.0], [0.0, 0.0, 0.0], ANCHORS).base_anchor() == 0
+    assert BoomModel([1.0], [0.0, 0.0, 1.0], ANCHORS).base_anchor() is None
+
+
+@pytest.mark.parametrize('kwargs, field', [
+    (dict(arm_lengths=[]), 'arm_lengths'),
+    (dict(arm_lengths=[1.0, -2.0]), 'arm_lengths'),
+    (dict(arm_lengths=[1.0, 0.0]), 'arm_lengths'),
+    (dict(arm_lengths=[1.0, np.nan]), 'arm_lengths'),
+    (dict(arm_lengths='long'), 'arm_lengths'),
+    (dict(base=[0.0, 0.0]), 'base'),
+    (dict(base=[0.0, np.inf, 0.0]), 'base'),
+    (dict(anchors=ANCHORS[:2]), 'anchors'),
+    (dict(anchors=[[0.0, 0.0]] * 4), 'anchors'),
+    (dict(anchors=[[0.0, 0.0, np.nan]] * 4), 'anchors'),
+])
+def test_invalid_geometry_names_the_field(kwargs, field):
+    args = dict(arm_lengths=[1.0, 2.0], base=[0.0, 0.0, 0.0], anchors=ANCHORS)
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=field):
+        BoomModel(**args)
+
+
+def test_model_arrays_are_read_only():
+    model = BoomModel([1.0], [0.0, 0.0, 0.0], ANCHORS)
+    with pytest.raises(ValueError):
+        model.anchors[0, 0] = 5.0

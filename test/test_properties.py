@@ -1,0 +1,52 @@
+"""Property tests over random postures and noise."""
+import numpy as np
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from epp_ros.core import METHODS, PostureEstimator
+from epp_ros.core.simulate import RangeNoise, random_posture, truck_pump, xie3dim
+
+MODELS = {'xie3dim': xie3dim()[0], 'truck': truck_pump()}
+SETTINGS = settings(max_examples=25, deadline=None,
+                    suppress_health_check=[HealthCheck.too_slow])
+
+
+@SETTINGS
+@given(seed=st.integers(0, 2 ** 32 - 1), method=st.sampled_from(sorted(METHODS)),
+       geometry=st.sampled_from(sorted(MODELS)))
+def test_exact_ranges_give_the_exact_posture(seed, method, geometry):
+    model = MODELS[geometry]
+    joints = random_posture(model, np.random.default_rng(seed))[2]
+    estimate = PostureEstimator(model, method).update(model.ranges(joints))
+    np.testing.assert_allclose(estimate, joints, atol=1e-6)
+
+
+@SETTINGS
+@given(seed=st.integers(0, 2 ** 32 - 1), method=st.sampled_from(sorted(METHODS)),
+       sigma=st.floats(0.0, 3.0), eta=st.floats(0.0, 0.1), dropout=st.floats(0.0, 0.5),
+       nlos=st.floats(0.0, 0.5))
+def test_any_noise_gives_finite_output_and_lengths_held(seed, method, sigma, eta, dropout,
+                                                        nlos):
+    model = MODELS['truck']
+    rng = np.random.default_rng(seed)
+    joints = random_posture(model, rng)[2]
+    noise = RangeNoise(eta=eta, sigma=sigma, nlos_fraction=nlos, nlos_gamma=2.0,
+                       dropout=dropout)
+    estimator = PostureEstimator(model, method)
+    for _ in range(2):
+        estimate = estimator.update(noise.apply(model.ranges(joints), rng)[0])
+        diagnostics = estimator.last_diagnostics
+        assert estimate.shape == (5, 3) and np.all(np.isfinite(estimate))
+        if diagnostics['valid'] and method != 'epp1':
+            np.testing.assert_allclose(diagnostics['arm_length_error'], 0.0, atol=1e-6)
+
+
+@SETTINGS
+@given(values=st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True),
+                                 st.just(np.nan)), min_size=30, max_size=30),
+       method=st.sampled_from(sorted(METHODS)))
+def test_arbitrary_numbers_never_crash_or_give_nan(values, method):
+    estimator = PostureEstimator(MODELS['truck'], method)
+    estimate = estimator.update(np.reshape(values, (5, 6)))
+    assert np.all(np.isfinite(estimate))
+    assert estimator.last_diagnostics['status'] in ('ok', 'insufficient_data', 'solver_failed')
