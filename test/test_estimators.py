@@ -147,7 +147,7 @@ def test_reset_forgets_the_warm_start():
 
 
 @pytest.mark.parametrize('method', sorted(METHODS))
-def test_warm_start_tracks_a_moving_boom_exactly_when_converged(method):
+def test_warm_start_tracks_a_moving_boom_to_a_tenth_of_a_millimetre(method):
     model = truck_pump()
     trajectory = working_cycle(model, duration=6.0, rate=5.0, rng=np.random.default_rng(9))
     estimator = PostureEstimator(model, method, tol=1e-10,
@@ -156,7 +156,7 @@ def test_warm_start_tracks_a_moving_boom_exactly_when_converged(method):
     for joints in trajectory.joints:
         estimate = estimator.update(model.ranges(joints))
         assert estimator.last_diagnostics['status'] == 'ok'
-        np.testing.assert_allclose(estimate, joints, atol=1e-5)
+        np.testing.assert_allclose(estimate, joints, atol=1e-4)
     assert not estimator.last_diagnostics['cold_start']
 
 

@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from epp_ros.core.edm import centering_matrix, classical_mds, squared_distances
-from epp_ros.core.nedm import _adjoint, _constraint_operator, nearest_edm, project_constrained_edm
+from epp_ros.core.nedm import (_constraint_operator, _Projector, nearest_edm,
+                                project_constrained_edm)
 
 
 def noisy_edm(rng, n, dim, noise):
@@ -79,7 +80,7 @@ def test_subproblem_satisfies_kkt(seed):
     j = centering_matrix(q)
     assert np.linalg.eigvalsh(j @ y_mat @ j).max() <= 1e-9
     # Dual feasibility and complementarity: Z = T + A*y - Y is PSD with Z q = 0, <Z, Y> = 0.
-    z = target + _adjoint(multipliers, rows, cols, n) - y_mat
+    z = target + _Projector(q, rows, cols).adjoint(multipliers) - y_mat
     assert np.linalg.eigvalsh(z).min() >= -1e-9
     np.testing.assert_allclose(z @ q, 0.0, atol=1e-9)
     assert abs(np.sum(z * y_mat)) <= 1e-8

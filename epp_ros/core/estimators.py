@@ -197,7 +197,7 @@ class CEPP(_EDMMethod):
 
     rank = 2
 
-    def __init__(self, model, clip_weight=0.1, slew_iterations=2, slew_tol=1e-6, **options):
+    def __init__(self, model, clip_weight=0.1, slew_iterations=1, slew_tol=1e-6, **options):
         super().__init__(model, **options)
         self.clip_weight = float(clip_weight)
         self.slew_iterations = int(slew_iterations)
@@ -217,6 +217,9 @@ class CEPP(_EDMMethod):
 
     def solve(self, ranges, prior):
         slew = fit_slew(prior, self.model.base)
+        if self.slew_iterations:
+            # Move last frame's plane to this frame's ranges before the first solve.
+            slew += slew_step(self.model, to_plane(prior, self.model.base, slew), ranges, slew)
         totals = {'iterations': 0, 'inner_iterations': 0}
         for attempt in range(self.slew_iterations + 1):
             coords, info = self._solve_in_plane(ranges, prior, slew)

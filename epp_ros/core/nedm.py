@@ -62,12 +62,77 @@ def _constraint_operator(n, pairs):
     return rows, cols
 
 
-def _adjoint(values, rows, cols, n):
-    """``A*(y) = sum_s y_s A_s`` as a symmetric (n, n) matrix."""
-    out = np.zeros((n, n))
-    np.add.at(out, (rows, cols), 0.5 * values)
-    np.add.at(out, (cols, rows), 0.5 * values)
-    return out
+class _Projector:
+    """Projection onto ``K_-(q)`` with prescribed entries, for one constraint structure.
+
+    Holds what does not change between the projections of one ``nearest_edm`` call.
+    """
+
+    def __init__(self, q, rows, cols):
+        self.n = q.size
+        self.rows, self.cols = rows, cols
+        self.centering = centering_matrix(q)
+        self.gram = np.where(rows == cols, 1.0, 0.5)     # <A_s, A_t>: diagonal
+        self.flat = rows * self.n + cols
+        self.flat_transposed = cols * self.n + rows
+
+    def adjoint(self, y):
+        """``A*(y) = sum_s y_s A_s`` as a symmetric (n, n) matrix (pairs are unique)."""
+        out = np.zeros(self.n * self.n)
+        out[self.flat] = 0.5 * y
+        out[self.flat_transposed] += 0.5 * y
+        return out.reshape(self.n, self.n)
+
+    def evaluate(self, target, values, y):
+        """Dual value, gradient, primal projection and the eigensystem behind it."""
+        z = target + self.adjoint(y)
+        centred = self.centering @ z @ self.centering
+        eigenvalues, eigenvectors = np.linalg.eigh(centred)
+        projection = z - (eigenvectors * np.maximum(eigenvalues, 0.0)) @ eigenvectors.T
+        value = 0.5 * np.sum(projection * projection) - values @ y
+        gradient = projection[self.rows, self.cols] - values
+        return value, gradient, projection, eigenvalues, eigenvectors
+
+    def newton_matrix(self, eigenvalues, eigenvectors, regularisation):
+        """Generalized Hessian ``A V A*`` of the dual (+ regularisation), (k, k)."""
+        positive = np.maximum(eigenvalues, 0.0)
+        diff = eigenvalues[:, None] - eigenvalues[None, :]
+        close = np.abs(diff) <= 1e-14
+        # Clarke Jacobian of Pi_{S+}: first divided differences of max(., 0).
+        omega = np.divide(positive[:, None] - positive[None, :], diff,
+                          out=((eigenvalues[:, None] > 0) & (eigenvalues[None, :] > 0))
+                          .astype(float), where=~close)
+        basis = self.centering @ eigenvectors
+        outer = basis[self.rows][:, :, None] * basis[self.cols][:, None, :]
+        blocks = (outer + outer.transpose(0, 2, 1)).reshape(self.rows.size, -1)
+        hessian = -0.25 * (blocks * omega.reshape(-1)) @ blocks.T
+        hessian[np.diag_indices_from(hessian)] += self.gram + regularisation
+        return hessian
+
+    def __call__(self, target, values, multipliers=None, tol=1e-10, max_iter=50):
+        y = np.zeros(self.rows.size) if multipliers is None else multipliers.copy()
+        tol = tol * max(1.0, float(np.linalg.norm(target)))
+        value, gradient, projection, eigenvalues, eigenvectors = self.evaluate(target, values, y)
+        iterations = 0
+        while np.linalg.norm(gradient) > tol and iterations < max_iter:
+            iterations += 1
+            regularisation = min(1e-2, float(np.linalg.norm(gradient))) + 1e-12
+            step = np.linalg.solve(self.newton_matrix(eigenvalues, eigenvectors,
+                                                      regularisation), -gradient)
+            slope = gradient @ step
+            if slope >= 0:                            # not a descent direction: fall back
+                step, slope = -gradient, -gradient @ gradient
+            size = 1.0
+            slack = 1e-13 * max(1.0, abs(value))     # round-off in theta near the solution
+            for _ in range(30):
+                trial = self.evaluate(target, values, y + size * step)
+                if trial[0] <= value + 1e-4 * size * slope + slack:
+                    break
+                size *= 0.5
+            y = y + size * step
+            value, gradient, projection, eigenvalues, eigenvectors = trial
+        residual = float(np.linalg.norm(gradient))
+        return ProjectionResult(projection, y, iterations, residual, residual <= tol)
 
 
 def project_constrained_edm(target, q, rows, cols, values, multipliers=None, tol=1e-10,
@@ -87,7 +152,7 @@ def project_constrained_edm(target, q, rows, cols, values, multipliers=None, tol
     q : ndarray, shape (n,), positive
         Centering direction of the cone (ones for the EDM cone itself).
     rows, cols : ndarray of int, shape (k,)
-        Entries held fixed; must include the diagonal for an EDM.
+        Entries held fixed, each pair once; must include the diagonal for an EDM.
     values : ndarray, shape (k,)
         Their values.
     multipliers : ndarray, shape (k,), optional
@@ -99,57 +164,9 @@ def project_constrained_edm(target, q, rows, cols, values, multipliers=None, tol
     -------
     ProjectionResult
     """
-    n = target.shape[0]
-    k = rows.size
-    centering = centering_matrix(q)
-    y = np.zeros(k) if multipliers is None else multipliers.copy()
-    gram = 0.5 * np.ones(k)                   # <A_s, A_t> is diagonal: 1 on diag, 1/2 off.
-    gram[rows == cols] = 1.0
-
-    def evaluate(y):
-        z = target + _adjoint(y, rows, cols, n)
-        centred = centering @ z @ centering
-        eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (centred + centred.T))
-        positive = np.maximum(eigenvalues, 0.0)
-        projection = z - (eigenvectors * positive) @ eigenvectors.T
-        value = 0.5 * np.sum(projection ** 2) - values @ y
-        gradient = projection[rows, cols] - values
-        return value, gradient, projection, eigenvalues, eigenvectors
-
-    tol = tol * max(1.0, float(np.linalg.norm(target)))
-    value, gradient, projection, eigenvalues, eigenvectors = evaluate(y)
-    iterations = 0
-    while np.linalg.norm(gradient) > tol and iterations < max_iter:
-        iterations += 1
-        # Clarke Jacobian of Pi_{S+} at the eigenvalues: first divided differences of max(.,0).
-        positive = np.maximum(eigenvalues, 0.0)
-        diff = eigenvalues[:, None] - eigenvalues[None, :]
-        with np.errstate(divide='ignore', invalid='ignore'):
-            omega = (positive[:, None] - positive[None, :]) / diff
-        both_positive = (eigenvalues[:, None] > 0) & (eigenvalues[None, :] > 0)
-        omega = np.where(np.abs(diff) > 1e-14, omega, both_positive.astype(float))
-        basis = centering @ eigenvectors
-        # P^T A_s P for every constraint s, flattened: (k, n*n).
-        outer = basis[rows][:, :, None] * basis[cols][:, None, :]
-        blocks = (0.5 * (outer + outer.transpose(0, 2, 1))).reshape(k, -1)
-        hessian = np.diag(gram) - (blocks * omega.reshape(-1)) @ blocks.T
-        grad_norm = np.linalg.norm(gradient)
-        hessian[np.diag_indices(k)] += min(1e-2, grad_norm) + 1e-12
-        step = np.linalg.solve(hessian, -gradient)
-        slope = gradient @ step
-        if slope >= 0:                            # not a descent direction: fall back
-            step, slope = -gradient, -gradient @ gradient
-        size = 1.0
-        slack = 1e-13 * max(1.0, abs(value))     # round-off in theta near the solution
-        for _ in range(30):
-            trial = evaluate(y + size * step)
-            if trial[0] <= value + 1e-4 * size * slope + slack:
-                break
-            size *= 0.5
-        y = y + size * step
-        value, gradient, projection, eigenvalues, eigenvectors = trial
-    residual = float(np.linalg.norm(gradient))
-    return ProjectionResult(projection, y, iterations, residual, residual <= tol)
+    projector = _Projector(np.asarray(q, dtype=float), np.asarray(rows), np.asarray(cols))
+    return projector(np.asarray(target, dtype=float), np.asarray(values, dtype=float),
+                     multipliers, tol, max_iter)
 
 
 def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1e-7,
@@ -169,8 +186,8 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
     fixed : ndarray of bool, shape (n, n), symmetric, optional
         Entries of D held equal to G (e.g. known anchor distances or squared arm lengths).
     initial : ndarray, shape (n, n), optional
-        Starting EDM D^0 (a warm start); defaults to G with unknown entries from the
-        convex relaxation.
+        Starting EDM D^0 of rank <= r (a warm start), from which the penalty iterations
+        start with c = 1. Without one they start from the convex relaxation (c = 0).
     tol : float
         Stop when the relative change of ``sqrt(f + c p)`` falls below ``tol`` ...
     rank_tol : float
@@ -181,8 +198,8 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
         Floor of the majorization weights ``w_i = max(tau, max_j H_ij)``.
     penalty_parameter : float, optional
         Initial c; by default from the rank error of the convex solution, clamped to
-        [1, 1e3] in the scaled problem; multiplied by 4 while the rank error is large
-        and by 1.2 otherwise.
+        [1, 1e3] in the scaled problem (1 from a warm start); multiplied by 4 while the
+        rank error is large and by 1.2 while it is above ``rank_tol``.
     inner_tol : float
         Relative tolerance of the convex subproblem.
 
@@ -233,11 +250,7 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
     def objective(edm):
         return 0.5 * np.sum(sq_weights * (edm - goal) ** 2)
 
-    def solve_subproblem(shifted, multipliers):
-        projected = project_constrained_edm(shifted * q_outer, q, rows, cols, constraint_values,
-                                            multipliers, tol=inner_tol)
-        return projected.matrix / q_outer, projected
-
+    projector = _Projector(q, rows, cols)
     centering = centering_matrix(np.ones(n))
     state = {'multipliers': None, 'inner_iterations': 0, 'kkt_residual': 0.0}
 
@@ -247,9 +260,8 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
         basis = centering @ leading
         complement = centering - basis @ basis.T          # J (I - U) J
         shifted = edm - (sq_weights * (edm - goal) - c * complement) / w_outer
-        projected = project_constrained_edm(shifted * q_outer, q, rows, cols,
-                                            constraint_values, state['multipliers'],
-                                            tol=inner_tol)
+        projected = projector(shifted * q_outer, constraint_values, state['multipliers'],
+                              tol=inner_tol)
         state['multipliers'] = projected.multipliers
         state['inner_iterations'] += projected.iterations
         state['kkt_residual'] = projected.kkt_residual
@@ -276,16 +288,20 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
     def merit(edm, c):
         return objective(edm) + c * rank_penalty(edm, rank)[0]
 
-    edm = np.where(known, goal, 0.0) if initial is None else np.asarray(initial, float) / scale
-    # Start from the convex relaxation (c = 0) near the initial point.
-    edm, _ = squarem_step(edm, 0.0)
-    penalty, trace, _ = rank_penalty(edm, rank)
-    if penalty_parameter is None:
+    if initial is None:
+        # Start from the convex relaxation (c = 0), with c set by its rank error.
+        edm, _ = squarem_step(np.where(known, goal, 0.0), 0.0)
+        penalty, trace, _ = rank_penalty(edm, rank)
         c = float(np.clip(penalty, 1.0, 1e3))
     else:
+        # A warm start is already of rank r: penalise from it directly.
+        edm = np.asarray(initial, dtype=float) / scale
+        penalty, trace, _ = rank_penalty(edm, rank)
+        c = 1.0
+    if penalty_parameter is not None:
         c = float(penalty_parameter) / scale
     rank_error = penalty / trace if trace > 0 else 0.0
-    converged = rank_error <= rank_tol
+    converged = initial is None and rank_error <= rank_tol
     iterations = 0
     while not converged and iterations < max_iter:
         previous = np.sqrt(merit(edm, c))
