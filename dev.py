@@ -5,8 +5,8 @@
     python3 dev.py test [pytest options]      # the whole test suite
     python3 dev.py bench [epp_bench options]  # the benchmarks
 
-The venv (.venv/) is rebuilt from requirements.txt only when that file, setup.py or
-setup.cfg changed since the last run, so a second run starts at once.
+The venv (.venv/) is rebuilt from requirements.txt only when that file, setup.py,
+setup.cfg or this script changed since the last run, so a second run starts at once.
 Needs nothing but Python >= 3.10.
 """
 import hashlib
@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parent
 VENV = ROOT / '.venv'
 PYTHON = VENV / 'bin' / 'python'
 STAMP = VENV / '.epp-ros-stamp'
-INPUTS = ('requirements.txt', 'setup.py', 'setup.cfg')
+INPUTS = ('requirements.txt', 'setup.py', 'setup.cfg', 'dev.py')
 
 
 def _fingerprint():
@@ -41,7 +41,9 @@ def ensure_venv():
         venv.EnvBuilder(with_pip=True).create(VENV)
     pip = [str(PYTHON), '-m', 'pip', 'install', '--quiet', '--disable-pip-version-check']
     subprocess.run(pip + ['-r', str(ROOT / 'requirements.txt')], check=True)
-    subprocess.run(pip + ['--no-deps', '--no-build-isolation', '-e', str(ROOT)], check=True)
+    # Compat mode puts the checkout on sys.path: modules added later import without a reinstall.
+    subprocess.run(pip + ['--no-deps', '--no-build-isolation', '--config-settings',
+                          'editable_mode=compat', '-e', str(ROOT)], check=True)
     STAMP.write_text(fingerprint)
     return PYTHON
 

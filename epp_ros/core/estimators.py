@@ -112,7 +112,7 @@ class _EDMMethod:
     rank = 3
     fix_lengths = True
 
-    def __init__(self, model, prior_weight=0.0, anchor_weight=10.0, tol=1e-6, max_iter=500):
+    def __init__(self, model, prior_weight=0.0, anchor_weight=np.inf, tol=1e-6, max_iter=500):
         self.model = model
         self.prior_weight = float(prior_weight)
         self.anchor_weight = float(anchor_weight)
@@ -144,12 +144,16 @@ class _EDMMethod:
         initial = squared_distances(np.vstack([known, prior]))
         target = initial.copy()
         weights = np.zeros((n, n))
-        # Known-known distances are weighted, not fixed: fixing all of them leaves the convex
-        # subproblem without a strictly feasible point whenever the known points outnumber
-        # their affine dimension + 1 (always in the plane), and its dual Newton method then
-        # converges sublinearly. The base pivot is pinned exactly by the alignment instead.
-        weights[:k, :k] = self.anchor_weight
         fixed = np.zeros((n, n), bool)
+        # Known-known distances are fixed (anchor_weight inf, as in the authors' code) or
+        # weighted. Fixed, the convex subproblem has no strictly feasible point when the
+        # known points outnumber their affine dimension + 1 (always in the plane), and its
+        # dual Newton method crawls when started far from feasible (cold starts); weighted,
+        # the unequal weights slow the majorization instead. Warm-started, fixed is faster.
+        if np.isinf(self.anchor_weight):
+            fixed[:k, :k] = True
+        else:
+            weights[:k, :k] = self.anchor_weight
         tags = slice(k, n)
         measured = np.isfinite(tag_squared)
         target[tags, :k] = np.where(measured, tag_squared, target[tags, :k])
@@ -266,7 +270,10 @@ class PostureEstimator:
     method : str
         One of ``METHODS``: ``"epp1"``, ``"epp2"``, ``"cepp"``.
     **options
-        Passed to the method (e.g. ``prior_weight``, ``tol``; CEPP: ``slew_iterations``).
+        Passed to the method: ``prior_weight`` (weight of tag-tag distances from the
+        previous pose, default 0; the paper uses 1), ``anchor_weight`` (inf: anchor-anchor
+        distances fixed, the default; a number: weighted), ``tol``, ``max_iter``; CEPP also
+        ``slew_iterations`` (default 1) and ``clip_weight``.
 
     Attributes
     ----------

@@ -5,7 +5,8 @@ Suites:
             arm-length error and per-frame time of each method (published: one trial).
   tracking  The simulated truck pump on a working cycle at 10 Hz, warm-started: RMSE and
             per-frame time, the runtime case.
-Every table ends with the commit it was measured on.
+Every table ends with the commit it was measured on. ``--option KEY=VALUE`` passes an
+option to the estimators (e.g. ``anchor_weight=inf``, ``slew_iterations=0``).
 """
 import argparse
 import json
@@ -21,6 +22,19 @@ from epp_ros.core.metrics import frame_rmse, pooled_rmse
 from epp_ros.core.simulate import XIE3DIM, RangeNoise, truck_pump, working_cycle, xie3dim
 
 PUBLISHED_XIE3DIM = {'cepp': ('EMBED/CEPP', XIE3DIM['published_rmse_m']['EMBED_CEPP'])}
+
+
+def parse_option(text):
+    """``'key=value'`` -> (key, number or string); ``inf`` is a number."""
+    key, sep, value = text.partition('=')
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f'expected KEY=VALUE, got {text!r}')
+    try:
+        number = float(value)
+        return key, int(number) if number.is_integer() and 'e' not in value.lower() and \
+            '.' not in value else number
+    except ValueError:
+        return key, value
 
 
 def commit():
@@ -44,13 +58,14 @@ def run_frames(estimator, frames, truths):
     return np.array(rmses), np.array(length_errors), np.array(times)
 
 
-def xie3dim_suite(methods, trials, seed):
+def xie3dim_suite(methods, trials, seed, options):
     model, truth = xie3dim()
     rng = np.random.default_rng(seed)
     frames = [RangeNoise(sigma=1.0).apply(model.ranges(truth), rng)[0] for _ in range(trials)]
     rows = []
     for method in methods:
-        results = [run_frames(PostureEstimator(model, method), [f], [truth]) for f in frames]
+        results = [run_frames(PostureEstimator(model, method, **options), [f], [truth])
+                   for f in frames]
         rmses = np.concatenate([r[0] for r in results])
         lengths = np.concatenate([r[1] for r in results])
         times = np.concatenate([r[2] for r in results])
@@ -63,7 +78,7 @@ def xie3dim_suite(methods, trials, seed):
     return {'suite': 'xie3dim', 'trials': trials, 'sigma_m': 1.0, 'rows': rows}
 
 
-def tracking_suite(methods, seconds, seed):
+def tracking_suite(methods, seconds, seed, options):
     model = truck_pump()
     trajectory = working_cycle(model, seconds, 10.0, rng=np.random.default_rng(seed))
     rng = np.random.default_rng(seed + 1)
@@ -71,7 +86,7 @@ def tracking_suite(methods, seconds, seed):
     frames = [noise.apply(model.ranges(j), rng)[0] for j in trajectory.joints]
     rows = []
     for method in methods:
-        rmses, lengths, times = run_frames(PostureEstimator(model, method), frames,
+        rmses, lengths, times = run_frames(PostureEstimator(model, method, **options), frames,
                                            trajectory.joints)
         rows.append({'method': method, 'rmse_m': pooled_rmse(rmses),
                      'arm_length_error_m': lengths.mean(axis=0).tolist(),
@@ -108,24 +123,28 @@ def main(argv=None):
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('suites', nargs='*', metavar='suite',
                         help='xie3dim and/or tracking (default: both)')
-    parser.add_argument('--methods', nargs='+', choices=sorted(METHODS), default=sorted(METHODS))
+    parser.add_argument('--methods', nargs='+', choices=list(METHODS), default=list(METHODS))
     parser.add_argument('--trials', type=int, default=200, help='xie3dim trials')
     parser.add_argument('--seconds', type=float, default=60.0, help='tracking duration')
     parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--option', type=parse_option, action='append', default=[],
+                        metavar='KEY=VALUE', help='estimator option, repeatable')
     parser.add_argument('--json', action='store_true', help='also print the reports as JSON')
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     suites = args.suites or ['xie3dim', 'tracking']
     unknown = sorted(set(suites) - {'xie3dim', 'tracking'})
     if unknown:
         parser.error(f'unknown suite(s) {unknown}; choose from xie3dim, tracking')
+    options = dict(args.option)
     reports = []
     for suite in suites:
         if suite == 'xie3dim':
-            reports.append(xie3dim_suite(args.methods, args.trials, args.seed))
+            reports.append(xie3dim_suite(args.methods, args.trials, args.seed, options))
         else:
-            reports.append(tracking_suite(args.methods, args.seconds, args.seed))
+            reports.append(tracking_suite(args.methods, args.seconds, args.seed, options))
         print(markdown(reports[-1]) + '\n', flush=True)
-    print(f'commit {commit()}, Python {sys.version.split()[0]}, numpy {np.__version__}')
+    print(f'commit {commit()}, Python {sys.version.split()[0]}, numpy {np.__version__}'
+          + (f', options {options}' if options else ''))
     if args.json:
         print(json.dumps({'commit': commit(), 'reports': reports}))
     return 0
