@@ -60,7 +60,12 @@ def main(argv):
     else:
         script = {'demo': 'epp_demo', 'bench': 'epp_bench'}[command]
         args = [str(VENV / 'bin' / script)] + rest
-    return subprocess.run(args, cwd=ROOT, env=env).returncode
+    child = subprocess.Popen(args, cwd=ROOT, env=env)
+    while True:
+        try:
+            return child.wait()
+        except KeyboardInterrupt:   # Ctrl-C reaches the child too; let it finish cleanly
+            continue
 
 
 if __name__ == '__main__':

@@ -107,9 +107,12 @@ def test_wrong_input_raises_clear_error(bad, message):
         PostureEstimator(truck_pump(), 'cepp').update(bad)
 
 
-def test_unknown_method_raises():
+def test_unknown_method_or_option_raises():
     with pytest.raises(ValueError, match='method'):
         PostureEstimator(truck_pump(), 'magic')
+    with pytest.raises(ValueError, match='slew_iterations'):
+        PostureEstimator(truck_pump(), 'epp2', slew_iterations=2)
+    PostureEstimator(truck_pump(), 'cepp', slew_iterations=2, prior_weight=1.0)
 
 
 @pytest.mark.parametrize('method', sorted(METHODS))

@@ -7,6 +7,7 @@ positions (p, 3), keeping the previous estimate as the warm start. Methods:
 - ``epp2``: the same with the arm lengths (base-joint 1 included) as equality constraints.
 - ``cepp``: EPP2 in the boom's vertical plane (rank 2) after projecting the ranges.
 """
+import inspect
 import time
 
 import numpy as np
@@ -261,6 +262,19 @@ def slew_step(model, coords, ranges, slew):
 METHODS = {'epp1': EPP1, 'epp2': EPP2, 'cepp': CEPP}
 
 
+def accepted_options(method):
+    """Names of the keyword options a method's constructor takes."""
+    names = set()
+    for cls in METHODS[method].__mro__:
+        if '__init__' in vars(cls):
+            names |= {name for name, parameter in
+                      inspect.signature(cls.__init__).parameters.items()
+                      if parameter.kind == parameter.KEYWORD_ONLY
+                      or (parameter.kind == parameter.POSITIONAL_OR_KEYWORD
+                          and name not in ('self', 'model'))}
+    return names
+
+
 class PostureEstimator:
     """Frame-by-frame boom posture from UWB ranges.
 
@@ -289,6 +303,10 @@ class PostureEstimator:
     def __init__(self, model, method='cepp', **options):
         if method not in METHODS:
             raise ValueError(f'method must be one of {sorted(METHODS)}, got {method!r}')
+        unknown = set(options) - accepted_options(method)
+        if unknown:
+            raise ValueError(f'method {method!r} takes no option {sorted(unknown)}; it takes '
+                             f'{sorted(accepted_options(method))}')
         self.model = model
         self.method = method
         self._solver = METHODS[method](model, **options)
