@@ -22,9 +22,9 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'uwb_driver = epp_ros.tools.pending:uwb_driver',
+            'uwb_driver = epp_ros.nodes.driver:main',
             'posture_estimator = epp_ros.tools.pending:posture_estimator',
-            'uwb_emulator = epp_ros.tools.pending:uwb_emulator',
+            'uwb_emulator = epp_ros.nodes.emulator:main',
             'epp_demo = epp_ros.tools.demo:main',
             'epp_bench = epp_ros.tools.bench:main',
             'epp_bag = epp_ros.tools.pending:epp_bag',

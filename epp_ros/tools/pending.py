@@ -6,8 +6,6 @@ real entry point when its issue lands.
 import sys
 
 _PENDING = {
-    'uwb_driver': 'the "UWB driver node" issue',
-    'uwb_emulator': 'the "UWB driver node" issue',
     'posture_estimator': 'the "Estimator node" issue',
     'epp_bag': 'the "Bags" issue',
 }
@@ -17,14 +15,6 @@ def _not_yet(name):
     print(f'{name}: not implemented yet; it arrives with {_PENDING[name]}. '
           'Meanwhile `epp_demo` runs the estimators on the simulated pump.', file=sys.stderr)
     return 2
-
-
-def uwb_driver():
-    return _not_yet('uwb_driver')
-
-
-def uwb_emulator():
-    return _not_yet('uwb_emulator')
 
 
 def posture_estimator():

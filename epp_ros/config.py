@@ -1,0 +1,232 @@
+"""The pump description shared by every node and tool (``config/pump.yaml``).
+
+One schema, validated in one place: nodes pass their ROS parameter values to
+:func:`pump_config_from_parameters`, plain tools read the YAML with :func:`load_pump_config`.
+A bad description raises :class:`ConfigError` with one line naming the field.
+"""
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from epp_ros.core.model import BoomModel
+
+__all__ = ['ConfigError', 'Source', 'PumpConfig', 'PUMP_PARAMETERS', 'PROTOCOLS',
+           'pump_config_from_parameters', 'load_pump_config', 'default_config_path']
+
+PROTOCOLS = ('trek', 'lec', 'arduino', 'json', 'auto')
+_DEVICE_ID = re.compile(r'^[0-9A-F]{1,16}$')
+
+#: Parameters of the shared pump description: name -> (default, description).
+PUMP_PARAMETERS = {
+    'frame_id': ('pump_base', 'World frame of ranges and postures (truck frame, z up).'),
+    'arm_lengths': ([0.0], 'Section lengths in metres, base outward.'),
+    'base': ([0.0, 0.0, 0.0], 'Base pivot [x, y, z] in metres, world frame.'),
+    'tag_names': ([''], 'Tag names, one per joint, base outward.'),
+    'tag_ids': ([''], 'Tag device ids (hexadecimal short addresses), as tag_names.'),
+    'anchor_names': ([''], 'Anchor names.'),
+    'anchor_ids': ([''], 'Anchor device ids (hexadecimal short addresses).'),
+    'anchor_positions': ([0.0], 'Anchor positions, metres, flattened [x0, y0, z0, x1, ...].'),
+    'source_ports': ([''], 'Range sources: /dev/tty... or socket://host:port, one each.'),
+    'source_protocols': ([''], 'Line protocol of each source: trek, lec, arduino, json, '
+                               'auto.'),
+    'source_tags': ([''], "Tag id on each source for formats that do not name it, else ''."),
+}
+
+
+class ConfigError(ValueError):
+    """A pump description that cannot be used; the message names the field."""
+
+
+@dataclass(frozen=True)
+class Source:
+    """One stream of range lines."""
+
+    port: str                   #: device path or pyserial URL (socket://host:port)
+    protocol: str               #: one of PROTOCOLS
+    tag: str | None = None      #: tag id for formats that do not name it
+
+
+@dataclass(frozen=True)
+class PumpConfig:
+    """A validated pump description."""
+
+    frame_id: str
+    arm_lengths: tuple
+    base: tuple
+    tag_names: tuple
+    tag_ids: tuple
+    anchor_names: tuple
+    anchor_ids: tuple
+    anchor_positions: tuple     #: ((x, y, z), ...) per anchor
+    sources: tuple              #: (Source, ...)
+
+    def model(self):
+        """The :class:`BoomModel` of this pump."""
+        return BoomModel(self.arm_lengths, self.base, self.anchor_positions)
+
+    @property
+    def link_names(self):
+        """``"<tag>:<anchor>"`` for every tag-anchor pair, tag-major (row k, column j)."""
+        return [f'{tag}:{anchor}' for tag in self.tag_names for anchor in self.anchor_names]
+
+    def tag_index(self, device_id):
+        """Joint index (0-based) of a tag device id, or None."""
+        return _index(self.tag_ids, device_id)
+
+    def anchor_index(self, device_id):
+        """Column of an anchor device id, or None."""
+        return _index(self.anchor_ids, device_id)
+
+
+def normalise_device_id(value):
+    """Device ids compare as upper-case text without surrounding blanks."""
+    return str(value).strip().upper()
+
+
+def _index(ids, device_id):
+    try:
+        return ids.index(normalise_device_id(device_id))
+    except ValueError:
+        return None
+
+
+def _names(values, field):
+    names = tuple(str(v).strip() for v in values)
+    if not names or any(not n for n in names):
+        raise ConfigError(f'{field}: every entry needs a non-empty name, got {list(values)}')
+    if any(not re.fullmatch(r'[A-Za-z0-9_]+', n) for n in names):
+        raise ConfigError(f'{field}: names may hold letters, digits and _ only, got {list(names)}')
+    duplicates = sorted({n for n in names if names.count(n) > 1})
+    if duplicates:
+        raise ConfigError(f'{field}: duplicate names {duplicates}')
+    return names
+
+
+def _device_ids(values, field, count):
+    ids = tuple(normalise_device_id(v) for v in values)
+    if len(ids) != count:
+        raise ConfigError(f'{field}: needs {count} entries (one per name), got {len(ids)}')
+    bad = [v for v, i in zip(values, ids) if not _DEVICE_ID.match(i)]
+    if bad:
+        raise ConfigError(f'{field}: device ids must be 1-16 hexadecimal digits, got {bad}')
+    duplicates = sorted({i for i in ids if ids.count(i) > 1})
+    if duplicates:
+        raise ConfigError(f'{field}: duplicate device ids {duplicates}')
+    return ids
+
+
+def _numbers(values, field):
+    try:
+        return tuple(float(v) for v in values)
+    except (TypeError, ValueError):
+        raise ConfigError(f'{field}: must be a list of numbers, got {values!r}') from None
+
+
+def pump_config_from_parameters(values):
+    """Validate a pump description given as parameter values (names of PUMP_PARAMETERS).
+
+    Parameters
+    ----------
+    values : dict
+        Missing names take their defaults, which are deliberately unusable.
+
+    Returns
+    -------
+    PumpConfig
+
+    Raises
+    ------
+    ConfigError
+    """
+    unknown = sorted(set(values) - set(PUMP_PARAMETERS))
+    if unknown:
+        raise ConfigError(f'unknown pump parameter(s) {unknown}')
+    get = {name: values.get(name, default) for name, (default, _) in PUMP_PARAMETERS.items()}
+    frame_id = str(get['frame_id']).strip()
+    if not frame_id:
+        raise ConfigError('frame_id: must not be empty')
+    tag_names = _names(get['tag_names'], 'tag_names')
+    tag_ids = _device_ids(get['tag_ids'], 'tag_ids', len(tag_names))
+    anchor_names = _names(get['anchor_names'], 'anchor_names')
+    anchor_ids = _device_ids(get['anchor_ids'], 'anchor_ids', len(anchor_names))
+    flat = _numbers(get['anchor_positions'], 'anchor_positions')
+    if len(flat) != 3 * len(anchor_names):
+        raise ConfigError(f'anchor_positions: needs 3 numbers per anchor '
+                          f'({3 * len(anchor_names)}), got {len(flat)}')
+    positions = tuple(tuple(flat[i:i + 3]) for i in range(0, len(flat), 3))
+    arm_lengths = _numbers(get['arm_lengths'], 'arm_lengths')
+    if len(arm_lengths) != len(tag_names):
+        raise ConfigError(f'arm_lengths: needs one length per tag ({len(tag_names)}), '
+                          f'got {len(arm_lengths)}')
+    base = _numbers(get['base'], 'base')
+    try:
+        BoomModel(arm_lengths, base, positions)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    sources = _sources(get['source_ports'], get['source_protocols'], get['source_tags'],
+                       tag_ids)
+    return PumpConfig(frame_id, arm_lengths, base, tag_names, tag_ids, anchor_names,
+                      anchor_ids, positions, sources)
+
+
+def _sources(ports, protocols, tags, tag_ids):
+    ports = [str(p).strip() for p in ports]
+    if not ports or any(not p for p in ports):
+        raise ConfigError(f'source_ports: every source needs a port, got {ports}')
+    if len(protocols) != len(ports) or len(tags) != len(ports):
+        raise ConfigError(f'source_protocols, source_tags: need one entry per source port '
+                          f'({len(ports)}), got {len(protocols)} and {len(tags)}')
+    sources = []
+    for port, protocol, tag in zip(ports, protocols, tags):
+        protocol = str(protocol).strip().lower()
+        if protocol not in PROTOCOLS:
+            raise ConfigError(f'source_protocols: {protocol!r} for {port} is not one of '
+                              f'{list(PROTOCOLS)}')
+        tag = normalise_device_id(tag) or None
+        if tag is not None and tag not in tag_ids:
+            raise ConfigError(f'source_tags: {tag!r} for {port} is not in tag_ids {list(tag_ids)}')
+        if protocol in ('lec', 'arduino') and tag is None:
+            raise ConfigError(f'source_tags: {port} speaks {protocol}, which does not name '
+                              'the tag: give its tag id')
+        sources.append(Source(port, protocol, tag))
+    duplicates = sorted({p for p in ports if ports.count(p) > 1})
+    if duplicates:
+        raise ConfigError(f'source_ports: duplicate ports {duplicates}')
+    return tuple(sources)
+
+
+def default_config_path():
+    """The pump description shipped with the package (installed share/ or the checkout)."""
+    here = Path(__file__).resolve().parent
+    for candidate in (here.parent / 'config' / 'pump.yaml',
+                      here.parents[3] / 'share' / 'epp_ros' / 'config' / 'pump.yaml'
+                      if len(here.parents) > 3 else None):
+        if candidate is not None and candidate.exists():
+            return candidate
+    raise ConfigError('no config/pump.yaml found next to the package; pass one explicitly')
+
+
+def load_pump_config(path=None):
+    """Read and validate a pump description from a ROS parameters YAML file.
+
+    The shared ``/**`` section holds the description; node sections are ignored here.
+    """
+    path = Path(path) if path is not None else default_config_path()
+    try:
+        document = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f'{path}: cannot read: {exc}') from None
+    try:
+        values = document['/**']['ros__parameters']
+    except (TypeError, KeyError):
+        raise ConfigError(f"{path}: no '/**: ros__parameters:' section") from None
+    return pump_config_from_parameters(values)
+
+
+def node_parameters(path, node_name):
+    """The ``<node_name>: ros__parameters`` section of a parameters file, or {}."""
+    document = yaml.safe_load(Path(path).read_text()) or {}
+    section = document.get(node_name) or {}
+    return dict(section.get('ros__parameters') or {})

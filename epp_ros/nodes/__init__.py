@@ -1,0 +1,1 @@
+"""Thin rclpy nodes: parameters, topics and timing around the plain modules."""

@@ -1,0 +1,99 @@
+"""What every epp_ros node shares: parameters, the pump description, messages, main()."""
+import math
+import sys
+
+import rclpy
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Pose, PoseArray
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from epp_ros.config import PUMP_PARAMETERS, ConfigError, pump_config_from_parameters
+from epp_ros.core.poses import boom_quaternions
+
+#: /uwb/ranges: reliable, deep: serves reliable and best-effort subscribers, and a fast bag
+#: replay loses nothing.
+RANGES_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                        history=HistoryPolicy.KEEP_LAST, depth=100)
+#: Postures (estimate and ground truth): reliable, keep last 10.
+POSTURE_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                         history=HistoryPolicy.KEEP_LAST, depth=10)
+
+
+class StartupError(Exception):
+    """A node cannot start; the message is one line for the user."""
+
+
+def declare(node, name, default, description, **descriptor):
+    """Declare a parameter with a descriptor and return its value."""
+    node.declare_parameter(name, default,
+                           ParameterDescriptor(description=description, **descriptor))
+    return node.get_parameter(name).value
+
+
+def declare_pump_parameters(node):
+    """Declare the shared pump description and return it validated.
+
+    Raises
+    ------
+    StartupError
+        Naming the offending field.
+    """
+    values = {name: declare(node, name, default, description, dynamic_typing=True)
+              for name, (default, description) in PUMP_PARAMETERS.items()}
+    try:
+        return pump_config_from_parameters(values)
+    except ConfigError as exc:
+        raise StartupError(f'bad pump configuration: {exc}') from None
+
+
+def to_time(seconds):
+    """builtin_interfaces/Time from seconds since the epoch."""
+    sec = math.floor(seconds)
+    return Time(sec=int(sec), nanosec=min(int(round((seconds - sec) * 1e9)), 999_999_999))
+
+
+def to_seconds(stamp):
+    """Seconds since the epoch from a builtin_interfaces/Time."""
+    return stamp.sec + 1e-9 * stamp.nanosec
+
+
+def posture_message(base, joints, stamp, frame_id):
+    """PoseArray of the base pivot then joints 1..p, oriented along the sections."""
+    message = PoseArray()
+    message.header.stamp = to_time(stamp)
+    message.header.frame_id = frame_id
+    quaternions = boom_quaternions(base, joints)
+    for position, quaternion in zip([base, *joints], quaternions):
+        pose = Pose()
+        pose.position.x, pose.position.y, pose.position.z = (float(v) for v in position)
+        (pose.orientation.x, pose.orientation.y, pose.orientation.z,
+         pose.orientation.w) = (float(v) for v in quaternion)
+        message.poses.append(pose)
+    return message
+
+
+def run_node(factory, args=None):
+    """The usual node main(): init, construct, spin, shut down; exit status 2 on StartupError."""
+    rclpy.init(args=sys.argv if args is None else args)
+    node = None
+    status = 0
+    try:
+        node = factory()
+        rclpy.spin(node)
+    except StartupError as exc:
+        name = node.get_name() if node is not None else factory.__name__
+        print(f'{getattr(factory, "node_name", name)}: {exc}', file=sys.stderr)
+        status = 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            close = getattr(node, 'close', None)
+            if close is not None:
+                close()
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return status

@@ -1,0 +1,159 @@
+"""uwb_driver: DWM1000 range lines from serial ports or WiFi bridges -> /uwb/ranges.
+
+Publishes ``sensor_msgs/JointState`` on ``uwb/ranges`` (relative: namespaces work), one
+message per ranging cycle, as a stamped, labelled range array: ``name[i] = "<tag>:<anchor>"``
+(config names), ``position[i]`` the range in metres or NaN where the pair did not report this
+cycle, ``header.stamp`` the receive time of the newest range, ``velocity`` and ``effort``
+empty. It never publishes on ``joint_states``. Diagnostics at 1 Hz on ``/diagnostics``.
+"""
+import threading
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from epp_ros.config import PROTOCOLS, Source, normalise_device_id
+from epp_ros.nodes.common import (RANGES_QOS, StartupError, declare, declare_pump_parameters,
+                                  run_node, to_time)
+from epp_ros.uwb.decoder import LineDecoder
+from epp_ros.uwb.frames import FrameAssembler
+from epp_ros.uwb.source import LineSource
+
+TREK_ANCHORS = {'0', '1', '2', '3'}
+
+
+class UwbDriver(Node):
+    """Reads every configured source and publishes one range frame per cycle."""
+
+    node_name = 'uwb_driver'
+
+    def __init__(self):
+        super().__init__(self.node_name)
+        self.config = declare_pump_parameters(self)
+        baud = declare(self, 'baud', 115200, 'Baud rate of serial sources.')
+        frame_period = declare(self, 'frame_period', 0.1,
+                               'Longest ranging cycle, s: a frame closes when every pair '
+                               'reported or after this long.')
+        min_range = declare(self, 'min_range', 0.05, 'Shortest plausible range, m.')
+        max_range = declare(self, 'max_range', 200.0, 'Longest plausible range, m.')
+        max_line = declare(self, 'max_line', 4096, 'Longest line kept, bytes.')
+        port = declare(self, 'port', '', 'A single source instead of the configured list.')
+        protocol = declare(self, 'protocol', 'auto', f'Protocol of `port`: {PROTOCOLS}.')
+        tag = declare(self, 'tag', '', 'Tag id on `port` for formats that do not name it.')
+        sources = self.config.sources
+        if port:
+            if protocol not in PROTOCOLS:
+                raise StartupError(f'protocol: {protocol!r} is not one of {list(PROTOCOLS)}')
+            sources = (Source(port, protocol, normalise_device_id(tag) or None),)
+        self._check_trek(sources)
+        try:
+            self.assembler = FrameAssembler(self.config, frame_period, min_range, max_range)
+        except ValueError as exc:
+            raise StartupError(f'frame_period, min_range, max_range: {exc}') from None
+        self.publisher = self.create_publisher(JointState, 'uwb/ranges', RANGES_QOS)
+        self.diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.link_names = self.config.link_names
+        self._lock = threading.Lock()
+        self._last_frame = time.time()
+        self._started = time.time()
+        self._previous_counts = {}
+        self.readers = []
+        for source in sources:
+            decoder = LineDecoder(source.protocol)
+            reader = LineSource(source.port, self._handler(source, decoder), baud=baud,
+                                max_line=max_line)
+            self.readers.append((source, decoder, reader))
+        for _, _, reader in self.readers:
+            reader.start()
+        self.create_timer(min(frame_period / 4, 0.05), self._close_stale_frames)
+        self.create_timer(1.0, self._publish_diagnostics)
+        self.get_logger().info(
+            f'reading {", ".join(f"{s.port} ({s.protocol})" for s in sources)}; '
+            f'{len(self.link_names)} tag-anchor pairs')
+
+    def _check_trek(self, sources):
+        if all(s.protocol == 'trek' for s in sources):
+            extra = sorted(set(self.config.anchor_ids) - TREK_ANCHORS)
+            if extra:
+                raise StartupError(
+                    f'anchor_ids: the trek format carries at most 4 anchors per tag (ids 0-3); '
+                    f'anchors {extra} need another source or another format')
+
+    def _handler(self, source, decoder):
+        def on_line(line, received):
+            records = decoder.decode(line)
+            with self._lock:
+                for record in records:
+                    for frame in self.assembler.add(record, received, source.tag):
+                        self._publish(frame)
+        return on_line
+
+    def _close_stale_frames(self):
+        with self._lock:
+            for frame in self.assembler.poll(time.time()):
+                self._publish(frame)
+
+    def _publish(self, frame):
+        message = JointState()
+        message.header.stamp = to_time(frame.stamp)
+        message.header.frame_id = self.config.frame_id
+        message.name = self.link_names
+        message.position = [float(v) for v in frame.ranges.ravel()]
+        self.publisher.publish(message)
+        self._last_frame = time.time()
+
+    def _publish_diagnostics(self):
+        now = time.time()
+        array = DiagnosticArray()
+        array.header.stamp = to_time(now)
+        silent = now - self._last_frame
+        with self._lock:
+            dropped = dict(self.assembler.dropped)
+            frames = self.assembler.frames
+        for source, decoder, reader in self.readers:
+            status = DiagnosticStatus(name=f'uwb_driver: {source.port}',
+                                      hardware_id=source.port)
+            counts = {'lines': reader.counts['lines'], 'frames': frames}
+            rates = {key: (value - self._previous_counts.get((source.port, key), value))
+                     for key, value in counts.items()}
+            for key, value in counts.items():
+                self._previous_counts[(source.port, key)] = value
+            if reader.state != 'connected':
+                status.level = DiagnosticStatus.ERROR
+                status.message = f'{reader.state}: {reader.last_error}'
+            elif silent > 1.0:
+                status.level = DiagnosticStatus.WARN
+                status.message = f'no frame for {silent:.1f} s'
+            else:
+                status.level = DiagnosticStatus.OK
+                status.message = 'ranging'
+            values = {
+                'connection': reader.state, 'protocol': decoder.protocol or 'detecting',
+                'lines/s': rates['lines'], 'frames/s': rates['frames'],
+                'lines': reader.counts['lines'], 'frames': frames,
+                'unparsed lines': decoder.counts['unparsed'],
+                'parse errors': decoder.counts['errors'],
+                'dropped implausible': dropped.get('implausible', 0),
+                'dropped unknown device': dropped.get('unknown_tag', 0)
+                + dropped.get('unknown_anchor', 0),
+                'dropped without tag': dropped.get('no_tag', 0),
+                'anchor-anchor ranges': dropped.get('anchor_range', 0),
+                'raw ranges (corrected ones used)': dropped.get('raw_range', 0),
+                'overlong lines': reader.splitter.overlong,
+                'reconnects': reader.counts['reconnects'],
+                'io errors': reader.counts['io_errors'],
+                'handler errors': reader.counts['handler_errors'],
+                'last error': reader.last_error,
+            }
+            status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+            array.status.append(status)
+        self.diagnostics.publish(array)
+
+    def close(self):
+        for _, _, reader in self.readers:
+            reader.stop()
+
+
+def main(args=None):
+    return run_node(UwbDriver, args)

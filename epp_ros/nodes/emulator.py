@@ -1,0 +1,140 @@
+"""uwb_emulator: a simulated pump whose UWB modules talk like the real ones.
+
+The boom follows a working cycle; each cycle's noisy ranges are written, in the chosen
+protocol, to a pseudo-terminal (like a USB-UART) or to TCP clients (like the ESP8266 WiFi
+bridge). The first stdout lines say where: ``PTY <device path>`` or ``TCP <url>``, one per
+channel (formats that do not name the tag need one channel per tag; then the tag id
+follows). With ``--truth`` the true posture is published as ``geometry_msgs/PoseArray`` on
+``arm_posture/ground_truth`` (base first, then joints 1..p).
+"""
+import argparse
+import sys
+import time
+
+import numpy as np
+from geometry_msgs.msg import PoseArray
+from rclpy.node import Node
+from rclpy.utilities import remove_ros_args
+
+from epp_ros.config import ConfigError, load_pump_config
+from epp_ros.core.simulate import RangeNoise, working_cycle
+from epp_ros.nodes.common import POSTURE_QOS, posture_message, run_node
+from epp_ros.uwb.emulation import (TAG_NAMING, PtyOutput, TcpOutput, channel_count, corrupt,
+                                   cycle_lines)
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(prog='uwb_emulator', description=__doc__.splitlines()[0])
+    parser.add_argument('--protocol', choices=sorted(TAG_NAMING), default='json')
+    where = parser.add_mutually_exclusive_group(required=True)
+    where.add_argument('--pty', action='store_true', help='serve on pseudo-terminal(s)')
+    where.add_argument('--tcp', metavar='HOST:PORT',
+                       help='serve as TCP bridge(s) (per-tag channels on PORT, PORT+1, ...)')
+    parser.add_argument('--link', help='symlink to the (first) pty, e.g. /tmp/ttyUWB; '
+                                       'further channels get .1, .2, ...')
+    parser.add_argument('--config', help='pump description (default: the packaged pump.yaml)')
+    parser.add_argument('--rate', type=float, default=10.0, help='ranging cycles per second')
+    parser.add_argument('--sigma', type=float, default=0.05, help='range noise, metres')
+    parser.add_argument('--nlos', type=float, default=0.0,
+                        help='fraction of NLOS links (exponential excess, mean 2 m)')
+    parser.add_argument('--drop', type=float, default=0.0, help='link dropout probability')
+    parser.add_argument('--garbage', type=float, default=0.0,
+                        help='probability that a line is corrupted or noise is sent')
+    parser.add_argument('--truth', action='store_true',
+                        help='publish the true posture on arm_posture/ground_truth')
+    parser.add_argument('--duration', type=float, default=None, help='stop after seconds')
+    parser.add_argument('--seed', type=int, default=0)
+    args = parser.parse_args(argv)
+    if args.rate <= 0:
+        parser.error('--rate must be positive')
+    if args.tcp:
+        host, _, port = args.tcp.rpartition(':')
+        if not host or not port.isdigit():
+            parser.error(f'--tcp needs HOST:PORT, got {args.tcp!r}')
+        args.host, args.port = host, int(port)
+    return args
+
+
+def open_outputs(args, config):
+    """The channels for this protocol, and the lines announcing them."""
+    count = channel_count(args.protocol, len(config.tag_ids))
+    outputs, announcements = [], []
+    for channel in range(count):
+        suffix = '' if channel == 0 else f'.{channel}'
+        if args.pty:
+            output = PtyOutput(link=args.link + suffix if args.link else None)
+            kind = 'PTY'
+        else:
+            output = TcpOutput(args.host, args.port + channel if args.port else 0)
+            kind = 'TCP'
+        tag = '' if TAG_NAMING[args.protocol] else f' {config.tag_ids[channel]}'
+        outputs.append(output)
+        announcements.append(f'{kind} {output.path}{tag}')
+    return outputs, announcements
+
+
+class UwbEmulator(Node):
+    """Writes one cycle of device lines per timer tick."""
+
+    node_name = 'uwb_emulator'
+
+    def __init__(self, args, config, outputs):
+        super().__init__(self.node_name)
+        self.args, self.config, self.outputs = args, config, outputs
+        self.model = config.model()
+        self.rng = np.random.default_rng(args.seed)
+        self.trajectory = working_cycle(self.model, 600.0, args.rate,
+                                        rng=np.random.default_rng(args.seed))
+        self.noise = RangeNoise(sigma=args.sigma, nlos_fraction=args.nlos, nlos_gamma=2.0,
+                                dropout=args.drop)
+        self.truth = (self.create_publisher(PoseArray, 'arm_posture/ground_truth', POSTURE_QOS)
+                      if args.truth else None)
+        self.cycle = 0
+        self.started = time.monotonic()
+        self.create_timer(1.0 / args.rate, self.step)
+
+    def step(self):
+        if self.args.duration is not None and \
+                time.monotonic() - self.started >= self.args.duration:
+            raise SystemExit(0)
+        joints = self.trajectory.joints[self.cycle % len(self.trajectory.times)]
+        ranges, _ = self.noise.apply(self.model.ranges(joints), self.rng)
+        stamp = time.time()
+        for channel, line in cycle_lines(self.config, ranges, self.args.protocol, self.cycle):
+            data = (line + '\r\n').encode()
+            if self.rng.random() < self.args.garbage:
+                data = corrupt(line, self.rng) + b'\r\n'
+            self.outputs[channel].write(data)
+        if self.truth is not None:
+            self.truth.publish(posture_message(self.model.base, joints, stamp,
+                                               self.config.frame_id))
+        self.cycle += 1
+
+    def close(self):
+        for output in self.outputs:
+            output.close()
+
+
+def main(argv=None):
+    argv = sys.argv if argv is None else argv
+    args = parse_args(remove_ros_args(argv)[1:])
+    try:
+        config = load_pump_config(args.config)
+    except ConfigError as exc:
+        print(f'uwb_emulator: bad pump configuration: {exc}', file=sys.stderr)
+        return 2
+    if args.protocol == 'trek' and not set(config.anchor_ids) <= {'0', '1', '2', '3'}:
+        print(f'uwb_emulator: anchor_ids: the trek format carries anchors 0-3 only, the '
+              f'configuration has {list(config.anchor_ids)}', file=sys.stderr)
+        return 2
+    try:
+        outputs, announcements = open_outputs(args, config)
+    except OSError as exc:
+        print(f'uwb_emulator: cannot open the output: {exc}', file=sys.stderr)
+        return 2
+    print('\n'.join(announcements), flush=True)
+    try:
+        return run_node(lambda: UwbEmulator(args, config, outputs), argv)
+    finally:
+        for output in outputs:
+            output.close()

@@ -1,0 +1,1 @@
+"""Device I/O for DWM1000 UWB modules, without ROS."""

@@ -1,0 +1,59 @@
+"""Lines of one source -> range records, with protocol auto-detection.
+
+With ``protocol="auto"`` every parser is tried on each line until one protocol has parsed
+``lock_after`` lines; from then on only that parser runs. Records parsed while detecting
+are kept, not dropped.
+"""
+from collections import Counter
+
+from epp_ros.uwb.protocols import PARSERS
+
+__all__ = ['LineDecoder']
+
+
+class LineDecoder:
+    """Decode the lines of one source.
+
+    Parameters
+    ----------
+    protocol : str
+        A name in ``PARSERS`` or ``"auto"``.
+    lock_after : int
+        Lines one protocol must parse before auto-detection settles on it.
+
+    Attributes
+    ----------
+    protocol : str or None
+        The protocol in use (None while auto-detection has not settled).
+    counts : collections.Counter
+        ``lines``, ``parsed`` (lines that gave records), ``unparsed`` (lines no parser
+        understood), ``errors`` (broken pieces inside parsed lines), ``records``.
+    """
+
+    def __init__(self, protocol='auto', lock_after=3):
+        if protocol != 'auto' and protocol not in PARSERS:
+            raise ValueError(f'protocol must be auto or one of {list(PARSERS)}, got {protocol!r}')
+        self.protocol = None if protocol == 'auto' else protocol
+        self.lock_after = int(lock_after)
+        self.counts = Counter()
+        self._votes = Counter()
+
+    def decode(self, line):
+        """Records of one line (a tuple, empty when nothing valid was in it)."""
+        self.counts['lines'] += 1
+        candidates = [self.protocol] if self.protocol else list(PARSERS)
+        for name in candidates:
+            result = PARSERS[name](line)
+            if result is not None and result.records:
+                break
+        else:
+            self.counts['unparsed'] += 1
+            return ()
+        if self.protocol is None:
+            self._votes[name] += 1
+            if self._votes[name] >= self.lock_after:
+                self.protocol = name
+        self.counts['parsed'] += 1
+        self.counts['errors'] += result.errors
+        self.counts['records'] += len(result.records)
+        return result.records

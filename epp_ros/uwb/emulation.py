@@ -1,0 +1,190 @@
+"""Impersonating the UWB hardware: device lines per ranging cycle, and where they go.
+
+A ranging cycle's (p, m) ranges become the lines the real devices would print, in one of the
+protocols of :mod:`epp_ros.uwb.protocols`. Formats that name the tag (trek, json) put every
+tag on one channel; formats that do not (lec, arduino) need one channel per tag, as on the
+real rig where each tag has its own serial port or WiFi bridge. A channel is a
+pseudo-terminal (:class:`PtyOutput`) or a TCP server like the ESP8266 bridge
+(:class:`TcpOutput`).
+"""
+import errno
+import os
+import socket
+import threading
+import time
+import tty
+from collections import Counter
+
+import numpy as np
+
+from epp_ros.uwb.protocols import format_arduino, format_json, format_lec, format_trek
+
+__all__ = ['TAG_NAMING', 'channel_count', 'cycle_lines', 'corrupt', 'PtyOutput', 'TcpOutput']
+
+#: Range bias of the emulated TREK1000 raw (``mr``) lines, metres.
+TREK_RAW_BIAS = 0.25
+
+#: Whether a protocol's lines name the tag.
+TAG_NAMING = {'trek': True, 'json': True, 'lec': False, 'arduino': False}
+
+
+def channel_count(protocol, n_tags):
+    """Channels (ports) a protocol needs for ``n_tags`` tags."""
+    return 1 if TAG_NAMING[protocol] else n_tags
+
+
+def cycle_lines(config, ranges, protocol, sequence=0, rx_power=-80.0):
+    """Device lines of one ranging cycle.
+
+    Parameters
+    ----------
+    config : epp_ros.config.PumpConfig
+    ranges : ndarray, shape (p, m)
+        Metres; NaN links are not reported.
+    protocol : str
+        trek, lec, arduino or json.
+    sequence : int
+        Cycle number (the trek format carries it).
+
+    Returns
+    -------
+    list of (channel, line)
+        ``channel`` is 0 for tag-naming formats, else the tag's row.
+    """
+    lines = []
+    for row, tag in enumerate(config.tag_ids):
+        measured = {config.anchor_ids[j]: float(ranges[row, j])
+                    for j in np.flatnonzero(np.isfinite(ranges[row]))}
+        if protocol == 'trek':
+            if measured:      # the firmware prints raw (biased) and corrected ranges
+                raw = {anchor: value + TREK_RAW_BIAS for anchor, value in measured.items()}
+                lines.append((0, format_trek(tag, raw, kind='mr', sequence=sequence)))
+                lines.append((0, format_trek(tag, measured, kind='mc', sequence=sequence)))
+        elif protocol == 'json':
+            if measured:
+                lines.append((0, format_json(tag, measured)))
+        elif protocol == 'lec':
+            if measured:
+                positions = {config.anchor_ids[j]: config.anchor_positions[j]
+                             for j in range(len(config.anchor_ids))}
+                lines.append((row, format_lec(measured, positions)))
+        elif protocol == 'arduino':
+            lines.extend((row, format_arduino(anchor, value, rx_power))
+                         for anchor, value in measured.items())
+        else:
+            raise ValueError(f'unknown protocol {protocol!r}')
+    return lines
+
+
+def corrupt(line, rng):
+    """A damaged version of ``line`` (bytes), as noisy links and firmware produce."""
+    data = line.encode()
+    kind = rng.integers(4)
+    if kind == 0:                                   # cut short
+        return data[:rng.integers(len(data))]
+    if kind == 1:                                   # binary noise instead of a line
+        return rng.integers(0, 256, rng.integers(1, 64), dtype=np.uint8).tobytes()
+    if kind == 2:                                   # a flipped byte
+        position = rng.integers(len(data))
+        return data[:position] + bytes([int(rng.integers(0, 256))]) + data[position + 1:]
+    return data + data[:rng.integers(len(data))]    # a repeated fragment
+
+
+class PtyOutput:
+    """A pseudo-terminal that a driver opens like a USB-UART device.
+
+    Parameters
+    ----------
+    link : str, optional
+        A symlink to create to the device (like a udev rule's stable name), so that a
+        driver finds a restarted emulator at the same path.
+
+    Attributes
+    ----------
+    path : str
+        What to open: the link if given, else the pty device.
+    counts : collections.Counter
+        ``written`` and ``dropped`` (the reader fell behind) writes.
+    """
+
+    def __init__(self, link=None):
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave)
+        os.set_blocking(self._master, False)
+        self.device = os.ttyname(self._slave)
+        self.link = link
+        if link:
+            if os.path.lexists(link):
+                os.unlink(link)
+            os.symlink(self.device, link)
+        self.path = link or self.device
+        self.counts = Counter()
+
+    def write(self, data):
+        try:
+            os.write(self._master, data)
+            self.counts['written'] += 1
+        except BlockingIOError:
+            self.counts['dropped'] += 1
+
+    def close(self):
+        for fd in (self._master, self._slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        if self.link and os.path.islink(self.link):
+            os.unlink(self.link)
+
+
+class TcpOutput:
+    """A TCP server on loopback that streams lines to every client, like the ESP8266 bridge.
+
+    New clients get data 0.2 s after they connect: pyserial's ``socket://`` discards what
+    arrives while it opens.
+    """
+
+    def __init__(self, host, port, grace=0.2):
+        self._server = socket.create_server((host, port))      # SO_REUSEADDR on POSIX
+        self.host, self.port = self._server.getsockname()[:2]
+        self.path = f'socket://{self.host}:{self.port}'
+        self.grace = grace
+        self.counts = Counter()
+        self._clients = []
+        self._lock = threading.Lock()
+        self._closed = threading.Event()
+        threading.Thread(target=self._accept, daemon=True).start()
+
+    def _accept(self):
+        while not self._closed.is_set():
+            try:
+                client, _ = self._server.accept()
+            except OSError:
+                return
+            client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            with self._lock:
+                self._clients.append((client, time.monotonic() + self.grace))
+
+    def write(self, data):
+        now = time.monotonic()
+        with self._lock:
+            for entry in list(self._clients):
+                client, ready = entry
+                if now < ready:
+                    continue
+                try:
+                    client.sendall(data)
+                    self.counts['written'] += 1
+                except OSError as exc:
+                    if exc.errno not in (errno.EAGAIN,):
+                        self._clients.remove(entry)
+                        client.close()
+                    self.counts['dropped'] += 1
+
+    def close(self):
+        self._closed.set()
+        self._server.close()
+        with self._lock:
+            for client, _ in self._clients:
+                client.close()
+            self._clients.clear()

@@ -1,0 +1,109 @@
+"""Range records -> frames: one (p, m) range matrix per ranging cycle.
+
+A cycle opens with its first range and closes when every configured tag-anchor pair has
+reported, or ``frame_period`` seconds after it opened, whichever comes first. A pair that
+reports again before its cycle closed starts the next cycle (the devices have moved on), so
+no range that arrived whole is lost. Every range that is not used is counted by reason.
+"""
+import math
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ['Frame', 'FrameAssembler']
+
+
+@dataclass
+class Frame:
+    """One ranging cycle."""
+
+    stamp: float            #: receive time of the newest range in the frame, seconds
+    ranges: np.ndarray      #: (p, m) metres, NaN where the pair did not report
+    rx_power: np.ndarray    #: (p, m) dBm where the device reported it, else NaN
+
+
+class FrameAssembler:
+    """Collect range records of a pump into frames.
+
+    Parameters
+    ----------
+    config : epp_ros.config.PumpConfig
+    frame_period : float
+        Longest cycle, seconds.
+    min_range, max_range : float
+        Plausible ranges, metres; others are dropped and counted.
+
+    Attributes
+    ----------
+    dropped : collections.Counter
+        Unused records by reason: ``implausible``, ``unknown_tag``, ``unknown_anchor``,
+        ``no_tag`` (a line that names no tag on a source configured without one),
+        ``anchor_range`` (anchor-anchor ranges) and ``raw_range`` (TREK1000 ranges before
+        bias correction, reported again corrected), which the estimators do not use.
+    frames : int
+        Frames closed so far.
+    """
+
+    def __init__(self, config, frame_period=0.1, min_range=0.05, max_range=200.0):
+        if not (frame_period > 0 and 0 <= min_range < max_range):
+            raise ValueError('need frame_period > 0 and 0 <= min_range < max_range')
+        self.config = config
+        self.frame_period = float(frame_period)
+        self.min_range, self.max_range = float(min_range), float(max_range)
+        self.shape = (len(config.tag_ids), len(config.anchor_ids))
+        self.dropped = Counter()
+        self.frames = 0
+        self._reset()
+
+    def _reset(self):
+        self._ranges = np.full(self.shape, np.nan)
+        self._rx_power = np.full(self.shape, np.nan)
+        self._opened = None
+        self._newest = None
+
+    def _close(self):
+        frame = Frame(self._newest, self._ranges, self._rx_power)
+        self.frames += 1
+        self._reset()
+        return frame
+
+    def add(self, record, stamp, source_tag=None):
+        """Add one record received at ``stamp`` (s); return the frames it closed (0 to 2).
+
+        ``source_tag`` is the tag id of the record's source, used when the line names none.
+        """
+        closed = self.poll(stamp)
+        if record.kind != 'range':
+            self.dropped[f'{record.kind}_range'] += 1
+            return closed
+        tag = record.tag if record.tag is not None else source_tag
+        if tag is None:
+            self.dropped['no_tag'] += 1
+            return closed
+        row = self.config.tag_index(tag)
+        column = self.config.anchor_index(record.anchor)
+        if row is None or column is None:
+            self.dropped['unknown_tag' if row is None else 'unknown_anchor'] += 1
+            return closed
+        if not (math.isfinite(record.range_m)
+                and self.min_range <= record.range_m <= self.max_range):
+            self.dropped['implausible'] += 1
+            return closed
+        if not math.isnan(self._ranges[row, column]):
+            closed.append(self._close())          # the pair reports again: a new cycle
+        if self._opened is None:
+            self._opened = stamp
+        self._ranges[row, column] = record.range_m
+        if record.rx_power_dbm is not None:
+            self._rx_power[row, column] = record.rx_power_dbm
+        self._newest = stamp if self._newest is None else max(self._newest, stamp)
+        if not np.isnan(self._ranges).any():
+            closed.append(self._close())
+        return closed
+
+    def poll(self, now):
+        """Close the open cycle if it is ``frame_period`` old; a list of 0 or 1 frame."""
+        if self._opened is not None and now - self._opened >= self.frame_period:
+            return [self._close()]
+        return []

@@ -1,0 +1,81 @@
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from epp_ros.config import (ConfigError, Source, load_pump_config, node_parameters,
+                            pump_config_from_parameters)
+
+ROOT = Path(__file__).resolve().parents[1]
+PUMP_YAML = ROOT / 'config' / 'pump.yaml'
+
+
+def shared_values():
+    return dict(yaml.safe_load(PUMP_YAML.read_text())['/**']['ros__parameters'])
+
+
+def test_packaged_pump_description_loads():
+    config = load_pump_config(PUMP_YAML)
+    assert config.tag_names[0] == 'joint1' and len(config.anchor_ids) == 6
+    assert config.sources == (Source('/dev/ttyUSB0', 'json', None),)
+    assert config.link_names[:2] == ['joint1:turret', 'joint1:outrigger_fl']
+    assert len(config.link_names) == 30
+    model = config.model()
+    np.testing.assert_allclose(model.anchors[1], [2.6, 3.4, 0.4])
+    assert config.tag_index('3') == 2 and config.anchor_index('1782') == 0
+    assert config.anchor_index('a1b2') is None
+    assert node_parameters(PUMP_YAML, 'uwb_driver')['frame_period'] == 0.1
+    assert node_parameters(PUMP_YAML, 'nobody') == {}
+
+
+def test_default_path_finds_the_packaged_file():
+    assert load_pump_config() == load_pump_config(PUMP_YAML)
+
+
+def test_device_ids_compare_case_insensitively():
+    values = shared_values()
+    values['anchor_ids'] = ['a1', 'B2', 'c3', 'd4', 'E5', 'f6']
+    config = pump_config_from_parameters(values)
+    assert config.anchor_index('A1') == 0 and config.anchor_index(' f6 ') == 5
+
+
+@pytest.mark.parametrize('change, field', [
+    ({'tag_ids': ['1', '2', '3', '4', 'xyz']}, 'tag_ids'),
+    ({'tag_ids': ['1', '2', '3', '4', '4']}, 'duplicate device ids'),
+    ({'tag_ids': ['1', '2', '3', '4']}, 'tag_ids'),
+    ({'tag_names': ['a', 'b', 'c', 'd', 'a']}, 'duplicate names'),
+    ({'tag_names': ['a', 'b', 'c', 'd', 'e f']}, 'tag_names'),
+    ({'anchor_names': []}, 'anchor_names'),
+    ({'anchor_positions': [0.0] * 17}, 'anchor_positions'),
+    ({'anchor_positions': ['x'] * 18}, 'anchor_positions'),
+    ({'arm_lengths': [9.0, 7.0]}, 'arm_lengths'),
+    ({'arm_lengths': [9.0, 7.0, 7.0, 9.0, -1.0]}, 'arm_lengths'),
+    ({'base': [0.0, 0.0]}, 'base'),
+    ({'frame_id': ' '}, 'frame_id'),
+    ({'source_protocols': ['morse']}, 'source_protocols'),
+    ({'source_protocols': ['lec']}, 'source_tags'),
+    ({'source_tags': ['9']}, 'source_tags'),
+    ({'source_ports': ['']}, 'source_ports'),
+    ({'source_ports': ['a', 'a'], 'source_protocols': ['json'] * 2,
+      'source_tags': [''] * 2}, 'duplicate ports'),
+    ({'source_tags': ['', '']}, 'one entry per source'),
+    ({'colour': 'red'}, 'unknown pump parameter'),
+])
+def test_bad_descriptions_name_the_field(change, field):
+    values = shared_values()
+    values.update(change)
+    with pytest.raises(ConfigError, match=field):
+        pump_config_from_parameters(values)
+
+
+def test_unreadable_files_give_one_clear_error(tmp_path):
+    with pytest.raises(ConfigError, match='cannot read'):
+        load_pump_config(tmp_path / 'missing.yaml')
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('uwb_driver: {ros__parameters: {baud: 9600}}\n')
+    with pytest.raises(ConfigError, match='ros__parameters'):
+        load_pump_config(bad)
+    bad.write_text(': : [\n')
+    with pytest.raises(ConfigError, match='cannot read'):
+        load_pump_config(bad)

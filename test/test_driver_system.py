@@ -1,0 +1,250 @@
+"""uwb_emulator -> pty or TCP -> uwb_driver -> /uwb/ranges, as separate processes over DDS."""
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rclpy
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseArray
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from epp_ros.config import load_pump_config
+from epp_ros.nodes.common import POSTURE_QOS, RANGES_QOS, to_seconds
+
+ROOT = Path(__file__).resolve().parents[1]
+PUMP_YAML = ROOT / 'config' / 'pump.yaml'
+BIN = Path(sys.executable).parent
+
+
+def script(name):
+    path = BIN / name
+    if not path.exists():
+        pytest.fail(f'{name} is not installed in {BIN}: run `python3 dev.py test`')
+    return str(path)
+
+
+class Listener(Node):
+    """Collects what the pipeline publishes."""
+
+    def __init__(self):
+        super().__init__('test_listener')
+        self.ranges, self.truth, self.diagnostics = [], [], []
+        self.create_subscription(JointState, 'uwb/ranges', self.ranges.append, RANGES_QOS)
+        self.create_subscription(PoseArray, 'arm_posture/ground_truth', self.truth.append,
+                                 POSTURE_QOS)
+        self.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append, 10)
+
+    def spin_until(self, condition, timeout):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            rclpy.spin_once(self, timeout_sec=0.05)
+            if condition():
+                return True
+        return False
+
+    def driver_levels(self):
+        return [status.level for array in self.diagnostics for status in array.status
+                if status.name.startswith('uwb_driver')]
+
+
+@pytest.fixture(scope='module')
+def listener():
+    rclpy.init()
+    node = Listener()
+    yield node
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+@pytest.fixture
+def processes():
+    started = []
+
+    def start(args):
+        process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                   text=True)
+        started.append(process)
+        return process
+
+    yield start
+    for process in started:
+        if process.poll() is None:
+            process.send_signal(signal.SIGINT)
+    for process in started:
+        try:
+            process.wait(5)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+        process.stdout.close()
+        process.stderr.close()
+
+
+def start_emulator(start, protocol, where, config=PUMP_YAML, extra=()):
+    emulator = start([script('uwb_emulator'), '--protocol', protocol, *where, '--truth',
+                      '--sigma', '0', '--rate', '10', '--config', str(config), *extra])
+    announced = []
+    while True:
+        line = emulator.stdout.readline()
+        if not line.startswith(('PTY', 'TCP')):
+            break
+        announced.append(line.split())
+        if len(announced) == channels(protocol, config):
+            break
+    assert announced, emulator.stderr.read()
+    return emulator, announced
+
+
+def channels(protocol, config):
+    return 1 if protocol in ('json', 'trek') else len(load_pump_config(config).tag_ids)
+
+
+def driver_params(tmp_path, config, announced, protocol):
+    """A parameters file: the pump description with the emulator's ports as sources."""
+    document = yaml.safe_load(Path(config).read_text())
+    shared = document['/**']['ros__parameters']
+    shared['source_ports'] = [a[1] for a in announced]
+    shared['source_protocols'] = [protocol] * len(announced)
+    shared['source_tags'] = [a[2] if len(a) > 2 else '' for a in announced]
+    path = tmp_path / 'driver.yaml'
+    path.write_text(yaml.safe_dump(document))
+    return path
+
+
+def check_ranges_against_truth(listener, config, since, tolerance):
+    """Every tag's ranges in every frame must match some true posture's (no noise) within
+    the format's precision, and frames carry the configured names. (Tags on separate ports
+    are not synchronised: one frame may hold rows of adjacent cycles.)"""
+    listener.spin_until(lambda: False, 0.5)      # the truth of the newest cycle comes last
+    model = config.model()
+    truths = [np.array([[p.position.x, p.position.y, p.position.z] for p in m.poses[1:]])
+              for m in listener.truth]
+    true_ranges = np.array([model.ranges(joints) for joints in truths])
+    frames = listener.ranges[since:]
+    assert frames
+    for frame in frames:
+        assert list(frame.name) == config.link_names
+        assert frame.header.frame_id == config.frame_id
+        assert abs(to_seconds(frame.header.stamp) - time.time()) < 30
+        measured = np.array(frame.position).reshape(model.n_sections, model.n_anchors)
+        assert np.isfinite(measured).any()
+        for row in np.flatnonzero(np.isfinite(measured).any(axis=1)):
+            reported = np.isfinite(measured[row])
+            errors = np.abs(true_ranges[:, row, reported] - measured[row, reported])
+            assert errors.max(axis=1).min() <= tolerance
+
+
+TREK_YAML = {
+    'anchor_names': ['a0', 'a1', 'a2', 'a3'], 'anchor_ids': ['0', '1', '2', '3'],
+    'anchor_positions': [0.0, 0.0, 3.5, 2.6, 3.4, 0.4, 2.6, -3.4, 0.4, -4.2, 3.0, 0.6],
+    'tag_ids': ['1', '2', '3', '4', '5'],
+}
+
+
+def trek_config(tmp_path):
+    document = yaml.safe_load(PUMP_YAML.read_text())
+    document['/**']['ros__parameters'].update(TREK_YAML)
+    path = tmp_path / 'trek_pump.yaml'
+    path.write_text(yaml.safe_dump(document))
+    return path
+
+
+@pytest.mark.parametrize('protocol', ['json', 'lec', 'arduino', 'trek'])
+def test_each_protocol_over_pty_reaches_uwb_ranges(protocol, listener, processes, tmp_path):
+    config_path = trek_config(tmp_path) if protocol == 'trek' else PUMP_YAML
+    config = load_pump_config(config_path)
+    _, announced = start_emulator(processes, protocol, ['--pty'], config_path)
+    params = driver_params(tmp_path, config_path, announced, protocol)
+    since = len(listener.ranges)
+    driver = processes([script('uwb_driver'), '--ros-args', '--params-file', str(params)])
+    assert listener.spin_until(lambda: len(listener.ranges) >= since + 8, 15), \
+        driver.stderr.read() if driver.poll() is not None else 'no frames'
+    tolerance = {'json': 2e-3, 'lec': 6e-3, 'arduino': 6e-3, 'trek': 1.5e-3}[protocol]
+    check_ranges_against_truth(listener, config, since + 2, tolerance)
+
+
+def test_unplugged_pty_is_reconnected(listener, processes, tmp_path):
+    link = str(tmp_path / 'ttyUWB')
+    emulator, _ = start_emulator(processes, 'json', ['--pty', '--link', link])
+    driver = processes([script('uwb_driver'), '--ros-args', '--params-file', str(PUMP_YAML),
+                        '-p', f'port:={link}', '-p', 'protocol:=json'])
+    assert listener.spin_until(lambda: len(listener.ranges) >= 3, 15)
+    emulator.send_signal(signal.SIGINT)                      # unplug: the pty goes away
+    emulator.wait(5)
+    listener.diagnostics.clear()
+    assert listener.spin_until(lambda: DiagnosticStatus.ERROR in listener.driver_levels(), 5)
+    count = len(listener.ranges)
+    start_emulator(processes, 'json', ['--pty', '--link', link])          # plug back in
+    assert listener.spin_until(lambda: len(listener.ranges) >= count + 5, 15)
+    assert driver.poll() is None
+    check_ranges_against_truth(listener, load_pump_config(PUMP_YAML), count + 2, 2e-3)
+
+
+def free_port():
+    import socket
+    with socket.socket() as probe:
+        probe.bind(('127.0.0.1', 0))
+        return probe.getsockname()[1]
+
+
+def test_tcp_bridge_path_survives_a_bridge_restart(listener, processes, tmp_path):
+    port = free_port()
+    emulator, announced = start_emulator(processes, 'json', ['--tcp', f'127.0.0.1:{port}'])
+    assert announced[0][1] == f'socket://127.0.0.1:{port}'
+    since = len(listener.ranges)
+    driver = processes([script('uwb_driver'), '--ros-args', '--params-file', str(PUMP_YAML),
+                        '-p', f'port:=socket://127.0.0.1:{port}', '-p', 'protocol:=auto'])
+    assert listener.spin_until(lambda: len(listener.ranges) >= since + 5, 15)
+    check_ranges_against_truth(listener, load_pump_config(PUMP_YAML), since + 2, 2e-3)
+    emulator.send_signal(signal.SIGINT)
+    emulator.wait(5)
+    time.sleep(1.0)
+    count = len(listener.ranges)
+    start_emulator(processes, 'json', ['--tcp', f'127.0.0.1:{port}'])
+    assert listener.spin_until(lambda: len(listener.ranges) >= count + 5, 15)
+    assert driver.poll() is None
+
+
+def test_garbage_is_counted_and_never_stops_the_driver(listener, processes, tmp_path):
+    link = str(tmp_path / 'ttyNoisy')
+    start_emulator(processes, 'json', ['--pty', '--link', link], extra=['--garbage', '0.3'])
+    since = len(listener.ranges)
+    listener.diagnostics.clear()
+    driver = processes([script('uwb_driver'), '--ros-args', '--params-file', str(PUMP_YAML),
+                        '-p', f'port:={link}', '-p', 'protocol:=json'])
+    assert listener.spin_until(lambda: len(listener.ranges) >= since + 10, 15)
+
+    def unparsed():
+        values = [{kv.key: kv.value for kv in status.values}
+                  for array in listener.diagnostics for status in array.status
+                  if status.name == f'uwb_driver: {link}']
+        return max((int(v['unparsed lines']) + int(v['parse errors']) for v in values),
+                   default=0)
+
+    assert listener.spin_until(lambda: unparsed() > 0, 5)
+    assert driver.poll() is None
+
+
+def test_bad_configuration_stops_the_driver_with_one_line(tmp_path):
+    document = yaml.safe_load(PUMP_YAML.read_text())
+    document['/**']['ros__parameters']['anchor_ids'][2] = 'not-hex'
+    path = tmp_path / 'bad.yaml'
+    path.write_text(yaml.safe_dump(document))
+    result = subprocess.run([script('uwb_driver'), '--ros-args', '--params-file', str(path)],
+                            capture_output=True, text=True, timeout=30)
+    assert result.returncode == 2
+    message = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(message) == 1 and 'anchor_ids' in message[0] and 'Traceback' not in message[0]
+
+
+def test_trek_with_more_than_four_anchors_is_refused_at_start():
+    result = subprocess.run([script('uwb_driver'), '--ros-args', '--params-file',
+                             str(PUMP_YAML), '-p', 'port:=/dev/null', '-p', 'protocol:=trek'],
+                            capture_output=True, text=True, timeout=30)
+    assert result.returncode == 2 and 'at most 4 anchors' in result.stderr

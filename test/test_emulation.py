@@ -1,0 +1,121 @@
+"""Emulated device lines decode back to the ranges they were made from."""
+import os
+
+import numpy as np
+import pytest
+
+from epp_ros.config import load_pump_config, pump_config_from_parameters
+from epp_ros.core.simulate import RangeNoise, random_posture
+from epp_ros.uwb.decoder import LineDecoder
+from epp_ros.uwb.emulation import PtyOutput, TcpOutput, channel_count, corrupt, cycle_lines
+from epp_ros.uwb.frames import FrameAssembler
+
+CONFIG = load_pump_config()
+PRECISION = {'json': 1e-3, 'lec': 5e-3, 'arduino': 5e-3, 'trek': 1e-3}
+
+
+def trek_config():
+    import dataclasses
+    return dataclasses.replace(CONFIG, anchor_ids=('0', '1', '2', '3'),
+                               anchor_names=CONFIG.anchor_names[:4],
+                               anchor_positions=CONFIG.anchor_positions[:4])
+
+
+@pytest.mark.parametrize('protocol', ['json', 'lec', 'arduino', 'trek'])
+def test_cycle_lines_decode_to_the_same_frame(protocol):
+    config = trek_config() if protocol == 'trek' else CONFIG
+    model = config.model()
+    rng = np.random.default_rng(0)
+    joints = random_posture(model, rng)[2]
+    ranges, _ = RangeNoise(dropout=0.2).apply(model.ranges(joints), rng)
+    lines = cycle_lines(config, ranges, protocol, sequence=7)
+    assert {channel for channel, _ in lines} <= set(range(channel_count(protocol, 5)))
+    decoders = [LineDecoder(protocol) for _ in range(channel_count(protocol, 5))]
+    assembler = FrameAssembler(config)
+    frames = []
+    for channel, line in lines:
+        tag = None if channel_count(protocol, 5) == 1 else config.tag_ids[channel]
+        for record in decoders[channel].decode(line):
+            frames += assembler.add(record, 1.0, tag)
+    frames += assembler.poll(2.0)
+    assert len(frames) == 1
+    np.testing.assert_array_equal(np.isnan(frames[0].ranges), np.isnan(ranges))
+    np.testing.assert_allclose(frames[0].ranges, ranges, atol=PRECISION[protocol])
+    raw = np.isfinite(ranges).sum() if protocol == 'trek' else 0
+    assert assembler.dropped == ({'raw_range': raw} if raw else {})
+
+
+def test_auto_detection_settles_and_keeps_early_records():
+    lines = [line for _, line in cycle_lines(CONFIG, np.full((5, 6), 4.0), 'json')]
+    decoder = LineDecoder('auto')
+    assert decoder.decode('\ufffd\ufffd garbage') == ()
+    records = [decoder.decode(line) for line in lines[:3]]
+    assert all(len(r) == 6 for r in records) and decoder.protocol == 'json'
+    assert decoder.counts['unparsed'] == 1 and decoder.counts['records'] == 18
+    with pytest.raises(ValueError):
+        LineDecoder('morse')
+
+
+def test_corrupted_lines_never_raise_in_the_decoder():
+    rng = np.random.default_rng(1)
+    decoder = LineDecoder('auto')
+    for protocol in ('json', 'lec', 'arduino'):
+        for _, line in cycle_lines(CONFIG, np.full((5, 6), 4.0), protocol):
+            for _ in range(20):
+                damaged = corrupt(line, rng).decode('utf-8', errors='replace')
+                for record in decoder.decode(damaged):
+                    assert np.isfinite(record.range_m) and record.range_m >= 0
+
+
+def test_pty_output_is_readable_through_its_link(tmp_path):
+    link = tmp_path / 'ttyUWB'
+    output = PtyOutput(link=str(link))
+    try:
+        assert output.path == str(link) and os.path.realpath(link) == output.device
+        reader = os.open(link, os.O_RDONLY | os.O_NONBLOCK)
+        output.write(b'hello\r\n')
+        assert os.read(reader, 100) == b'hello\r\n'
+        os.close(reader)
+    finally:
+        output.close()
+    assert not os.path.lexists(link)
+
+
+def test_pty_output_drops_instead_of_blocking_when_nobody_reads():
+    output = PtyOutput()
+    try:
+        for _ in range(2000):
+            output.write(b'x' * 100 + b'\n')
+        assert output.counts['dropped'] > 0
+    finally:
+        output.close()
+
+
+def test_tcp_output_serves_clients_after_a_grace_period():
+    import socket
+    import time
+    output = TcpOutput('127.0.0.1', 0, grace=0.1)
+    try:
+        client = socket.create_connection((output.host, output.port), timeout=2)
+        time.sleep(0.05)
+        output.write(b'early\n')                # inside the grace period: not sent
+        time.sleep(0.15)
+        output.write(b'late\n')
+        assert client.recv(100) == b'late\n'
+        client.close()
+    finally:
+        output.close()
+
+
+def test_unknown_protocol_raises():
+    with pytest.raises(ValueError):
+        cycle_lines(CONFIG, np.full((5, 6), 4.0), 'morse')
+
+
+def test_config_validation_is_shared_with_the_emulator():
+    values = {'tag_names': ['a'], 'tag_ids': ['1'], 'anchor_names': ['x', 'y', 'z'],
+              'anchor_ids': ['1', '2', '3'], 'anchor_positions': [0.0] * 6 + [1.0, 2.0, 3.0],
+              'arm_lengths': [1.0], 'base': [0.0, 0.0, 0.0], 'source_ports': ['p'],
+              'source_protocols': ['json'], 'source_tags': ['']}
+    config = pump_config_from_parameters(values)
+    assert len(cycle_lines(config, np.array([[1.0, 2.0, np.nan]]), 'arduino')) == 2

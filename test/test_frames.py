@@ -1,0 +1,79 @@
+import numpy as np
+import pytest
+
+from epp_ros.config import load_pump_config
+from epp_ros.uwb.frames import FrameAssembler
+from epp_ros.uwb.protocols import RangeRecord
+
+CONFIG = load_pump_config()
+ANCHORS = CONFIG.anchor_ids
+TAGS = CONFIG.tag_ids
+
+
+def full_cycle(assembler, stamp, value=5.0):
+    frames = []
+    for tag in TAGS:
+        for anchor in ANCHORS:
+            frames += assembler.add(RangeRecord(anchor, value, tag=tag), stamp)
+    return frames
+
+
+def test_cycle_closes_when_every_pair_reported():
+    assembler = FrameAssembler(CONFIG)
+    frames = full_cycle(assembler, 100.0)
+    assert len(frames) == 1 and assembler.frames == 1
+    np.testing.assert_array_equal(frames[0].ranges, np.full((5, 6), 5.0))
+    assert frames[0].stamp == 100.0
+
+
+def test_cycle_closes_after_the_period_with_nan_for_silent_pairs():
+    assembler = FrameAssembler(CONFIG, frame_period=0.1)
+    assert assembler.add(RangeRecord(ANCHORS[0], 3.0, tag=TAGS[0]), 10.00) == []
+    assert assembler.add(RangeRecord(ANCHORS[1], 4.0, tag=TAGS[2]), 10.05) == []
+    assert assembler.poll(10.08) == []
+    (frame,) = assembler.poll(10.11)
+    assert frame.stamp == 10.05
+    assert frame.ranges[0, 0] == 3.0 and frame.ranges[2, 1] == 4.0
+    assert np.isnan(frame.ranges).sum() == 28
+    assert assembler.poll(20.0) == []                  # no ranges, no frame
+
+
+def test_a_pair_reporting_again_starts_a_new_cycle():
+    assembler = FrameAssembler(CONFIG)
+    record = RangeRecord(ANCHORS[0], 3.0, tag=TAGS[0])
+    assert assembler.add(record, 1.00) == []
+    (frame,) = assembler.add(RangeRecord(ANCHORS[0], 3.1, tag=TAGS[0]), 1.01)
+    assert frame.ranges[0, 0] == 3.0
+    (second,) = assembler.poll(2.0)
+    assert second.ranges[0, 0] == 3.1
+
+
+def test_source_tag_applies_when_the_line_names_none():
+    assembler = FrameAssembler(CONFIG)
+    assembler.add(RangeRecord(ANCHORS[2], 7.5, rx_power_dbm=-81.0), 1.0, source_tag='4')
+    (frame,) = assembler.poll(5.0)
+    assert frame.ranges[3, 2] == 7.5 and frame.rx_power[3, 2] == -81.0
+
+
+@pytest.mark.parametrize('record, reason', [
+    (RangeRecord(ANCHORS[0], 0.01, tag=TAGS[0]), 'implausible'),
+    (RangeRecord(ANCHORS[0], 250.0, tag=TAGS[0]), 'implausible'),
+    (RangeRecord(ANCHORS[0], float('nan'), tag=TAGS[0]), 'implausible'),
+    (RangeRecord('FFFF', 5.0, tag=TAGS[0]), 'unknown_anchor'),
+    (RangeRecord(ANCHORS[0], 5.0, tag='EE'), 'unknown_tag'),
+    (RangeRecord(ANCHORS[0], 5.0), 'no_tag'),
+    (RangeRecord(ANCHORS[0], 5.0, kind='anchor'), 'anchor_range'),
+    (RangeRecord(ANCHORS[0], 5.0, tag=TAGS[0], kind='raw'), 'raw_range'),
+])
+def test_unused_records_are_counted_by_reason(record, reason):
+    assembler = FrameAssembler(CONFIG)
+    assert assembler.add(record, 1.0) == []
+    assert assembler.dropped == {reason: 1}
+    assert assembler.poll(9.0) == []
+
+
+def test_bad_settings_raise():
+    with pytest.raises(ValueError):
+        FrameAssembler(CONFIG, frame_period=0.0)
+    with pytest.raises(ValueError):
+        FrameAssembler(CONFIG, min_range=5.0, max_range=1.0)
