@@ -23,7 +23,7 @@ setup(
     entry_points={
         'console_scripts': [
             'uwb_driver = epp_ros.nodes.driver:main',
-            'posture_estimator = epp_ros.tools.pending:posture_estimator',
+            'posture_estimator = epp_ros.nodes.estimator:main',
             'uwb_emulator = epp_ros.nodes.emulator:main',
             'epp_demo = epp_ros.tools.demo:main',
             'epp_bench = epp_ros.tools.bench:main',

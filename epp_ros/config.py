@@ -8,6 +8,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from epp_ros.core.model import BoomModel
@@ -70,6 +71,50 @@ class PumpConfig:
     def link_names(self):
         """``"<tag>:<anchor>"`` for every tag-anchor pair, tag-major (row k, column j)."""
         return [f'{tag}:{anchor}' for tag in self.tag_names for anchor in self.anchor_names]
+
+    def range_matrix(self, names, values):
+        """Arrange labelled ranges into the (p, m) matrix of the estimators.
+
+        Parameters
+        ----------
+        names : sequence of str
+            ``"<tag>:<anchor>"`` labels, as ``uwb/ranges`` carries them, in any order.
+        values : sequence of float
+            The ranges, metres (NaN for missing).
+
+        Returns
+        -------
+        ranges : ndarray, shape (p, m)
+            NaN where a pair is absent.
+        unknown : int
+            Labels that name no configured pair (ignored).
+
+        Raises
+        ------
+        ValueError
+            When ``names`` and ``values`` differ in length.
+        """
+        if len(names) != len(values):
+            raise ValueError(f'{len(names)} names but {len(values)} ranges')
+        index = self._link_index()
+        ranges = np.full((len(self.tag_ids), len(self.anchor_ids)), np.nan)
+        flat = ranges.reshape(-1)
+        unknown = 0
+        for name, value in zip(names, values):
+            position = index.get(name)
+            if position is None:
+                unknown += 1
+            else:
+                flat[position] = value
+        return ranges, unknown
+
+    def _link_index(self):
+        try:
+            return self._links
+        except AttributeError:
+            links = {name: i for i, name in enumerate(self.link_names)}
+            object.__setattr__(self, '_links', links)
+            return links
 
     def tag_index(self, device_id):
         """Joint index (0-based) of a tag device id, or None."""
@@ -226,7 +271,7 @@ def load_pump_config(path=None):
 
 
 def node_parameters(path, node_name):
-    """The ``<node_name>: ros__parameters`` section of a parameters file, or {}."""
+    """A node's ``ros__parameters`` section (``/**/<node_name>`` or ``<node_name>``), or {}."""
     document = yaml.safe_load(Path(path).read_text()) or {}
-    section = document.get(node_name) or {}
+    section = document.get(f'/**/{node_name}') or document.get(node_name) or {}
     return dict(section.get('ros__parameters') or {})

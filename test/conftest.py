@@ -20,3 +20,33 @@ def _configure_ros_environment():
 
 
 _configure_ros_environment()
+
+
+# Fixtures of the multi-process tests (imported here, after the environment is set).
+import pytest  # noqa: E402
+
+
+@pytest.fixture(scope='module')
+def listener():
+    import rclpy
+    from system import Listener
+    rclpy.init()
+    node = Listener()
+    yield node
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+@pytest.fixture
+def fresh_listener(listener):
+    """Each test judges only what its own processes published."""
+    listener.clear()
+    return listener
+
+
+@pytest.fixture
+def processes():
+    from system import Processes
+    started = Processes()
+    yield started
+    started.stop_all()

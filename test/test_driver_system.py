@@ -1,143 +1,29 @@
 """uwb_emulator -> pty or TCP -> uwb_driver -> /uwb/ranges, as separate processes over DDS."""
 import signal
+import socket
 import subprocess
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
-import rclpy
 import yaml
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import PoseArray
-from rclpy.node import Node
-from sensor_msgs.msg import JointState
+from diagnostic_msgs.msg import DiagnosticStatus
+from system import (PUMP_YAML, params_with_sources, poses_to_joints, script,
+                    start_emulator, truth_window)
 
 from epp_ros.config import load_pump_config
-from epp_ros.nodes.common import POSTURE_QOS, RANGES_QOS, to_seconds
+from epp_ros.nodes.common import to_seconds
 
-ROOT = Path(__file__).resolve().parents[1]
-PUMP_YAML = ROOT / 'config' / 'pump.yaml'
-BIN = Path(sys.executable).parent
-
-
-def script(name):
-    path = BIN / name
-    if not path.exists():
-        pytest.fail(f'{name} is not installed in {BIN}: run `python3 dev.py test`')
-    return str(path)
-
-
-class Listener(Node):
-    """Collects what the pipeline publishes."""
-
-    def __init__(self):
-        super().__init__('test_listener')
-        self.ranges, self.truth, self.diagnostics = [], [], []
-        self.create_subscription(JointState, 'uwb/ranges', self.ranges.append, RANGES_QOS)
-        self.create_subscription(PoseArray, 'arm_posture/ground_truth', self.truth.append,
-                                 POSTURE_QOS)
-        self.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append, 10)
-
-    def spin_until(self, condition, timeout):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            rclpy.spin_once(self, timeout_sec=0.05)
-            if condition():
-                return True
-        return False
-
-    def driver_levels(self):
-        return [status.level for array in self.diagnostics for status in array.status
-                if status.name.startswith('uwb_driver')]
-
-
-@pytest.fixture(scope='module')
-def listener():
-    rclpy.init()
-    node = Listener()
-    yield node
-    node.destroy_node()
-    rclpy.shutdown()
-
-
-@pytest.fixture(autouse=True)
-def fresh_listener(listener):
-    """Each test judges only what its own processes published."""
-    listener.spin_until(lambda: False, 0.2)
-    for received in (listener.ranges, listener.truth, listener.diagnostics):
-        received.clear()
-    return listener
-
-
-@pytest.fixture
-def processes():
-    started = []
-
-    def start(args):
-        process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                   text=True)
-        started.append(process)
-        return process
-
-    yield start
-    for process in started:
-        if process.poll() is None:
-            process.send_signal(signal.SIGINT)
-    for process in started:
-        try:
-            process.wait(5)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-        process.stdout.close()
-        process.stderr.close()
-
-
-def start_emulator(start, protocol, where, config=PUMP_YAML, extra=()):
-    emulator = start([script('uwb_emulator'), '--protocol', protocol, *where, '--truth',
-                      '--sigma', '0', '--rate', '10', '--config', str(config), *extra])
-    announced = []
-    while True:
-        line = emulator.stdout.readline()
-        if not line.startswith(('PTY', 'TCP')):
-            break
-        announced.append(line.split())
-        if len(announced) == channels(protocol, config):
-            break
-    assert announced, emulator.stderr.read()
-    return emulator, announced
-
-
-def channels(protocol, config):
-    return 1 if protocol in ('json', 'trek') else len(load_pump_config(config).tag_ids)
-
-
-def driver_params(tmp_path, config, announced, protocol):
-    """A parameters file: the pump description with the emulator's ports as sources."""
-    document = yaml.safe_load(Path(config).read_text())
-    shared = document['/**']['ros__parameters']
-    shared['source_ports'] = [a[1] for a in announced]
-    shared['source_protocols'] = [protocol] * len(announced)
-    shared['source_tags'] = [a[2] if len(a) > 2 else '' for a in announced]
-    path = tmp_path / 'driver.yaml'
-    path.write_text(yaml.safe_dump(document))
-    return path
+pytestmark = pytest.mark.usefixtures('fresh_listener')
 
 
 def check_ranges_against_truth(listener, config, since, tolerance):
     """Every tag's ranges in every frame must match some true posture's (no noise) within
     the format's precision, and frames carry the configured names. (Tags on separate ports
     are not synchronised: one frame may hold rows of adjacent cycles.)"""
-    listener.spin_until(lambda: False, 0.5)      # the truth of the newest cycle comes last
+    first, last = truth_window(listener)
     model = config.model()
-    truths = [np.array([[p.position.x, p.position.y, p.position.z] for p in m.poses[1:]])
-              for m in listener.truth]
-    true_ranges = np.array([model.ranges(joints) for joints in truths])
-    # Only frames inside the stretch of truth received (truth published before the
-    # listener matched the emulator is not delivered).
-    first, last = (to_seconds(listener.truth[i].header.stamp) for i in (0, -1))
+    true_ranges = np.array([model.ranges(poses_to_joints(m)) for m in listener.truth])
     frames = [f for f in listener.ranges[since:]
               if first + 0.15 <= to_seconds(f.header.stamp) <= last]
     assert len(frames) >= 3
@@ -151,6 +37,8 @@ def check_ranges_against_truth(listener, config, since, tolerance):
             reported = np.isfinite(measured[row])
             errors = np.abs(true_ranges[:, row, reported] - measured[row, reported])
             assert errors.max(axis=1).min() <= tolerance
+
+
 
 
 TREK_YAML = {
@@ -173,7 +61,7 @@ def test_each_protocol_over_pty_reaches_uwb_ranges(protocol, listener, processes
     config_path = trek_config(tmp_path) if protocol == 'trek' else PUMP_YAML
     config = load_pump_config(config_path)
     _, announced = start_emulator(processes, protocol, ['--pty'], config_path)
-    params = driver_params(tmp_path, config_path, announced, protocol)
+    params = params_with_sources(tmp_path, config_path, announced, protocol)
     since = len(listener.ranges)
     driver = processes([script('uwb_driver'), '--ros-args', '--params-file', str(params)])
     assert listener.spin_until(lambda: len(listener.ranges) >= since + 8, 15), \
@@ -191,7 +79,8 @@ def test_unplugged_pty_is_reconnected(listener, processes, tmp_path):
     emulator.send_signal(signal.SIGINT)                      # unplug: the pty goes away
     emulator.wait(5)
     listener.diagnostics.clear()
-    assert listener.spin_until(lambda: DiagnosticStatus.ERROR in listener.driver_levels(), 5)
+    assert listener.spin_until(lambda: DiagnosticStatus.ERROR in [
+        s.level for s in listener.statuses('uwb_driver')], 5)
     count = len(listener.ranges)
     start_emulator(processes, 'json', ['--pty', '--link', link])          # plug back in
     assert listener.spin_until(lambda: len(listener.ranges) >= count + 5, 15)
@@ -200,7 +89,6 @@ def test_unplugged_pty_is_reconnected(listener, processes, tmp_path):
 
 
 def free_port():
-    import socket
     with socket.socket() as probe:
         probe.bind(('127.0.0.1', 0))
         return probe.getsockname()[1]
@@ -235,8 +123,7 @@ def test_garbage_is_counted_and_never_stops_the_driver(listener, processes, tmp_
 
     def unparsed():
         values = [{kv.key: kv.value for kv in status.values}
-                  for array in listener.diagnostics for status in array.status
-                  if status.name == f'uwb_driver: {link}']
+                  for status in listener.statuses(f'uwb_driver: {link}')]
         return max((int(v['unparsed lines']) + int(v['parse errors']) for v in values),
                    default=0)
 

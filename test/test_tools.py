@@ -45,7 +45,7 @@ def test_bench_option_parsing():
 
 
 def test_pending_scripts_say_so_and_fail(capsys):
-    assert pending.posture_estimator() == 2
+    assert pending.epp_bag() == 2
     assert 'not implemented yet' in capsys.readouterr().err
 
 

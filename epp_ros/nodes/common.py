@@ -4,10 +4,11 @@ import sys
 
 import rclpy
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Pose, PoseArray
+from geometry_msgs.msg import Point, Pose, PoseArray
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from visualization_msgs.msg import Marker, MarkerArray
 
 from epp_ros.config import PUMP_PARAMETERS, ConfigError, pump_config_from_parameters
 from epp_ros.core.poses import boom_quaternions
@@ -72,6 +73,31 @@ def posture_message(base, joints, stamp, frame_id):
          pose.orientation.w) = (float(v) for v in quaternion)
         message.poses.append(pose)
     return message
+
+
+def posture_markers(base, joints, stamp, frame_id, namespace='boom'):
+    """MarkerArray for RViz: the boom as a line strip, joint spheres and a tip label."""
+    header_stamp = to_time(stamp)
+    points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in [base, *joints]]
+    strip = Marker(ns=namespace, id=0, type=Marker.LINE_STRIP, action=Marker.ADD,
+                   points=points)
+    strip.scale.x = 0.3
+    strip.color.r, strip.color.g, strip.color.b, strip.color.a = 1.0, 0.6, 0.0, 1.0
+    spheres = Marker(ns=namespace, id=1, type=Marker.SPHERE_LIST, action=Marker.ADD,
+                     points=points)
+    spheres.scale.x = spheres.scale.y = spheres.scale.z = 0.6
+    spheres.color.r, spheres.color.g, spheres.color.b, spheres.color.a = 0.2, 0.2, 0.2, 1.0
+    label = Marker(ns=namespace, id=2, type=Marker.TEXT_VIEW_FACING, action=Marker.ADD,
+                   text=f'tip {joints[-1][2]:.1f} m')
+    label.pose.position = Point(x=points[-1].x, y=points[-1].y, z=points[-1].z + 1.0)
+    label.pose.orientation.w = 1.0
+    label.scale.z = 0.8
+    label.color.r = label.color.g = label.color.b = label.color.a = 1.0
+    for marker in (strip, spheres, label):
+        marker.header.stamp = header_stamp
+        marker.header.frame_id = frame_id
+        marker.pose.orientation.w = 1.0
+    return MarkerArray(markers=[strip, spheres, label])
 
 
 def run_node(factory, args=None):

@@ -6,19 +6,13 @@ real entry point when its issue lands.
 import sys
 
 _PENDING = {
-    'posture_estimator': 'the "Estimator node" issue',
     'epp_bag': 'the "Bags" issue',
 }
 
 
 def _not_yet(name):
-    print(f'{name}: not implemented yet; it arrives with {_PENDING[name]}. '
-          'Meanwhile `epp_demo` runs the estimators on the simulated pump.', file=sys.stderr)
+    print(f'{name}: not implemented yet; it arrives with {_PENDING[name]}.', file=sys.stderr)
     return 2
-
-
-def posture_estimator():
-    return _not_yet('posture_estimator')
 
 
 def epp_bag():

@@ -1,0 +1,120 @@
+"""posture_estimator: uwb/ranges -> arm_posture, every frame, with diagnostics and markers.
+
+Subscribes to ``uwb/ranges`` (``sensor_msgs/JointState`` from uwb_driver), arranges the
+``"<tag>:<anchor>"`` ranges as the configured (p, m) matrix and runs
+:class:`epp_ros.core.PostureEstimator`, warm-started from the previous pose. Publishes, with
+the range frame's stamp:
+
+- ``arm_posture`` (``geometry_msgs/PoseArray``): the base pivot, then joints 1..p; pose k's
+  x-axis along section k, z-axis up in the boom's vertical plane;
+- ``arm_posture/markers`` (``visualization_msgs/MarkerArray``) for RViz;
+- ``/diagnostics`` at 1 Hz: section lengths and errors, range residual, iterations, solve
+  time, missing links, counters; level from the last frame and the thresholds.
+
+A frame that cannot be solved publishes no pose; after ``reset_after_failures`` such frames
+in a row the estimator starts cold. Frames whose stamp is not newer than the last one are
+ignored and counted. Topic names are relative: ``-r __ns:=/pump7`` runs one per pump.
+"""
+import time
+from collections import Counter
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseArray
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from visualization_msgs.msg import MarkerArray
+
+from epp_ros.core import METHODS, PostureEstimator
+from epp_ros.health import Thresholds, assess
+from epp_ros.nodes.common import (POSTURE_QOS, RANGES_QOS, StartupError, declare,
+                                  declare_pump_parameters, posture_message, posture_markers,
+                                  run_node, to_seconds, to_time)
+
+LEVELS = {0: DiagnosticStatus.OK, 1: DiagnosticStatus.WARN, 2: DiagnosticStatus.ERROR}
+
+
+class PostureEstimatorNode(Node):
+    """Solves every range frame for the boom's posture."""
+
+    node_name = 'posture_estimator'
+
+    def __init__(self):
+        super().__init__(self.node_name)
+        self.config = declare_pump_parameters(self)
+        method = declare(self, 'method', 'cepp', f'Estimator: {", ".join(METHODS)}.')
+        if method not in METHODS:
+            raise StartupError(f'method: {method!r} is not one of {list(METHODS)}')
+        self.reset_after = declare(self, 'reset_after_failures', 10,
+                                   'Unsolvable frames in a row before a cold start.')
+        self.thresholds = Thresholds(
+            declare(self, 'arm_length_warn', 0.05, 'Section length error for WARN, m.'),
+            declare(self, 'arm_length_error', 0.5, 'Section length error for ERROR, m.'),
+            declare(self, 'residual_warn', 0.5, 'Range residual RMS for WARN, m.'),
+            declare(self, 'residual_error', 2.0, 'Range residual RMS for ERROR, m.'))
+        self.publish_markers = declare(self, 'publish_markers', True,
+                                       'Also publish arm_posture/markers for RViz.')
+        if self.reset_after < 1:
+            raise StartupError('reset_after_failures: must be >= 1')
+        self.model = self.config.model()
+        self.estimator = PostureEstimator(self.model, method)
+        self.lengths = self.model.arm_lengths
+        self.posture = self.create_publisher(PoseArray, 'arm_posture', POSTURE_QOS)
+        self.markers = self.create_publisher(MarkerArray, 'arm_posture/markers', POSTURE_QOS)
+        self.diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_subscription(JointState, 'uwb/ranges', self.on_ranges, RANGES_QOS)
+        self.create_timer(1.0, self.publish_diagnostics)
+        self.counts = Counter()
+        self.failures_in_a_row = 0
+        self.last_stamp = None
+        self.status_name = f'{self.get_fully_qualified_name()}'
+        self.get_logger().info(f'{method} on {self.model.n_sections} sections, '
+                               f'{self.model.n_anchors} anchors')
+
+    def on_ranges(self, message):
+        self.counts['frames'] += 1
+        stamp = to_seconds(message.header.stamp)
+        if self.last_stamp is not None and stamp <= self.last_stamp:
+            self.counts['out_of_order'] += 1
+            return
+        try:
+            ranges, unknown = self.config.range_matrix(message.name, message.position)
+        except ValueError:
+            self.counts['malformed'] += 1
+            return
+        self.counts['unknown_links'] += unknown
+        self.last_stamp = stamp
+        joints = self.estimator.update(ranges)
+        if not self.estimator.last_diagnostics['valid']:
+            self.counts['unsolved'] += 1
+            self.failures_in_a_row += 1
+            if self.failures_in_a_row >= self.reset_after:
+                self.estimator.reset()
+                self.counts['cold_restarts'] += 1
+                self.failures_in_a_row = 0
+            return
+        self.failures_in_a_row = 0
+        self.counts['published'] += 1
+        frame_id = message.header.frame_id or self.config.frame_id
+        self.posture.publish(posture_message(self.model.base, joints, stamp, frame_id))
+        if self.publish_markers:
+            self.markers.publish(posture_markers(self.model.base, joints, stamp, frame_id))
+
+    def publish_diagnostics(self):
+        diagnostics = self.estimator.last_diagnostics
+        status = DiagnosticStatus(name=f'posture_estimator: {self.status_name}',
+                                  hardware_id=self.config.frame_id)
+        if not diagnostics:
+            status.level, status.message = DiagnosticStatus.WARN, 'waiting for uwb/ranges'
+            values = {}
+        else:
+            level, status.message, values = assess(diagnostics, self.thresholds, self.lengths)
+            status.level = LEVELS[level]
+        values.update({f'frames {key}': str(value) for key, value in self.counts.items()})
+        status.values = [KeyValue(key=key, value=value) for key, value in values.items()]
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = to_time(time.time())
+        self.diagnostics.publish(array)
+
+
+def main(args=None):
+    return run_node(PostureEstimatorNode, args)

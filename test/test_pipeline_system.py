@@ -1,0 +1,132 @@
+"""emulator -> driver -> posture_estimator -> /arm_posture, as separate processes over DDS."""
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus
+from sensor_msgs.msg import JointState
+from system import PUMP_YAML, Listener, poses_to_joints, script, start_emulator, truth_window
+
+from epp_ros.config import load_pump_config
+from epp_ros.core.metrics import frame_rmse
+from epp_ros.nodes.common import RANGES_QOS, to_seconds, to_time
+
+pytestmark = pytest.mark.usefixtures('fresh_listener')
+CONFIG = load_pump_config(PUMP_YAML)
+SIGMA = 0.05
+
+
+def start_pump(processes, tmp_path, name='ttyUWB', namespace=None, extra=(), seed=0):
+    """Emulator on a pty, driver and estimator; all under ``namespace`` if given."""
+    link = str(tmp_path / name)
+    remap = ['--ros-args', '-r', f'__ns:={namespace}'] if namespace else ['--ros-args']
+    emulator, _ = start_emulator(
+        processes, 'json', ['--pty', '--link', link],
+        extra=['--sigma', str(SIGMA), '--seed', str(seed), *extra, *remap])
+    driver = processes([script('uwb_driver'), *remap, '--params-file', str(PUMP_YAML),
+                        '-p', f'port:={link}', '-p', 'protocol:=json'])
+    estimator = processes([script('posture_estimator'), *remap, '--params-file',
+                           str(PUMP_YAML)])
+    return emulator, driver, estimator
+
+
+def matched_errors(listener):
+    """RMSE of each received posture against the newest truth published before its frame."""
+    first, last = truth_window(listener)
+    truth_stamps = np.array([to_seconds(m.header.stamp) for m in listener.truth])
+    errors = []
+    for posture in listener.postures:
+        stamp = to_seconds(posture.header.stamp)
+        if not first <= stamp <= last + 0.05:
+            continue
+        index = np.searchsorted(truth_stamps, stamp) - 1
+        errors.append(frame_rmse(poses_to_joints(posture),
+                                 poses_to_joints(listener.truth[index])))
+    return np.array(errors)
+
+
+def test_postures_follow_the_truth(listener, processes, tmp_path):
+    start_pump(processes, tmp_path)
+    assert listener.spin_until(lambda: len(listener.postures) >= 30, 20)
+    for posture in listener.postures:
+        assert len(posture.poses) == 6 and posture.header.frame_id == CONFIG.frame_id
+        values = [[p.position.x, p.position.y, p.position.z, p.orientation.x,
+                   p.orientation.y, p.orientation.z, p.orientation.w] for p in posture.poses]
+        assert np.all(np.isfinite(values))
+        np.testing.assert_allclose(values[0][:3], CONFIG.base)
+        np.testing.assert_allclose(np.linalg.norm(np.array(values)[:, 3:], axis=1), 1.0)
+    errors = matched_errors(listener)
+    assert errors.size >= 20
+    # CEPP on this geometry: RMSE ~3.3 sigma (epp_bench tracking); the bound leaves room.
+    assert np.sqrt(np.mean(errors ** 2)) < 8 * SIGMA
+    # Diagnostics: the paper's arm-length diagnostic and the solver's figures.
+    assert listener.spin_until(lambda: listener.statuses('posture_estimator'), 3)
+    status = listener.statuses('posture_estimator')[-1]
+    values = {kv.key: kv.value for kv in status.values}
+    assert status.level == DiagnosticStatus.OK, status.message
+    assert float(values['section 5 abs error [m]']) < 1e-6
+    assert values['method'] == 'cepp' and int(values['frames published']) >= 20
+    for key in ('range residual RMS [m]', 'iterations', 'solve time [ms]', 'missing links'):
+        assert key in values
+
+
+def test_frames_missing_most_ranges_publish_no_nan(listener, processes, tmp_path):
+    start_pump(processes, tmp_path, extra=['--drop', '0.85'])
+    assert listener.spin_until(lambda: len(listener.ranges) >= 40, 20)
+    listener.spin_until(lambda: False, 1.5)
+    assert len(listener.postures) < len(listener.ranges)        # some frames were unsolvable
+    for posture in listener.postures:
+        values = [[p.position.x, p.position.y, p.position.z, p.orientation.w]
+                  for p in posture.poses]
+        assert np.all(np.isfinite(values))
+    statuses = listener.statuses('posture_estimator')
+    assert statuses
+    counts = {kv.key: kv.value for kv in statuses[-1].values}
+    assert int(counts['frames unsolved']) > 0
+
+
+def test_out_of_order_and_duplicate_frames_are_ignored_and_counted(listener, processes):
+    processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML)])
+    publisher = listener.create_publisher(JointState, 'uwb/ranges', RANGES_QOS)
+    try:
+        model = CONFIG.model()
+        joints = model.forward_kinematics(0.3, np.radians([50.0, 20.0, 0.0, -20.0, -40.0]))
+        # The listener subscribes too: wait for the estimator as the second subscriber.
+        assert listener.spin_until(lambda: publisher.get_subscription_count() >= 2, 10)
+        now = time.time()
+        for stamp in (now, now + 0.1, now + 0.05, now + 0.1, now + 0.2):
+            message = JointState(name=CONFIG.link_names,
+                                 position=[float(v) for v in model.ranges(joints).ravel()])
+            message.header.stamp = to_time(stamp)
+            publisher.publish(message)
+        assert listener.spin_until(lambda: len(listener.postures) >= 3, 10)
+        listener.spin_until(lambda: False, 1.5)
+        assert len(listener.postures) == 3
+        np.testing.assert_allclose(poses_to_joints(listener.postures[-1]), joints, atol=1e-4)
+        counts = {kv.key: kv.value
+                  for kv in listener.statuses('posture_estimator')[-1].values}
+        assert counts['frames out_of_order'] == '2'
+    finally:
+        listener.destroy_publisher(publisher)
+
+
+def test_two_pumps_side_by_side_in_namespaces(processes, tmp_path):
+    start_pump(processes, tmp_path, 'ttyPump1', '/pump1', seed=1)
+    start_pump(processes, tmp_path, 'ttyPump2', '/pump2', seed=2)
+    pumps = [Listener('listener1', '/pump1'), Listener('listener2', '/pump2')]
+    try:
+        deadline = time.monotonic() + 25
+        while time.monotonic() < deadline and min(len(p.postures) for p in pumps) < 20:
+            for pump in pumps:
+                rclpy.spin_once(pump, timeout_sec=0.02)
+        for pump in pumps:
+            errors = matched_errors(pump)
+            assert errors.size >= 10
+            assert np.sqrt(np.mean(errors ** 2)) < 8 * SIGMA
+        # Different seeds: the two booms are in different places.
+        assert np.abs(poses_to_joints(pumps[0].postures[-1])
+                      - poses_to_joints(pumps[1].postures[-1])).max() > 1.0
+    finally:
+        for pump in pumps:
+            pump.destroy_node()
