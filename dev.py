@@ -55,6 +55,9 @@ def main(argv):
     python = ensure_venv()
     command, rest = argv[0], argv[1:]
     env = dict(os.environ, AMENT_PREFIX_PATH=str(VENV), VIRTUAL_ENV=str(VENV))
+    # Quick Fast DDS discovery for processes started together (unless the user set one).
+    env.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE',
+                   str(ROOT / 'config' / 'fastdds_fast_discovery.xml'))
     if command == 'test':
         args = [str(python), '-m', 'pytest'] + rest
     else:

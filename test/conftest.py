@@ -11,7 +11,8 @@ HERE = Path(__file__).resolve().parent
 def _configure_ros_environment():
     log_dir = tempfile.mkdtemp(prefix='epp_ros_test_log_')
     os.environ['ROS_LOG_DIR'] = log_dir
-    os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(HERE / 'fastdds_fast_discovery.xml')
+    os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(
+        HERE.parent / 'config' / 'fastdds_fast_discovery.xml')
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     os.environ['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
     # A domain per run keeps parallel or leftover runs from hearing each other.

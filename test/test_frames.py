@@ -77,3 +77,31 @@ def test_bad_settings_raise():
         FrameAssembler(CONFIG, frame_period=0.0)
     with pytest.raises(ValueError):
         FrameAssembler(CONFIG, min_range=5.0, max_range=1.0)
+
+
+def test_whole_tag_lines_close_the_cycle_when_every_tag_reported():
+    assembler = FrameAssembler(CONFIG)
+    frames = []
+    for row, tag in enumerate(TAGS):
+        # Each tag misses its last anchor this cycle.
+        records = [RangeRecord(anchor, 5.0 + row, tag=tag) for anchor in ANCHORS[:-1]]
+        frames += assembler.add_line(records, 1.0 + 0.001 * row, whole=True)
+        assert len(frames) == (1 if row == len(TAGS) - 1 else 0)
+    np.testing.assert_array_equal(np.isnan(frames[0].ranges[:, -1]), True)
+    assert frames[0].ranges[4, 0] == 9.0
+
+
+def test_a_tag_reporting_twice_starts_the_next_cycle():
+    assembler = FrameAssembler(CONFIG)
+    line = [RangeRecord(ANCHORS[0], 5.0, tag=TAGS[0])]
+    assert assembler.add_line(line, 1.0, whole=True) == []
+    (frame,) = assembler.add_line([RangeRecord(ANCHORS[1], 6.0, tag=TAGS[0])], 1.05,
+                                  whole=True)
+    assert frame.ranges[0, 0] == 5.0 and np.isnan(frame.ranges[0, 1])
+
+
+def test_lines_that_are_not_whole_wait_for_every_pair_or_the_period():
+    assembler = FrameAssembler(CONFIG)
+    for tag in TAGS:
+        assert assembler.add_line([RangeRecord(ANCHORS[0], 5.0, tag=tag)], 1.0) == []
+    assert len(assembler.poll(1.2)) == 1

@@ -8,22 +8,28 @@ import pytest
 from epp_ros.tools import bench, demo, pending
 
 
-def test_demo_json_summary_is_the_last_line(capsys):
-    assert demo.main(['--duration', '3', '--rate', '10', '--fast', '--json',
-                      '--sigma', '0.1']) == 0
-    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    assert summary['frames'] == 30 and summary['method'] == 'cepp'
+def test_demo_runs_the_pipeline_and_ends_with_a_json_summary(tmp_path):
+    plot = tmp_path / 'boom.png'
+    result = subprocess.run([sys.executable, '-m', 'epp_ros.tools.demo', '--duration', '6',
+                             '--sigma', '0.1', '--garbage', '0', '--json', '--plot', str(plot)],
+                            capture_output=True, text=True, timeout=90)
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout.strip().splitlines()[-1])
     assert set(summary) == {'frames', 'rmse_m', 'max_joint_error_m', 'latency_p50_ms',
                             'latency_p99_ms', 'dropped_frames', 'method'}
-    assert 0.0 < summary['rmse_m'] < 1.0 and summary['dropped_frames'] == 0
-    assert summary['latency_p50_ms'] <= summary['latency_p99_ms']
+    assert summary['frames'] >= 30 and summary['method'] == 'cepp'
+    assert 0.0 < summary['rmse_m'] < 0.8                 # CEPP here: ~3.3 sigma
+    assert summary['dropped_frames'] == 0
+    assert 0.0 < summary['latency_p50_ms'] <= summary['latency_p99_ms']
+    assert plot.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 
 
 def test_demo_rejects_bad_arguments():
     with pytest.raises(SystemExit):
-        demo.main(['--rate', '0'])
+        demo.parse_args(['--rate', '0'])
     with pytest.raises(SystemExit):
-        demo.main(['--method', 'magic'])
+        demo.parse_args(['--method', 'magic'])
+    assert demo.main(['--config', '/nonexistent.yaml', '--duration', '1']) == 2
 
 
 def test_bench_prints_tables_and_json(capsys):
@@ -47,10 +53,3 @@ def test_bench_option_parsing():
 def test_pending_scripts_say_so_and_fail(capsys):
     assert pending.epp_bag() == 2
     assert 'not implemented yet' in capsys.readouterr().err
-
-
-def test_console_script_runs_as_a_process():
-    result = subprocess.run([sys.executable, '-m', 'epp_ros.tools.demo', '--duration', '0.5',
-                             '--fast', '--json'], capture_output=True, text=True, timeout=60)
-    assert result.returncode == 0
-    assert json.loads(result.stdout.strip().splitlines()[-1])['frames'] == 5

@@ -60,10 +60,17 @@ def to_seconds(stamp):
     return stamp.sec + 1e-9 * stamp.nanosec
 
 
+def _stamp(stamp):
+    return stamp if isinstance(stamp, Time) else to_time(stamp)
+
+
 def posture_message(base, joints, stamp, frame_id):
-    """PoseArray of the base pivot then joints 1..p, oriented along the sections."""
+    """PoseArray of the base pivot then joints 1..p, oriented along the sections.
+
+    ``stamp`` is a builtin_interfaces/Time (copied exactly) or seconds.
+    """
     message = PoseArray()
-    message.header.stamp = to_time(stamp)
+    message.header.stamp = _stamp(stamp)
     message.header.frame_id = frame_id
     quaternions = boom_quaternions(base, joints)
     for position, quaternion in zip([base, *joints], quaternions):
@@ -77,7 +84,7 @@ def posture_message(base, joints, stamp, frame_id):
 
 def posture_markers(base, joints, stamp, frame_id, namespace='boom'):
     """MarkerArray for RViz: the boom as a line strip, joint spheres and a tip label."""
-    header_stamp = to_time(stamp)
+    header_stamp = _stamp(stamp)
     points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in [base, *joints]]
     strip = Marker(ns=namespace, id=0, type=Marker.LINE_STRIP, action=Marker.ADD,
                    points=points)

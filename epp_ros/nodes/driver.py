@@ -18,6 +18,7 @@ from epp_ros.nodes.common import (RANGES_QOS, StartupError, declare, declare_pum
                                   run_node, to_time)
 from epp_ros.uwb.decoder import LineDecoder
 from epp_ros.uwb.frames import FrameAssembler
+from epp_ros.uwb.protocols import WHOLE_TAG_LINES
 from epp_ros.uwb.source import LineSource
 
 TREK_ANCHORS = {'0', '1', '2', '3'}
@@ -83,10 +84,12 @@ class UwbDriver(Node):
     def _handler(self, source, decoder):
         def on_line(line, received):
             records = decoder.decode(line)
+            if not records:
+                return
             with self._lock:
-                for record in records:
-                    for frame in self.assembler.add(record, received, source.tag):
-                        self._publish(frame)
+                for frame in self.assembler.add_line(records, received, source.tag,
+                                                     decoder.protocol in WHOLE_TAG_LINES):
+                    self._publish(frame)
         return on_line
 
     def _close_stale_frames(self):
@@ -157,3 +160,8 @@ class UwbDriver(Node):
 
 def main(args=None):
     return run_node(UwbDriver, args)
+
+
+if __name__ == '__main__':
+    import sys
+    sys.exit(main())

@@ -138,3 +138,8 @@ def main(argv=None):
     finally:
         for output in outputs:
             output.close()
+
+
+if __name__ == '__main__':
+    import sys
+    sys.exit(main())

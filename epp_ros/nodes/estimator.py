@@ -95,6 +95,7 @@ class PostureEstimatorNode(Node):
         self.failures_in_a_row = 0
         self.counts['published'] += 1
         frame_id = message.header.frame_id or self.config.frame_id
+        stamp = message.header.stamp                 # the frame's, exactly
         self.posture.publish(posture_message(self.model.base, joints, stamp, frame_id))
         if self.publish_markers:
             self.markers.publish(posture_markers(self.model.base, joints, stamp, frame_id))
@@ -118,3 +119,8 @@ class PostureEstimatorNode(Node):
 
 def main(args=None):
     return run_node(PostureEstimatorNode, args)
+
+
+if __name__ == '__main__':
+    import sys
+    sys.exit(main())

@@ -1,9 +1,11 @@
 """Range records -> frames: one (p, m) range matrix per ranging cycle.
 
 A cycle opens with its first range and closes when every configured tag-anchor pair has
-reported, or ``frame_period`` seconds after it opened, whichever comes first. A pair that
-reports again before its cycle closed starts the next cycle (the devices have moved on), so
-no range that arrived whole is lost. Every range that is not used is counted by reason.
+reported, or ``frame_period`` seconds after it opened, whichever comes first. In formats
+whose lines carry all of a tag's ranges (``WHOLE_TAG_LINES``) a tag's line also reports its
+missing pairs, so the cycle closes as soon as every tag has reported. A pair (or a whole
+tag) that reports again before its cycle closed starts the next cycle (the devices have
+moved on), so no range that arrived whole is lost. Unused ranges are counted by reason.
 """
 import math
 from collections import Counter
@@ -61,6 +63,7 @@ class FrameAssembler:
         self._rx_power = np.full(self.shape, np.nan)
         self._opened = None
         self._newest = None
+        self._tags_done = set()
 
     def _close(self):
         frame = Frame(self._newest, self._ranges, self._rx_power)
@@ -100,6 +103,31 @@ class FrameAssembler:
         self._newest = stamp if self._newest is None else max(self._newest, stamp)
         if not np.isnan(self._ranges).any():
             closed.append(self._close())
+        return closed
+
+    def add_line(self, records, stamp, source_tag=None, whole=False):
+        """Add the records of one line; return the frames closed (0 to 2 or so).
+
+        With ``whole`` the line carries all of its tag's ranges this cycle (see
+        ``WHOLE_TAG_LINES``): its tag counts as reported, and a tag reporting twice starts
+        the next cycle.
+        """
+        closed = []
+        rows = set()
+        if whole:
+            for record in records:
+                tag = record.tag if record.tag is not None else source_tag
+                row = self.config.tag_index(tag) if tag is not None else None
+                if record.kind == 'range' and row is not None:
+                    rows.add(row)
+            if rows & self._tags_done:
+                closed.append(self._close())
+        for record in records:
+            closed += self.add(record, stamp, source_tag)
+        if rows and self._opened is not None:
+            self._tags_done |= rows
+            if len(self._tags_done) == self.shape[0]:
+                closed.append(self._close())
         return closed
 
     def poll(self, now):

@@ -552,6 +552,10 @@ def format_json(tag, ranges):
 
 # --- registry and detection -------------------------------------------------------------
 
+#: Formats in which one line carries all of one tag's ranges of a ranging cycle: the line
+#: also says which of that tag's pairs are missing this cycle.
+WHOLE_TAG_LINES = frozenset({'trek', 'lec', 'json'})
+
 PARSERS = {'trek': parse_trek, 'lec': parse_lec, 'arduino': parse_arduino, 'json': parse_json}
 FORMATTERS = {'trek': format_trek, 'lec': format_lec, 'arduino': format_arduino,
               'json': format_json}

@@ -1,0 +1,116 @@
+"""The package as ROS users run it: built with colcon, found through the ament index."""
+import importlib.util
+import os
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import pytest
+import rclpy
+from system import ROOT, Listener, Processes, script, start_emulator
+
+PYTHON = Path(sys.executable)
+
+
+@pytest.fixture(scope='module')
+def install(tmp_path_factory):
+    """A colcon workspace with epp_ros built from this checkout."""
+    workspace = tmp_path_factory.mktemp('ws')
+    colcon = PYTHON.parent / 'colcon'
+    result = subprocess.run(
+        [str(colcon), '--log-base', str(workspace / 'log'), 'build', '--base-paths',
+         str(ROOT), '--build-base', str(workspace / 'build'), '--install-base',
+         str(workspace / 'install')], cwd=workspace, capture_output=True, text=True,
+        timeout=300)
+    assert result.returncode == 0, result.stdout + result.stderr
+    return workspace / 'install'
+
+
+def ros2_run_path(install, executable, env):
+    """What `ros2 run epp_ros <executable>` executes: package prefix + lib/epp_ros/<exe>."""
+    code = ('from ament_index_python.packages import get_package_prefix; '
+            "print(get_package_prefix('epp_ros'))")
+    prefix = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
+                            text=True, check=True).stdout.strip()
+    return Path(prefix) / 'lib' / 'epp_ros' / executable
+
+
+def installed_env(install):
+    prefix = install / 'epp_ros'
+    site = prefix / 'lib' / f'python{sys.version_info[0]}.{sys.version_info[1]}' / \
+        'site-packages'
+    env = dict(os.environ)
+    env['AMENT_PREFIX_PATH'] = os.pathsep.join([str(prefix), sys.prefix])
+    env['PYTHONPATH'] = os.pathsep.join([str(site), env.get('PYTHONPATH', '')])
+    return env
+
+
+def test_install_layout(install):
+    prefix = install / 'epp_ros'
+    assert (prefix / 'share/ament_index/resource_index/packages/epp_ros').exists()
+    assert (prefix / 'share/epp_ros/package.xml').exists()
+    assert (prefix / 'share/epp_ros/config/pump.yaml').exists()
+    assert (prefix / 'share/epp_ros/launch/epp.launch.py').exists()
+    for executable in ('uwb_driver', 'posture_estimator', 'uwb_emulator', 'epp_demo',
+                       'epp_bench', 'epp_bag'):
+        assert os.access(prefix / 'lib/epp_ros' / executable, os.X_OK)
+
+
+def test_installed_nodes_run_with_the_installed_config(install, tmp_path):
+    env = installed_env(install)
+    config = install / 'epp_ros/share/epp_ros/config/pump.yaml'
+    driver = ros2_run_path(install, 'uwb_driver', env)
+    estimator = ros2_run_path(install, 'posture_estimator', env)
+    assert driver.parent == install / 'epp_ros/lib/epp_ros'
+    processes = Processes()
+    rclpy.init()
+    listener = Listener('ros2_run_listener')
+    try:
+        link = str(tmp_path / 'ttyUWB')
+        start_emulator(processes, 'json', ['--pty', '--link', link])
+        for executable, extra in ((driver, ['-p', f'port:={link}']), (estimator, [])):
+            processes.started.append(subprocess.Popen(
+                [str(executable), '--ros-args', '--params-file', str(config), *extra],
+                env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
+        assert listener.spin_until(lambda: len(listener.postures) >= 5, 20), \
+            [p.stderr.read() for p in processes.started[1:] if p.poll() is not None]
+    finally:
+        processes.stop_all()
+        listener.destroy_node()
+        rclpy.shutdown()
+
+
+class _Recorder:
+    """Stands in for a launch class: remembers its arguments."""
+
+    def __init__(self, *args, **kwargs):
+        self.args, self.kwargs = args, kwargs
+
+
+def test_launch_file_names_what_exists(monkeypatch):
+    """launch and launch_ros are not installable here: run the file under stand-ins."""
+    modules = {
+        'launch': types.SimpleNamespace(LaunchDescription=_Recorder),
+        'launch.actions': types.SimpleNamespace(DeclareLaunchArgument=_Recorder),
+        'launch.substitutions': types.SimpleNamespace(LaunchConfiguration=_Recorder),
+        'launch_ros': types.SimpleNamespace(),
+        'launch_ros.actions': types.SimpleNamespace(Node=_Recorder),
+    }
+    for name, module in modules.items():
+        monkeypatch.setitem(sys.modules, name, module)
+    import ament_index_python.packages as packages
+    monkeypatch.setattr(packages, 'get_package_share_directory', lambda name: str(ROOT))
+    spec = importlib.util.spec_from_file_location('epp_launch', ROOT / 'launch/epp.launch.py')
+    launch_file = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(launch_file)
+    description = launch_file.generate_launch_description()
+    actions = description.args[0]
+    arguments = {a.args[0]: a.kwargs['default_value'] for a in actions if 'default_value'
+                 in a.kwargs}
+    assert Path(arguments['config']).resolve() == ROOT / 'config/pump.yaml'
+    nodes = [a.kwargs for a in actions if 'executable' in a.kwargs]
+    assert [n['executable'] for n in nodes] == ['uwb_driver', 'posture_estimator']
+    for node in nodes:
+        assert node['package'] == 'epp_ros'
+        assert Path(script(node['executable'])).exists()
