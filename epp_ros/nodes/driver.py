@@ -6,6 +6,7 @@ message per ranging cycle, as a stamped, labelled range array: ``name[i] = "<tag
 cycle, ``header.stamp`` the receive time of the newest range, ``velocity`` and ``effort``
 empty. It never publishes on ``joint_states``. Diagnostics at 1 Hz on ``/diagnostics``.
 """
+import sys
 import threading
 import time
 
@@ -163,5 +164,4 @@ def main(args=None):
 
 
 if __name__ == '__main__':
-    import sys
     sys.exit(main())

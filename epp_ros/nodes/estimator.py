@@ -15,6 +15,7 @@ A frame that cannot be solved publishes no pose; after ``reset_after_failures`` 
 in a row the estimator starts cold. Frames whose stamp is not newer than the last one are
 ignored and counted. Topic names are relative: ``-r __ns:=/pump7`` runs one per pump.
 """
+import sys
 import time
 from collections import Counter
 
@@ -122,5 +123,4 @@ def main(args=None):
 
 
 if __name__ == '__main__':
-    import sys
     sys.exit(main())

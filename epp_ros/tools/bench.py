@@ -5,6 +5,9 @@ Suites:
             arm-length error and per-frame time of each method (published: one trial).
   tracking  The simulated truck pump on a working cycle at 10 Hz, warm-started: RMSE and
             per-frame time, the runtime case.
+  latency   A posture_estimator process fed over DDS: latency from a uwb/ranges publish to
+            the matching arm_posture receive at 10 and 100 Hz, and the highest frame rate
+            sustained with no frame lost.
 Every table ends with the commit it was measured on. ``--option KEY=VALUE`` passes an
 option to the estimators (e.g. ``anchor_weight=inf``, ``slew_iterations=0``).
 """
@@ -96,7 +99,39 @@ def tracking_suite(methods, seconds, seed, options):
             'rows': rows}
 
 
+def latency_suite(methods, seconds, seed, options):
+    """Latency and throughput of the estimator node, measured from another process."""
+    from epp_ros.tools.node_bench import measure_latency, sustained_rate
+    model = truck_pump()
+    trajectory = working_cycle(model, 600.0, 10.0, rng=np.random.default_rng(seed))
+    rng = np.random.default_rng(seed + 1)
+    frames = [RangeNoise(sigma=0.1).apply(model.ranges(j), rng)[0]
+              for j in trajectory.joints[:2000]]
+    rows = []
+    for method in methods:
+        row = {'method': method}
+        for rate in (10.0, 100.0):
+            latencies, lost = measure_latency(method, frames, rate, seconds, options)
+            row[f'p50_ms_{rate:g}hz'] = 1e3 * float(np.median(latencies))
+            row[f'p99_ms_{rate:g}hz'] = 1e3 * float(np.percentile(latencies, 99))
+            row[f'lost_{rate:g}hz'] = lost
+        row['sustained_hz'] = sustained_rate(method, frames, options)
+        rows.append(row)
+    return {'suite': 'latency', 'seconds': seconds, 'rows': rows}
+
+
 def markdown(report):
+    if report['suite'] == 'latency':
+        lines = [f'### posture_estimator over DDS, uwb/ranges publish -> arm_posture receive '
+                 f'({report["seconds"]:g} s per rate)', '',
+                 '| method | 10 Hz p50 [ms] | p99 | lost | 100 Hz p50 [ms] | p99 | lost | '
+                 'sustained, none lost [frames/s] |', '|---|---|---|---|---|---|---|---|']
+        for row in report['rows']:
+            lines.append(f'| {row["method"]} | {row["p50_ms_10hz"]:.1f} | '
+                         f'{row["p99_ms_10hz"]:.1f} | {row["lost_10hz"]} | '
+                         f'{row["p50_ms_100hz"]:.1f} | {row["p99_ms_100hz"]:.1f} | '
+                         f'{row["lost_100hz"]} | {row["sustained_hz"]:g} |')
+        return '\n'.join(lines)
     if report['suite'] == 'xie3dim':
         title = (f'xie3dim (authors\' geometry), additive sigma = 1 m, {report["trials"]} '
                  'trials, cold start')
@@ -122,26 +157,31 @@ def main(argv=None):
                                      epilog=__doc__.split('\n', 1)[1],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('suites', nargs='*', metavar='suite',
-                        help='xie3dim and/or tracking (default: both)')
+                        help='xie3dim, tracking, latency (default: all)')
     parser.add_argument('--methods', nargs='+', choices=list(METHODS), default=list(METHODS))
     parser.add_argument('--trials', type=int, default=200, help='xie3dim trials')
     parser.add_argument('--seconds', type=float, default=60.0, help='tracking duration')
+    parser.add_argument('--latency-seconds', type=float, default=5.0,
+                        help='latency: seconds per rate')
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--option', type=parse_option, action='append', default=[],
                         metavar='KEY=VALUE', help='estimator option, repeatable')
     parser.add_argument('--json', action='store_true', help='also print the reports as JSON')
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
-    suites = args.suites or ['xie3dim', 'tracking']
-    unknown = sorted(set(suites) - {'xie3dim', 'tracking'})
+    suites = args.suites or ['xie3dim', 'tracking', 'latency']
+    unknown = sorted(set(suites) - {'xie3dim', 'tracking', 'latency'})
     if unknown:
-        parser.error(f'unknown suite(s) {unknown}; choose from xie3dim, tracking')
+        parser.error(f'unknown suite(s) {unknown}; choose from xie3dim, tracking, latency')
     options = dict(args.option)
     reports = []
     for suite in suites:
         if suite == 'xie3dim':
             reports.append(xie3dim_suite(args.methods, args.trials, args.seed, options))
-        else:
+        elif suite == 'tracking':
             reports.append(tracking_suite(args.methods, args.seconds, args.seed, options))
+        else:
+            reports.append(latency_suite(args.methods, args.latency_seconds, args.seed,
+                                         options))
         print(markdown(reports[-1]) + '\n', flush=True)
     print(f'commit {commit()}, Python {sys.version.split()[0]}, numpy {np.__version__}'
           + (f', options {options}' if options else ''))

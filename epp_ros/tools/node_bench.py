@@ -1,0 +1,112 @@
+"""Measuring a running posture_estimator from outside, over DDS (used by epp_bench)."""
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import PoseArray
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from epp_ros.config import default_config_path, load_pump_config
+from epp_ros.nodes.common import POSTURE_QOS, RANGES_QOS, to_time
+
+__all__ = ['measure_latency', 'sustained_rate']
+
+
+class _Feeder(Node):
+    """Publishes range frames and times the postures that answer them."""
+
+    def __init__(self, names):
+        super().__init__('epp_bench_feeder')
+        self.names = names
+        self.publisher = self.create_publisher(JointState, 'uwb/ranges', RANGES_QOS)
+        self.sent, self.answered = {}, {}
+        self.create_subscription(PoseArray, 'arm_posture', self._on_posture, POSTURE_QOS)
+
+    def _on_posture(self, message):
+        key = (message.header.stamp.sec, message.header.stamp.nanosec)
+        if key in self.sent:
+            self.answered[key] = time.perf_counter() - self.sent[key]
+
+    def publish(self, ranges, stamp):
+        message = JointState(name=self.names, position=[float(v) for v in ranges.ravel()])
+        message.header.stamp = to_time(stamp)
+        key = (message.header.stamp.sec, message.header.stamp.nanosec)
+        self.sent[key] = time.perf_counter()
+        self.publisher.publish(message)
+
+
+def _with_estimator(method, options, work):
+    """Run ``work(feeder)`` against a fresh posture_estimator process."""
+    config = default_config_path()
+    names = load_pump_config(config).link_names
+    args = [sys.executable, '-m', 'epp_ros.nodes.estimator', '--ros-args', '--params-file',
+            str(config), '-p', f'method:={method}', '-p', 'publish_markers:=false',
+            '--log-level', 'warn']
+    if options:
+        raise ValueError('estimator options are not passed to the node benchmark')
+    env = dict(os.environ, ROS_DOMAIN_ID=str(100 + os.getpid() % 100))
+    os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']
+    estimator = subprocess.Popen(args, env=env)
+    rclpy.init()
+    feeder = _Feeder(names)
+    try:
+        deadline = time.monotonic() + 20
+        while feeder.publisher.get_subscription_count() < 1:
+            rclpy.spin_once(feeder, timeout_sec=0.05)
+            if time.monotonic() > deadline:
+                raise RuntimeError('posture_estimator did not come up')
+        return work(feeder)
+    finally:
+        feeder.destroy_node()
+        rclpy.shutdown()
+        estimator.send_signal(signal.SIGINT)
+        estimator.wait(10)
+
+
+def _feed(feeder, frames, rate, count):
+    """Publish ``count`` frames at ``rate``, then wait for the answers; return lost count."""
+    start = time.perf_counter()
+    base = time.time()
+    for i in range(count):
+        target = start + i / rate
+        while time.perf_counter() < target:
+            rclpy.spin_once(feeder, timeout_sec=max(0.0, min(0.001, target -
+                                                             time.perf_counter())))
+        feeder.publish(frames[i % len(frames)], base + i / rate)
+    deadline = time.perf_counter() + 3.0
+    while len(feeder.answered) < len(feeder.sent) and time.perf_counter() < deadline:
+        rclpy.spin_once(feeder, timeout_sec=0.01)
+    return len(feeder.sent) - len(feeder.answered)
+
+
+def measure_latency(method, frames, rate, seconds, options=None):
+    """Latencies (s) of the answered frames at ``rate`` Hz, and how many were not answered."""
+    def work(feeder):
+        _feed(feeder, frames, 10.0, 10)                  # warm start and DDS settle
+        feeder.sent.clear()
+        feeder.answered.clear()
+        lost = _feed(feeder, frames, rate, int(rate * seconds))
+        return np.array(list(feeder.answered.values())), lost
+    return _with_estimator(method, options, work)
+
+
+def sustained_rate(method, frames, options=None, rates=(50, 100, 150, 200, 300, 500, 700,
+                                                        1000, 1500, 2000), seconds=2.0):
+    """Highest of ``rates`` (frames/s) at which every frame of ``seconds`` was answered."""
+    def work(feeder):
+        _feed(feeder, frames, 10.0, 10)
+        best = 0
+        for rate in rates:
+            feeder.sent.clear()
+            feeder.answered.clear()
+            if _feed(feeder, frames, rate, int(rate * seconds)) > 0:
+                break
+            best = rate
+            time.sleep(0.5)
+        return best
+    return _with_estimator(method, options, work)
