@@ -57,6 +57,12 @@ def assess(diagnostics, thresholds, lengths):
               'missing links': str(diagnostics.get('missing_links', '')),
               'iterations': str(diagnostics.get('iterations', '')),
               'solve time [ms]': f'{1e3 * diagnostics.get("solve_time", np.nan):.2f}'}
+    if 'predicted_rmse' in diagnostics:              # the chain's own uncertainty
+        values['predicted RMSE [m]'] = f'{diagnostics["predicted_rmse"]:.4f}'
+        for k, std in enumerate(diagnostics['joint_std'], start=1):
+            values[f'joint {k} predicted std [m]'] = f'{std:.4f}'
+    if 'nlos_links' in diagnostics:
+        values['NLOS links'] = str(int(np.sum(diagnostics['nlos_links'])))
     for k, (estimate, configured, error) in enumerate(zip(estimated, lengths, length_error),
                                                     start=1):
         values[f'section {k} length [m]'] = f'{estimate:.4f}'

@@ -6,12 +6,15 @@ positions (p, 3), keeping the previous estimate as the warm start. Methods:
 - ``epp1``: the paper's NEDM model in 3-D without the arm-length constraints.
 - ``epp2``: the same with the arm lengths (base-joint 1 included) as equality constraints.
 - ``cepp``: EPP2 in the boom's vertical plane (rank 2) after projecting the ranges.
+- ``chain``: least squares over the slew and the pitches (``core.chain``), at the
+  Cramér–Rao bound, robust to NLOS ranges.
 """
 import inspect
 import time
 
 import numpy as np
 
+from .chain import ChainMethod
 from .edm import align_to_known, squared_distances
 from .multilateration import intersect_spheres, srls
 from .nedm import nearest_edm
@@ -124,11 +127,18 @@ class _EDMMethod:
         self._other_anchors = np.array([j for j in range(model.n_anchors) if j != base_anchor],
                                        dtype=int)
 
-    def min_ranges(self):
-        """(per tag, in total) valid ranges the method needs."""
+    needs_prior = True
+
+    def enough_information(self, valid):
+        """Whether the valid links (p, m) can determine the posture."""
         p = self.model.n_sections
         # Without lengths each tag stands alone: r + 1 ranges, or its mirror image fits too.
-        return (1, (self.rank - 1) * p) if self.fix_lengths else (self.rank + 1, 3 * p)
+        per_tag, total = ((1, (self.rank - 1) * p) if self.fix_lengths
+                          else (self.rank + 1, 3 * p))
+        return valid.sum(axis=1).min() >= per_tag and valid.sum() >= total
+
+    def reset(self):
+        """The EDM methods keep no state of their own."""
 
     def _known_columns(self, ranges):
         """Ranges (p, k) from each tag to the known points: base first, then other anchors."""
@@ -259,7 +269,7 @@ def slew_step(model, coords, ranges, slew):
     return float(-np.sum(jac * residual) / curvature) if curvature > 1e-12 else 0.0
 
 
-METHODS = {'epp1': EPP1, 'epp2': EPP2, 'cepp': CEPP}
+METHODS = {'epp1': EPP1, 'epp2': EPP2, 'cepp': CEPP, 'chain': ChainMethod}
 
 
 def accepted_options(method):
@@ -282,12 +292,13 @@ class PostureEstimator:
     ----------
     model : BoomModel
     method : str
-        One of ``METHODS``: ``"epp1"``, ``"epp2"``, ``"cepp"``.
+        One of ``METHODS``: ``"epp1"``, ``"epp2"``, ``"cepp"``, ``"chain"``.
     **options
         Passed to the method: ``prior_weight`` (weight of tag-tag distances from the
         previous pose, default 0; the paper uses 1), ``anchor_weight`` (inf: anchor-anchor
         distances fixed, the default; a number: weighted), ``tol``, ``max_iter``; CEPP also
-        ``slew_iterations`` (default 1) and ``clip_weight``.
+        ``slew_iterations`` (default 1) and ``clip_weight``; chain: ``sigma`` (range noise,
+        0.1 m), ``nlos_threshold`` (3 sigma), ``tol``, ``max_iter``, ``slew_starts``.
 
     Attributes
     ----------
@@ -317,6 +328,7 @@ class PostureEstimator:
     def reset(self):
         """Forget the warm start: the next frame is solved from scratch."""
         self._previous = None
+        self._solver.reset()
 
     @property
     def previous(self):
@@ -348,14 +360,14 @@ class PostureEstimator:
         p, m = self.model.n_sections, self.model.n_anchors
         ranges, implausible = clean_ranges(ranges, (p, m), self._max_ranges)
         valid = np.isfinite(ranges)
-        per_tag, total = self._solver.min_ranges()
         diagnostics = {'method': self.method, 'missing_links': int(p * m - valid.sum()),
                        'implausible_links': implausible, 'cold_start': self._previous is None,
                        'iterations': 0}
+        enough = self._solver.enough_information(valid)
         prior = self._previous
-        if prior is None and valid.sum(axis=1).min() >= per_tag and valid.sum() >= total:
+        if enough and prior is None:
             prior = cold_start_guess(self.model, ranges)
-        if prior is None or valid.sum(axis=1).min() < per_tag or valid.sum() < total:
+        if not enough or (prior is None and self._solver.needs_prior):
             return self._finish(self._fallback(), 'insufficient_data', diagnostics, ranges,
                                 start)
         try:

@@ -101,6 +101,36 @@ class BoomModel:
                           self.arm_lengths * np.sin(pitches)], axis=-1)
         return self.base + np.cumsum(steps, axis=-2)
 
+    def joint_jacobian(self, slew, pitches):
+        """Derivatives of the joints with respect to the posture angles.
+
+        Parameters
+        ----------
+        slew : float
+            Radians.
+        pitches : ndarray, shape (p,)
+            Radians.
+
+        Returns
+        -------
+        jacobian : ndarray, shape (p, 3, p + 1)
+            ``jacobian[k, :, 0] = dw_k/dslew``, ``jacobian[k, :, 1 + i] = dw_k/dpitch_i``
+            (zero for sections beyond joint k).
+        """
+        pitches = np.asarray(pitches, dtype=float)
+        p = self.n_sections
+        along = np.array([np.cos(slew), np.sin(slew), 0.0])
+        across = np.array([-np.sin(slew), np.cos(slew), 0.0])
+        reach = np.cumsum(self.arm_lengths * np.cos(pitches))
+        # d/dpitch_i of section i's vector: L_i (-sin phi_i along + cos phi_i up).
+        section = self.arm_lengths[:, None] * (-np.sin(pitches)[:, None] * along
+                                               + np.cos(pitches)[:, None] * [0.0, 0.0, 1.0])
+        jacobian = np.zeros((p, 3, p + 1))
+        jacobian[:, :, 0] = reach[:, None] * across
+        lower = np.tril(np.ones((p, p)))                  # joint k moves with sections i <= k
+        jacobian[:, :, 1:] = lower[:, None, :] * section.T[None, :, :]
+        return jacobian
+
     def ranges(self, joints):
         """Tag-to-anchor distances, shape (..., p, m), for joints of shape (..., p, 3)."""
         joints = np.asarray(joints, dtype=float)

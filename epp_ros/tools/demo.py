@@ -102,11 +102,16 @@ class Monitor(Node):
                 self.level = LEVEL_NAMES.get(ord(status.level), '?')
 
     def unanswered_frames(self, settle=0.5):
-        """Range frames older than ``settle`` s that got no posture."""
+        """Range frames that got no posture, from the first posture on (before it the
+        estimator may not have been listening yet) to ``settle`` s ago."""
+        if not self.posture_stamps:
+            return len(self.frame_stamps)
         answered = set(self.posture_stamps)
+        first = min(self.posture_stamps)
         horizon = time.time() - settle
         return sum(1 for stamp in self.frame_stamps
-                   if stamp[0] + 1e-9 * stamp[1] < horizon and stamp not in answered)
+                   if first <= stamp and stamp[0] + 1e-9 * stamp[1] < horizon
+                   and stamp not in answered)
 
     def summary(self, method):
         latencies = 1e3 * np.array(self.latencies) if self.latencies else np.full(1, np.nan)

@@ -1,0 +1,78 @@
+"""The Cramér–Rao bound of the boom posture from UWB ranges (method notes section 5).
+
+A pump boom is a chain: psi = (slew, pitch_1..pitch_p) fixes every joint. With independent
+Gaussian range errors of standard deviation sigma_kj, the Fisher information of psi is
+``F = A^T Sigma^-1 A``, ``A[(k, j), :] = u_kj^T dw_k/dpsi`` with ``u_kj`` the unit vector from
+anchor j to tag k. Any unbiased estimator has ``cov(psi_hat) >= F^-1``; for the joints,
+``cov(w_hat) >= G F^-1 G^T`` with ``G = dw/dpsi``, and the paper's RMSE is bounded below by
+``sqrt(trace / p)``.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ['range_jacobian', 'fisher_information', 'Bound', 'crlb']
+
+
+def range_jacobian(model, slew, pitches):
+    """Derivatives of every tag-anchor range with respect to psi, shape (p, m, p + 1)."""
+    joints = model.forward_kinematics(slew, pitches)
+    offset = joints[:, None, :] - model.anchors[None, :, :]
+    unit = offset / np.linalg.norm(offset, axis=-1, keepdims=True)
+    return np.einsum('kjc,kcq->kjq', unit, model.joint_jacobian(slew, pitches))
+
+
+def fisher_information(model, slew, pitches, sigma, measured=None):
+    """Fisher information of psi, shape (p + 1, p + 1).
+
+    Parameters
+    ----------
+    sigma : float or ndarray, shape (p, m)
+        Range standard deviations, metres.
+    measured : ndarray of bool, shape (p, m), optional
+        Links that are measured (all by default).
+    """
+    jacobian = range_jacobian(model, slew, pitches)
+    precision = np.broadcast_to(1.0 / np.asarray(sigma, dtype=float) ** 2,
+                                jacobian.shape[:2])
+    if measured is not None:
+        precision = precision * np.asarray(measured, dtype=bool)
+    return np.einsum('kjq,kj,kjr->qr', jacobian, precision, jacobian)
+
+
+@dataclass
+class Bound:
+    """The Cramér–Rao bound at one posture."""
+
+    parameter_covariance: np.ndarray   #: (p + 1, p + 1) rad^2, of (slew, pitches)
+    joint_covariance: np.ndarray       #: (p, 3, 3) m^2, of each joint
+    rmse: float                        #: lower bound of the paper's RMSE, metres
+
+    @property
+    def joint_std(self):
+        """Root of each joint's covariance trace, metres, shape (p,)."""
+        return np.sqrt(np.trace(self.joint_covariance, axis1=-2, axis2=-1))
+
+
+def crlb(model, slew, pitches, sigma, measured=None):
+    """Cramér–Rao bound of the joints for a posture, anchor set and range noise.
+
+    Returns
+    -------
+    Bound
+        Infinite entries when the links do not determine the posture.
+    """
+    information = fisher_information(model, slew, pitches, sigma, measured)
+    try:
+        covariance = np.linalg.inv(information)
+        if not np.all(np.isfinite(covariance)) or np.linalg.cond(information) > 1e14:
+            raise np.linalg.LinAlgError
+    except np.linalg.LinAlgError:
+        p = model.n_sections
+        infinite = np.full((p + 1, p + 1), np.inf)
+        return Bound(infinite, np.full((p, 3, 3), np.inf), float('inf'))
+    jacobian = model.joint_jacobian(slew, pitches)
+    joint_covariance = np.einsum('kcq,qr,kdr->kcd', jacobian, covariance, jacobian)
+    rmse = float(np.sqrt(np.trace(joint_covariance, axis1=-2, axis2=-1).sum()
+                         / model.n_sections))
+    return Bound(covariance, joint_covariance, rmse)

@@ -1,0 +1,125 @@
+"""The chain estimator and the Cramér–Rao bound."""
+import numpy as np
+import pytest
+
+from epp_ros.core import PostureEstimator
+from epp_ros.core.bounds import crlb, fisher_information
+from epp_ros.core.chain import angles_from_joints
+from epp_ros.core.simulate import RangeNoise, random_posture, truck_pump, working_cycle, xie3dim
+
+GEOMETRIES = {'xie3dim': lambda: xie3dim()[0], 'truck': truck_pump}
+
+
+@pytest.mark.parametrize('geometry', sorted(GEOMETRIES))
+def test_cold_start_recovers_any_posture_exactly(geometry):
+    model = GEOMETRIES[geometry]()
+    rng = np.random.default_rng(1)
+    for _ in range(15):
+        slew, pitches, joints = random_posture(model, rng)
+        estimator = PostureEstimator(model, 'chain')
+        np.testing.assert_allclose(estimator.update(model.ranges(joints)), joints, atol=1e-8)
+        diagnostics = estimator.last_diagnostics
+        assert diagnostics['status'] == 'ok' and not diagnostics['nlos_links'].any()
+        assert np.angle(np.exp(1j * (diagnostics['slew'] - slew))) == pytest.approx(0, abs=1e-8)
+
+
+def test_warm_start_tracks_exactly_and_lengths_hold_by_construction():
+    model = truck_pump()
+    trajectory = working_cycle(model, 10.0, 10.0, rng=np.random.default_rng(2))
+    estimator = PostureEstimator(model, 'chain')
+    for joints in trajectory.joints:
+        np.testing.assert_allclose(estimator.update(model.ranges(joints)), joints, atol=1e-8)
+    noisy = estimator.update(RangeNoise(sigma=1.0).apply(
+        model.ranges(trajectory.joints[-1]), np.random.default_rng(3))[0])
+    np.testing.assert_allclose(model.section_lengths(noisy), model.arm_lengths, atol=1e-9)
+
+
+def test_fisher_information_matches_finite_differences():
+    model = xie3dim()[0]
+    slew, pitches, _ = random_posture(model, np.random.default_rng(4))
+    psi = np.r_[slew, pitches]
+    sigma = np.random.default_rng(5).uniform(0.1, 1.0, (model.n_sections, model.n_anchors))
+    measured = np.random.default_rng(6).random(sigma.shape) > 0.2
+
+    def ranges(angles):
+        return model.ranges(model.forward_kinematics(angles[0], angles[1:]))
+
+    step = 1e-6
+    columns = [(ranges(psi + step * e) - ranges(psi - step * e)) / (2 * step)
+               for e in np.eye(psi.size)]
+    jacobian = np.stack(columns, axis=-1)[measured] / sigma[measured][:, None]
+    np.testing.assert_allclose(fisher_information(model, slew, pitches, sigma, measured),
+                               jacobian.T @ jacobian, rtol=1e-6, atol=1e-8)
+
+
+def test_bound_of_the_authors_geometry_is_the_published_one():
+    """Method notes: on xie3dim at sigma = 1 m the chain bound is near 1.0 m."""
+    model, joints = xie3dim()
+    slew, pitches = angles_from_joints(model, joints)
+    bound = crlb(model, slew, pitches, 1.0)
+    assert 0.95 < bound.rmse < 1.08
+    assert bound.joint_std.shape == (5,) and np.all(bound.joint_std > 0)
+    # Fewer links: a larger bound; too few: an infinite one.
+    measured = np.ones((5, 4), bool)
+    measured[:, 3] = False
+    assert crlb(model, slew, pitches, 1.0, measured).rmse > bound.rmse
+    assert crlb(model, slew, pitches, 1.0, np.zeros((5, 4), bool)).rmse == np.inf
+
+
+def test_monte_carlo_rmse_matches_the_bound():
+    """Small noise: the estimator is efficient. The tolerance follows from the trial count."""
+    model = truck_pump()
+    rng = np.random.default_rng(7)
+    slew, pitches, joints = random_posture(model, rng)
+    sigma, trials = 0.05, 400
+    bound = crlb(model, slew, pitches, sigma)
+    estimator = PostureEstimator(model, 'chain', sigma=sigma)
+    estimator.update(model.ranges(joints))                      # warm start at the truth
+    squared = []
+    for _ in range(trials):
+        estimate = estimator.update(RangeNoise(sigma=sigma).apply(model.ranges(joints),
+                                                                  rng)[0])
+        squared.append(np.sum((estimate - joints) ** 2) / model.n_sections)
+    squared = np.array(squared)
+    # MSE estimate and its standard error from the trials themselves; allow 4 of them.
+    standard_error = squared.std(ddof=1) / np.sqrt(trials)
+    assert abs(squared.mean() - bound.rmse ** 2) < 4 * standard_error
+    assert estimator.last_diagnostics['predicted_rmse'] == pytest.approx(bound.rmse, rel=0.05)
+
+
+def test_nlos_links_are_flagged_and_do_not_pull_the_estimate():
+    model = truck_pump()
+    rng = np.random.default_rng(8)
+    joints = random_posture(model, rng)[2]
+    ranges, _ = RangeNoise(sigma=0.05).apply(model.ranges(joints), rng)
+    blocked = [(4, 1), (3, 2), (2, 5)]
+    for k, j in blocked:
+        ranges[k, j] += 3.0                                      # a detour around the boom
+    robust = PostureEstimator(model, 'chain', sigma=0.05)
+    plain = PostureEstimator(model, 'chain', sigma=0.05, nlos_threshold=None)
+    estimate, naive = robust.update(ranges), plain.update(ranges)
+    flagged = robust.last_diagnostics['nlos_links']
+    assert {tuple(i) for i in np.argwhere(flagged)} == set(blocked)
+    robust_error = np.sqrt(np.mean(np.sum((estimate - joints) ** 2, axis=1)))
+    plain_error = np.sqrt(np.mean(np.sum((naive - joints) ** 2, axis=1)))
+    slew, pitches = robust.last_diagnostics['slew'], robust.last_diagnostics['pitches']
+    bound = crlb(model, slew, pitches, 0.05, ~flagged).rmse       # LOS links alone
+    assert robust_error < 4 * bound < plain_error
+
+
+def test_needs_the_tip_and_enough_links():
+    model = truck_pump()
+    joints = random_posture(model, np.random.default_rng(9))[2]
+    ranges = model.ranges(joints)
+    ranges[-1] = np.nan                                          # the tip unheard
+    estimator = PostureEstimator(model, 'chain')
+    assert np.all(np.isfinite(estimator.update(ranges)))
+    assert estimator.last_diagnostics['status'] == 'insufficient_data'
+    sparse = np.full_like(ranges, np.nan)
+    sparse[:, 1] = model.ranges(joints)[:, 1]
+    sparse[4, 2] = model.ranges(joints)[4, 2]                    # p + 1 = 6 links
+    estimate = estimator.update(sparse)
+    # Six links may not single out the posture, but the fit must explain them exactly.
+    assert estimator.last_diagnostics['status'] == 'ok'
+    assert estimator.last_diagnostics['range_residual_rms'] < 1e-6
+    np.testing.assert_allclose(model.section_lengths(estimate), model.arm_lengths)
