@@ -108,7 +108,7 @@ class ChainMethod:
         """Levenberg–Marquardt from ``psi``; returns (psi, cost, iterations)."""
         residuals, offset, distance = self._residuals(psi, ranges, valid)
         weights, cost = self._weights(residuals)
-        damping = 1e-3
+        damping = 1e-6
         for iteration in range(1, self.max_iter + 1):
             jacobian = self._jacobian(psi, offset, distance, valid)
             weighted = jacobian * weights[:, None]
@@ -126,11 +126,12 @@ class ChainMethod:
                 damping *= 4.0
             if trial_cost > cost:
                 return psi, cost, iteration
+            stalled = cost - trial_cost <= 1e-12 * (1.0 + cost)
             psi, cost = trial, trial_cost
             residuals, offset, distance = trial_residuals, trial_offset, trial_distance
             weights = trial_weights
             damping = max(damping / 3.0, 1e-9)
-            if np.max(np.abs(step)) <= self.tol:
+            if stalled or np.max(np.abs(step)) <= self.tol:
                 return psi, cost, iteration
         return psi, cost, self.max_iter
 

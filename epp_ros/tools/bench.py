@@ -21,6 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from epp_ros.core import METHODS, PostureEstimator
+from epp_ros.core.bounds import crlb
+from epp_ros.core.chain import angles_from_joints
+from epp_ros.core.estimators import accepted_options
 from epp_ros.core.metrics import frame_rmse, pooled_rmse
 from epp_ros.core.simulate import XIE3DIM, RangeNoise, truck_pump, working_cycle, xie3dim
 
@@ -61,14 +64,22 @@ def run_frames(estimator, frames, truths):
     return np.array(rmses), np.array(length_errors), np.array(times)
 
 
+def method_options(method, options, sigma):
+    """The user's options, plus the suite's range noise for methods that model it."""
+    if 'sigma' in accepted_options(method) and 'sigma' not in options:
+        return dict(options, sigma=sigma)
+    return options
+
+
 def xie3dim_suite(methods, trials, seed, options):
     model, truth = xie3dim()
     rng = np.random.default_rng(seed)
     frames = [RangeNoise(sigma=1.0).apply(model.ranges(truth), rng)[0] for _ in range(trials)]
     rows = []
     for method in methods:
-        results = [run_frames(PostureEstimator(model, method, **options), [f], [truth])
-                   for f in frames]
+        results = [run_frames(PostureEstimator(model, method,
+                                               **method_options(method, options, 1.0)),
+                              [f], [truth]) for f in frames]
         rmses = np.concatenate([r[0] for r in results])
         lengths = np.concatenate([r[1] for r in results])
         times = np.concatenate([r[2] for r in results])
@@ -78,6 +89,10 @@ def xie3dim_suite(methods, trials, seed, options):
                      'ms_median': 1e3 * float(np.median(times)),
                      'ms_p99': 1e3 * float(np.percentile(times, 99)),
                      'published': None if published is None else f'{published} ({label})'})
+    slew, pitches = angles_from_joints(model, truth)
+    bound = crlb(model, slew, pitches, 1.0).rmse
+    for row in rows:
+        row['crlb_m'] = bound
     return {'suite': 'xie3dim', 'trials': trials, 'sigma_m': 1.0, 'rows': rows}
 
 
@@ -89,12 +104,18 @@ def tracking_suite(methods, seconds, seed, options):
     frames = [noise.apply(model.ranges(j), rng)[0] for j in trajectory.joints]
     rows = []
     for method in methods:
-        rmses, lengths, times = run_frames(PostureEstimator(model, method, **options), frames,
-                                           trajectory.joints)
+        rmses, lengths, times = run_frames(
+            PostureEstimator(model, method, **method_options(method, options, 0.1)), frames,
+            trajectory.joints)
         rows.append({'method': method, 'rmse_m': pooled_rmse(rmses),
                      'arm_length_error_m': lengths.mean(axis=0).tolist(),
                      'ms_median': 1e3 * float(np.median(times)),
                      'ms_p99': 1e3 * float(np.percentile(times, 99)), 'published': None})
+    bounds = [crlb(model, slew, pitches, 0.1, np.isfinite(f)).rmse
+              for slew, pitches, f in zip(trajectory.slew, trajectory.pitches, frames)]
+    bound = pooled_rmse(bounds)
+    for row in rows:
+        row['crlb_m'] = bound
     return {'suite': 'tracking', 'frames': len(frames), 'sigma_m': 0.1, 'dropout': 0.05,
             'rows': rows}
 
@@ -139,12 +160,14 @@ def markdown(report):
         title = (f'truck pump, working cycle at 10 Hz, {report["frames"]} frames, sigma = '
                  f'{report["sigma_m"]} m, {report["dropout"]:.0%} dropouts, warm start')
     lines = [f'### {title}', '',
-             '| method | RMSE [m] | mean arm-length error [m] | ms/frame p50 | p99 | '
-             'published RMSE [m] |', '|---|---|---|---|---|---|']
+             '| method | RMSE [m] | RMSE / CRLB | mean arm-length error [m] | ms/frame p50 | '
+             'p99 | published RMSE [m] |', '|---|---|---|---|---|---|---|']
     for row in report['rows']:
         lines.append(f'| {row["method"]} | {row["rmse_m"]:.3f} | '
-                     f'{max(row["arm_length_error_m"]):.1e} | {row["ms_median"]:.1f} | '
-                     f'{row["ms_p99"]:.1f} | {row["published"] or "-"} |')
+                     f'{row["rmse_m"] / row["crlb_m"]:.2f} | '
+                     f'{max(row["arm_length_error_m"]):.1e} | {row["ms_median"]:.2f} | '
+                     f'{row["ms_p99"]:.2f} | {row["published"] or "-"} |')
+    lines += ['', f'Cramér–Rao bound of the chain model (RMSE): {report["rows"][0]["crlb_m"]:.3f} m.']
     if report['suite'] == 'xie3dim':
         published = ', '.join(f'{name} {value}' for name, value
                               in XIE3DIM['published_rmse_m'].items())
