@@ -256,7 +256,7 @@ def default_config_path():
 def load_pump_config(path=None):
     """Read and validate a pump description from a ROS parameters YAML file.
 
-    The shared ``/**`` section holds the description; node sections are ignored here.
+    The ``/**`` section holds the description (and node settings, ignored here).
     """
     path = Path(path) if path is not None else default_config_path()
     try:
@@ -267,11 +267,6 @@ def load_pump_config(path=None):
         values = document['/**']['ros__parameters']
     except (TypeError, KeyError):
         raise ConfigError(f"{path}: no '/**: ros__parameters:' section") from None
-    return pump_config_from_parameters(values)
-
-
-def node_parameters(path, node_name):
-    """A node's ``ros__parameters`` section (``/**/<node_name>`` or ``<node_name>``), or {}."""
-    document = yaml.safe_load(Path(path).read_text()) or {}
-    section = document.get(f'/**/{node_name}') or document.get(node_name) or {}
-    return dict(section.get('ros__parameters') or {})
+    # The section also holds node settings (baud, method, ...): keep the pump's own.
+    return pump_config_from_parameters({name: value for name, value in values.items()
+                                        if name in PUMP_PARAMETERS})

@@ -42,8 +42,12 @@ def assess(diagnostics, thresholds, lengths):
     length_error = np.abs(estimated - lengths)
     worst = float(np.nanmax(length_error)) if np.isfinite(length_error).any() else np.inf
     residual = float(diagnostics.get('range_residual_rms', np.nan))
+    if diagnostics.get('method') == 'epp1':
+        worst = 0.0                 # EPP1 does not model the lengths: not judged on them
     if not diagnostics.get('valid', False):
         level, message = ERROR, f'no estimate: {diagnostics.get("status", "unknown")}'
+    elif not diagnostics.get('converged', True):
+        level, message = WARN, 'solver stopped before converging'
     elif worst > thresholds.arm_length_error or residual > thresholds.residual_error:
         level, message = ERROR, f'poor fit: arm length error {worst:.3f} m, ' \
                                 f'range residual {residual:.3f} m'

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import yaml
 
-from epp_ros.config import (ConfigError, Source, load_pump_config, node_parameters,
+from epp_ros.config import (PUMP_PARAMETERS, ConfigError, Source, load_pump_config,
                             pump_config_from_parameters)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -12,7 +12,15 @@ PUMP_YAML = ROOT / 'config' / 'pump.yaml'
 
 
 def shared_values():
-    return dict(yaml.safe_load(PUMP_YAML.read_text())['/**']['ros__parameters'])
+    values = yaml.safe_load(PUMP_YAML.read_text())['/**']['ros__parameters']
+    return {name: value for name, value in values.items() if name in PUMP_PARAMETERS}
+
+
+def test_pump_yaml_has_one_section_so_command_line_overrides_win():
+    document = yaml.safe_load(PUMP_YAML.read_text())
+    assert list(document) == ['/**']
+    settings = document['/**']['ros__parameters']
+    assert settings['method'] == 'cepp' and settings['frame_period'] == 0.1
 
 
 def test_packaged_pump_description_loads():
@@ -25,8 +33,6 @@ def test_packaged_pump_description_loads():
     np.testing.assert_allclose(model.anchors[1], [2.6, 3.4, 0.4])
     assert config.tag_index('3') == 2 and config.anchor_index('1782') == 0
     assert config.anchor_index('a1b2') is None
-    assert node_parameters(PUMP_YAML, 'uwb_driver')['frame_period'] == 0.1
-    assert node_parameters(PUMP_YAML, 'nobody') == {}
 
 
 def test_default_path_finds_the_packaged_file():

@@ -148,3 +148,28 @@ def test_trek_with_more_than_four_anchors_is_refused_at_start():
                              str(PUMP_YAML), '-p', 'port:=/dev/null', '-p', 'protocol:=trek'],
                             capture_output=True, text=True, timeout=30)
     assert result.returncode == 2 and 'at most 4 anchors' in result.stderr
+
+
+@pytest.mark.parametrize('executable, name, value', [('uwb_driver', 'frame_period', 'fast'),
+                                                     ('posture_estimator', 'residual_warn',
+                                                      [1.0]),
+                                                     ('posture_estimator', 'method', 'magic')])
+def test_bad_settings_stop_a_node_with_one_line(executable, name, value, tmp_path):
+    document = yaml.safe_load(PUMP_YAML.read_text())
+    document['/**']['ros__parameters'][name] = value
+    path = tmp_path / 'settings.yaml'
+    path.write_text(yaml.safe_dump(document))
+    result = subprocess.run([script(executable), '--ros-args', '--params-file', str(path)],
+                            capture_output=True, text=True, timeout=30)
+    message = [line for line in result.stderr.splitlines() if line.strip()]
+    assert result.returncode == 2 and len(message) == 1, result.stderr
+    assert name in message[0] and 'Traceback' not in message[0]
+
+
+def test_command_line_settings_override_the_file(listener, processes):
+    """`-p method:=chain` must reach the estimator (a node section in the file would win)."""
+    processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML),
+               '-p', 'method:=chain'])
+    assert listener.spin_until(lambda: any(
+        kv.key == 'method' and kv.value == 'chain' for status in
+        listener.statuses('posture_estimator') for kv in status.values), 10)

@@ -86,7 +86,7 @@ def test_pty_output_drops_instead_of_blocking_when_nobody_reads():
     try:
         for _ in range(2000):
             output.write(b'x' * 100 + b'\n')
-        assert output.counts['dropped'] > 0
+        assert output.counts['dropped'] + output.counts['truncated'] > 0
     finally:
         output.close()
 

@@ -105,3 +105,9 @@ def test_lines_that_are_not_whole_wait_for_every_pair_or_the_period():
     for tag in TAGS:
         assert assembler.add_line([RangeRecord(ANCHORS[0], 5.0, tag=tag)], 1.0) == []
     assert len(assembler.poll(1.2)) == 1
+
+
+def test_frames_from_one_read_get_strictly_increasing_stamps():
+    assembler = FrameAssembler(CONFIG)
+    frames = full_cycle(assembler, 100.0) + full_cycle(assembler, 100.0)
+    assert len(frames) == 2 and frames[1].stamp > frames[0].stamp == 100.0

@@ -31,12 +31,26 @@ def test_chain_reports_its_predicted_uncertainty_and_nlos():
 
 
 def test_levels_follow_the_thresholds():
-    ranges, _ = RangeNoise(sigma=1.0).apply(MODEL.ranges(JOINTS), np.random.default_rng(1))
-    diagnostics = diagnostics_of('epp1', ranges)           # lengths not held
-    assert assess(diagnostics, Thresholds(), MODEL.arm_lengths)[0] == ERROR
-    loose = Thresholds(arm_length_warn=100, arm_length_error=200, residual_warn=0.0,
-                       residual_error=100)
-    assert assess(diagnostics, loose, MODEL.arm_lengths)[0] == WARN
+    diagnostics = dict(diagnostics_of('epp2', MODEL.ranges(JOINTS)))
+    thresholds = Thresholds()
+    for error, level in ((0.01, OK), (0.1, WARN), (1.0, ERROR)):
+        diagnostics['section_lengths'] = MODEL.arm_lengths + [0, 0, error, 0, 0]
+        assert assess(diagnostics, thresholds, MODEL.arm_lengths)[0] == level
+    diagnostics['section_lengths'] = MODEL.arm_lengths
+    diagnostics['range_residual_rms'] = 1.0
+    assert assess(diagnostics, thresholds, MODEL.arm_lengths)[0] == WARN
+    diagnostics['range_residual_rms'] = 3.0
+    assert assess(diagnostics, thresholds, MODEL.arm_lengths)[0] == ERROR
+    diagnostics.update(range_residual_rms=0.0, converged=False)
+    assert assess(diagnostics, thresholds, MODEL.arm_lengths)[:2] == (
+        WARN, 'solver stopped before converging')
+
+
+def test_epp1_is_not_judged_on_lengths_it_does_not_model():
+    ranges, _ = RangeNoise(sigma=0.1).apply(MODEL.ranges(JOINTS), np.random.default_rng(1))
+    diagnostics = diagnostics_of('epp1', ranges)
+    assert np.max(diagnostics['arm_length_error']) > Thresholds().arm_length_warn
+    assert assess(diagnostics, Thresholds(), MODEL.arm_lengths)[0] == OK
 
 
 def test_an_unsolved_frame_is_an_error():

@@ -55,7 +55,6 @@ def test_postures_follow_the_truth(listener, processes, tmp_path):
                    p.orientation.y, p.orientation.z, p.orientation.w] for p in posture.poses]
         assert np.all(np.isfinite(values))
         np.testing.assert_allclose(values[0][:3], CONFIG.base)
-        np.testing.assert_allclose(np.linalg.norm(np.array(values)[:, 3:], axis=1), 1.0)
     errors = matched_errors(listener)
     assert errors.size >= 20
     # CEPP on this geometry: RMSE ~3.3 sigma (epp_bench tracking); the bound leaves room.

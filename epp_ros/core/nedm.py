@@ -264,8 +264,7 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
                               tol=inner_tol)
         state['multipliers'] = projected.multipliers
         state['inner_iterations'] += projected.iterations
-        state['kkt_residual'] = projected.kkt_residual
-        return projected.matrix / q_outer
+        return projected.matrix / q_outer, projected.kkt_residual
 
     def squarem_step(edm, c):
         """One SQUAREM cycle (Varadhan & Roland 2008) on the MM map, never worse than 2 steps.
@@ -273,17 +272,18 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
         The MM map converges linearly and slowly along weakly determined directions (zero
         or unequal weights); squared extrapolation removes most of that tail.
         """
-        first = mm_step(edm, c)
-        second = mm_step(first, c)
+        first, _ = mm_step(edm, c)
+        second, residual = mm_step(first, c)
         step, curvature = first - edm, second - 2.0 * first + edm
         norm_curvature = np.linalg.norm(curvature)
-        if norm_curvature <= 1e-15:
-            return second, 2
-        alpha = min(-np.linalg.norm(step) / norm_curvature, -1.0)
-        candidate = mm_step(edm - 2.0 * alpha * step + alpha ** 2 * curvature, c)
-        if merit(candidate, c) <= merit(second, c):
-            return candidate, 3
-        return second, 3
+        if norm_curvature > 1e-15:
+            alpha = min(-np.linalg.norm(step) / norm_curvature, -1.0)
+            candidate, candidate_residual = mm_step(
+                edm - 2.0 * alpha * step + alpha ** 2 * curvature, c)
+            if merit(candidate, c) <= merit(second, c):
+                second, residual = candidate, candidate_residual
+        state['kkt_residual'] = residual          # of the iterate kept
+        return second, 3 if norm_curvature > 1e-15 else 2
 
     def merit(edm, c):
         return objective(edm) + c * rank_penalty(edm, rank)[0]

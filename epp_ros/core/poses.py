@@ -1,10 +1,12 @@
 """Orientations of the boom's sections, for publishing a posture as poses.
 
 Pose 0 is the base pivot, pose k (k = 1..p) joint k. Pose k's x-axis points along section k
-(from joint k-1 to joint k) and its z-axis lies in the boom's vertical plane, pointing up;
+(from joint k-1 to joint k) and its z-axis lies in the section's vertical plane, pointing up;
 the base pose points along the slew, level. Quaternions are (x, y, z, w).
 """
 import numpy as np
+
+from .plane import fit_slew
 
 __all__ = ['boom_frames', 'rotation_to_quaternion', 'boom_quaternions']
 
@@ -20,23 +22,27 @@ def boom_frames(base, joints):
     Returns
     -------
     rotations : ndarray, shape (p + 1, 3, 3)
-        Columns are the frame's x, y, z axes in the world frame.
+        Columns are the frame's x, y, z axes in the world frame. Section k: x along the
+        section, y horizontal (``z_world x x``), z = x cross y, which has a non-negative
+        vertical component. The base, and any vertical section, use the slew fitted to the
+        joints (``plane.fit_slew``) for their horizontal axes.
     """
     base = np.asarray(base, dtype=float)
-    chain = np.vstack([base, np.asarray(joints, dtype=float)])
-    sections = np.diff(chain, axis=0)
-    reach = chain[1:, :2] - base[:2]
-    # Slew direction from the joints' horizontal reach (the sections' own when they are
-    # vertical), falling back to +x for a boom standing straight up.
-    horizontal = np.where(np.linalg.norm(sections[:, :2], axis=1)[:, None] > 1e-9,
-                          sections[:, :2], reach)
-    slew = horizontal.sum(axis=0)
-    slew_direction = np.r_[slew / np.linalg.norm(slew), 0.0] if np.linalg.norm(slew) > 1e-9 \
-        else np.array([1.0, 0.0, 0.0])
-    lateral = np.cross([0.0, 0.0, 1.0], slew_direction)       # y: left of the boom
-    x_axes = np.vstack([slew_direction, sections / np.linalg.norm(sections, axis=1)[:, None]])
-    y_axes = np.broadcast_to(lateral, x_axes.shape)
+    joints = np.asarray(joints, dtype=float)
+    up = np.array([0.0, 0.0, 1.0])
+    reach = np.linalg.norm(joints[:, :2] - base[:2], axis=1)
+    slew = fit_slew(joints, base) if reach.max() > 1e-9 else 0.0   # straight up: +x
+    slew_x = np.array([np.cos(slew), np.sin(slew), 0.0])
+    slew_y = np.cross(up, slew_x)
+    sections = np.diff(np.vstack([base, joints]), axis=0)
+    x_axes = sections / np.linalg.norm(sections, axis=1, keepdims=True)
+    y_axes = np.cross(up, x_axes)
+    norms = np.linalg.norm(y_axes, axis=1, keepdims=True)
+    y_axes = np.where(norms > 1e-9, y_axes / np.maximum(norms, 1e-12), slew_y)
     z_axes = np.cross(x_axes, y_axes)
+    x_axes = np.vstack([slew_x, x_axes])
+    y_axes = np.vstack([slew_y, y_axes])
+    z_axes = np.vstack([up, z_axes])
     return np.stack([x_axes, y_axes, z_axes], axis=-1)
 
 

@@ -6,6 +6,7 @@ import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, Pose, PoseArray
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from visualization_msgs.msg import Marker, MarkerArray
@@ -27,9 +28,18 @@ class StartupError(Exception):
 
 
 def declare(node, name, default, description, **descriptor):
-    """Declare a parameter with a descriptor and return its value."""
-    node.declare_parameter(name, default,
-                           ParameterDescriptor(description=description, **descriptor))
+    """Declare a parameter with a descriptor and return its value.
+
+    Raises
+    ------
+    StartupError
+        When the value given does not fit the parameter (e.g. an integer for a float).
+    """
+    try:
+        node.declare_parameter(name, default,
+                               ParameterDescriptor(description=description, **descriptor))
+    except ParameterException as exc:
+        raise StartupError(f'{name}: {exc}') from None
     return node.get_parameter(name).value
 
 

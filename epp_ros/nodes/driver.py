@@ -19,10 +19,8 @@ from epp_ros.nodes.common import (RANGES_QOS, StartupError, declare, declare_pum
                                   run_node, to_time)
 from epp_ros.uwb.decoder import LineDecoder
 from epp_ros.uwb.frames import FrameAssembler
-from epp_ros.uwb.protocols import WHOLE_TAG_LINES
+from epp_ros.uwb.protocols import TREK_ANCHOR_IDS, WHOLE_TAG_LINES
 from epp_ros.uwb.source import LineSource
-
-TREK_ANCHORS = {'0', '1', '2', '3'}
 
 
 class UwbDriver(Node):
@@ -76,7 +74,7 @@ class UwbDriver(Node):
 
     def _check_trek(self, sources):
         if all(s.protocol == 'trek' for s in sources):
-            extra = sorted(set(self.config.anchor_ids) - TREK_ANCHORS)
+            extra = sorted(set(self.config.anchor_ids) - TREK_ANCHOR_IDS)
             if extra:
                 raise StartupError(
                     f'anchor_ids: the trek format carries at most 4 anchors per tag (ids 0-3); '

@@ -19,6 +19,7 @@ from rclpy.utilities import remove_ros_args
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core.simulate import RangeNoise, working_cycle
 from epp_ros.nodes.common import POSTURE_QOS, posture_message, run_node
+from epp_ros.uwb.protocols import TREK_ANCHOR_IDS
 from epp_ros.uwb.emulation import (TAG_NAMING, PtyOutput, TcpOutput, channel_count, corrupt,
                                    cycle_lines)
 
@@ -97,7 +98,10 @@ class UwbEmulator(Node):
         if self.args.duration is not None and \
                 time.monotonic() - self.started >= self.args.duration:
             raise SystemExit(0)
-        joints = self.trajectory.joints[self.cycle % len(self.trajectory.times)]
+        # Play the cycle forth and back: the boom never jumps.
+        count = len(self.trajectory.times)
+        index = self.cycle % (2 * count - 2)
+        joints = self.trajectory.joints[index if index < count else 2 * count - 2 - index]
         ranges, _ = self.noise.apply(self.model.ranges(joints), self.rng)
         stamp = time.time()
         for channel, line in cycle_lines(self.config, ranges, self.args.protocol, self.cycle):
@@ -123,7 +127,7 @@ def main(argv=None):
     except ConfigError as exc:
         print(f'uwb_emulator: bad pump configuration: {exc}', file=sys.stderr)
         return 2
-    if args.protocol == 'trek' and not set(config.anchor_ids) <= {'0', '1', '2', '3'}:
+    if args.protocol == 'trek' and not set(config.anchor_ids) <= TREK_ANCHOR_IDS:
         print(f'uwb_emulator: anchor_ids: the trek format carries anchors 0-3 only, the '
               f'configuration has {list(config.anchor_ids)}', file=sys.stderr)
         return 2

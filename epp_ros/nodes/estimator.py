@@ -9,11 +9,13 @@ the range frame's stamp:
   x-axis along section k, z-axis up in the boom's vertical plane;
 - ``arm_posture/markers`` (``visualization_msgs/MarkerArray``) for RViz;
 - ``/diagnostics`` at 1 Hz: section lengths and errors, range residual, iterations, solve
-  time, missing links, counters; level from the last frame and the thresholds.
+  time, missing links, counters; level: the worst frame's since the last report (from the
+  thresholds), STALE when no frame came for 1 s.
 
 A frame that cannot be solved publishes no pose; after ``reset_after_failures`` such frames
 in a row the estimator starts cold. Frames whose stamp is not newer than the last one are
-ignored and counted. Topic names are relative: ``-r __ns:=/pump7`` runs one per pump.
+ignored and counted; a stamp more than 1 s older than the last is taken as a clock jump and
+the estimator starts over. Topic names are relative: ``-r __ns:=/pump7`` runs one per pump.
 """
 import sys
 import time
@@ -31,6 +33,7 @@ from epp_ros.nodes.common import (POSTURE_QOS, RANGES_QOS, StartupError, declare
                                   declare_pump_parameters, posture_message, posture_markers,
                                   run_node, to_seconds, to_time)
 
+BACKWARD_JUMP = 1.0      # s: an older stamp by more than this is a clock jump, not disorder
 LEVELS = {0: DiagnosticStatus.OK, 1: DiagnosticStatus.WARN, 2: DiagnosticStatus.ERROR}
 
 
@@ -67,16 +70,30 @@ class PostureEstimatorNode(Node):
         self.counts = Counter()
         self.failures_in_a_row = 0
         self.last_stamp = None
+        self.last_frame_time = None
+        self.worst = None               # worst (level, message) since the last report
         self.status_name = f'{self.get_fully_qualified_name()}'
         self.get_logger().info(f'{method} on {self.model.n_sections} sections, '
                                f'{self.model.n_anchors} anchors')
 
     def on_ranges(self, message):
+        try:
+            self._on_ranges(message)
+        except Exception as exc:  # noqa: BLE001 - one bad frame must not stop the node
+            self.counts['errors'] += 1
+            self.estimator.reset()
+            self.get_logger().error(f'frame dropped: {exc!r}', throttle_duration_sec=5.0)
+
+    def _on_ranges(self, message):
         self.counts['frames'] += 1
         stamp = to_seconds(message.header.stamp)
         if self.last_stamp is not None and stamp <= self.last_stamp:
-            self.counts['out_of_order'] += 1
-            return
+            if self.last_stamp - stamp < BACKWARD_JUMP:
+                self.counts['out_of_order'] += 1
+                return
+            # The clock jumped back (NTP, a restarted driver, a looping bag): start over.
+            self.counts['clock_jumps'] += 1
+            self.estimator.reset()
         try:
             ranges, unknown = self.config.range_matrix(message.name, message.position)
         except ValueError:
@@ -84,7 +101,12 @@ class PostureEstimatorNode(Node):
             return
         self.counts['unknown_links'] += unknown
         self.last_stamp = stamp
+        self.last_frame_time = time.monotonic()
         joints = self.estimator.update(ranges)
+        level, summary, _ = assess(self.estimator.last_diagnostics, self.thresholds,
+                                   self.lengths)
+        if self.worst is None or level > self.worst[0]:
+            self.worst = (level, summary)
         if not self.estimator.last_diagnostics['valid']:
             self.counts['unsolved'] += 1
             self.failures_in_a_row += 1
@@ -105,12 +127,20 @@ class PostureEstimatorNode(Node):
         diagnostics = self.estimator.last_diagnostics
         status = DiagnosticStatus(name=f'posture_estimator: {self.status_name}',
                                   hardware_id=self.config.frame_id)
+        silent = (None if self.last_frame_time is None
+                  else time.monotonic() - self.last_frame_time)
         if not diagnostics:
             status.level, status.message = DiagnosticStatus.WARN, 'waiting for uwb/ranges'
-            values = {}
+            values = {'method': self.estimator.method}
         else:
-            level, status.message, values = assess(diagnostics, self.thresholds, self.lengths)
-            status.level = LEVELS[level]
+            level, message, values = assess(diagnostics, self.thresholds, self.lengths)
+            if silent > 1.0:
+                status.level = DiagnosticStatus.STALE
+                status.message = f'no uwb/ranges for {silent:.1f} s'
+            else:                           # the worst frame since the last report
+                level, status.message = self.worst or (level, message)
+                status.level = LEVELS[level]
+        self.worst = None
         values.update({f'frames {key}': str(value) for key, value in self.counts.items()})
         status.values = [KeyValue(key=key, value=value) for key, value in values.items()]
         array = DiagnosticArray(status=[status])

@@ -7,7 +7,6 @@ real rig where each tag has its own serial port or WiFi bridge. A channel is a
 pseudo-terminal (:class:`PtyOutput`) or a TCP server like the ESP8266 bridge
 (:class:`TcpOutput`).
 """
-import errno
 import os
 import socket
 import threading
@@ -104,7 +103,7 @@ class PtyOutput:
     path : str
         What to open: the link if given, else the pty device.
     counts : collections.Counter
-        ``written`` and ``dropped`` (the reader fell behind) writes.
+        ``written``, ``truncated`` and ``dropped`` writes (the reader fell behind).
     """
 
     def __init__(self, link=None):
@@ -122,10 +121,12 @@ class PtyOutput:
 
     def write(self, data):
         try:
-            os.write(self._master, data)
-            self.counts['written'] += 1
+            sent = os.write(self._master, data)
         except BlockingIOError:
             self.counts['dropped'] += 1
+            return
+        # A full buffer takes part of a line, as a real UART overrun cuts one.
+        self.counts['written' if sent == len(data) else 'truncated'] += 1
 
     def close(self):
         for fd in (self._master, self._slave):
@@ -162,6 +163,7 @@ class TcpOutput:
             except OSError:
                 return
             client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            client.settimeout(0.05)          # a stalled client must not stall the pump
             with self._lock:
                 self._clients.append((client, time.monotonic() + self.grace))
 
@@ -175,10 +177,9 @@ class TcpOutput:
                 try:
                     client.sendall(data)
                     self.counts['written'] += 1
-                except OSError as exc:
-                    if exc.errno not in (errno.EAGAIN,):
-                        self._clients.remove(entry)
-                        client.close()
+                except OSError:                    # gone or stalled: drop the client
+                    self._clients.remove(entry)
+                    client.close()
                     self.counts['dropped'] += 1
 
     def close(self):

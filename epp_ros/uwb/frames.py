@@ -20,7 +20,8 @@ __all__ = ['Frame', 'FrameAssembler']
 class Frame:
     """One ranging cycle."""
 
-    stamp: float            #: receive time of the newest range in the frame, seconds
+    stamp: float            #: receive time of the newest range (raised by 1 us where
+                            #: needed so that stamps strictly increase), seconds
     ranges: np.ndarray      #: (p, m) metres, NaN where the pair did not report
     rx_power: np.ndarray    #: (p, m) dBm where the device reported it, else NaN
 
@@ -56,6 +57,7 @@ class FrameAssembler:
         self.shape = (len(config.tag_ids), len(config.anchor_ids))
         self.dropped = Counter()
         self.frames = 0
+        self._last_stamp = None
         self._reset()
 
     def _reset(self):
@@ -66,7 +68,11 @@ class FrameAssembler:
         self._tags_done = set()
 
     def _close(self):
-        frame = Frame(self._newest, self._ranges, self._rx_power)
+        # Stamps strictly increase: lines of two cycles can arrive in one read.
+        stamp = self._newest if self._last_stamp is None else \
+            max(self._newest, self._last_stamp + 1e-6)
+        frame = Frame(stamp, self._ranges, self._rx_power)
+        self._last_stamp = stamp
         self.frames += 1
         self._reset()
         return frame

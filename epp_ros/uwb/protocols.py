@@ -193,6 +193,8 @@ _TREK_RANGE = re.compile(r'[0-9A-Fa-f]{8}', re.ASCII)
 _TREK_TOKEN = re.compile(r'([at])([0-9]{1,10}):([0-9]{1,10})', re.ASCII)
 _TREK_TAG_ADDRESS = re.compile(r'[0-9]{1,10}', re.ASCII)
 _TREK_ANCHORS = ('0', '1', '2', '3')
+#: Anchor ids the TREK1000 format can carry (its four range fields).
+TREK_ANCHOR_IDS = frozenset(_TREK_ANCHORS)
 #: ``ma`` field -> (initiating anchor, responding anchor).
 _TREK_ANCHOR_PAIRS = {1: ('0', '1'), 2: ('0', '2'), 3: ('1', '2')}
 _TREK_KINDS = ('mc', 'mr', 'ma')

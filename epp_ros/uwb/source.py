@@ -113,6 +113,17 @@ class LineSource:
             self._thread.join(timeout)
 
     def _run(self):
+        while not self._stop.is_set():
+            try:
+                self._connect_and_read()
+            except Exception as exc:  # noqa: BLE001 - whatever breaks, retry the port
+                self.counts['unexpected_errors'] += 1
+                self._note_failure(exc)
+                self._stop.wait(self.backoff)
+        self.state = 'disconnected'
+
+    def _connect_and_read(self):
+        """Connect (with backoff) and read until the port fails or we are stopped."""
         wait = 0.05
         while not self._stop.is_set():
             try:
@@ -132,7 +143,6 @@ class LineSource:
                 self._read_until_failure(connection)
             finally:
                 _close_quietly(connection)
-        self.state = 'disconnected'
 
     def _read_until_failure(self, connection):
         while not self._stop.is_set():
