@@ -27,7 +27,7 @@ setup(
             'uwb_emulator = epp_ros.nodes.emulator:main',
             'epp_demo = epp_ros.tools.demo:main',
             'epp_bench = epp_ros.tools.bench:main',
-            'epp_bag = epp_ros.tools.pending:epp_bag',
+            'epp_bag = epp_ros.tools.bag:main',
         ],
     },
 )

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from epp_ros.tools import bench, demo, pending
+from epp_ros.tools import bench, demo
 
 
 def test_demo_runs_the_pipeline_and_ends_with_a_json_summary(tmp_path):
@@ -49,8 +49,3 @@ def test_bench_option_parsing():
     assert bench.parse_option('tol=1e-9') == ('tol', 1e-9)
     with pytest.raises(argparse.ArgumentTypeError):
         bench.parse_option('novalue')
-
-
-def test_pending_scripts_say_so_and_fail(capsys):
-    assert pending.epp_bag() == 2
-    assert 'not implemented yet' in capsys.readouterr().err

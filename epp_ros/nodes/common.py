@@ -18,6 +18,11 @@ from epp_ros.core.poses import boom_quaternions
 #: replay loses nothing.
 RANGES_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                         history=HistoryPolicy.KEEP_LAST, depth=100)
+#: The estimator's subscription to uwb/ranges: reliable, keep all. DDS then never overwrites
+#: a frame the node has not taken (a keep-last queue would drop silently when it lags):
+#: a slow node shows as latency, and a fast replay is flow-controlled instead of lossy.
+RANGES_INPUT_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                              history=HistoryPolicy.KEEP_ALL)
 #: Postures (estimate and ground truth): reliable, keep last 10.
 POSTURE_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                          history=HistoryPolicy.KEEP_LAST, depth=10)

@@ -1,6 +1,7 @@
 """posture_estimator: uwb/ranges -> arm_posture, every frame, with diagnostics and markers.
 
-Subscribes to ``uwb/ranges`` (``sensor_msgs/JointState`` from uwb_driver), arranges the
+Subscribes to ``uwb/ranges`` (``sensor_msgs/JointState`` from uwb_driver; reliable, keep
+all, so no frame is lost silently: a node that lags shows it as latency), arranges the
 ``"<tag>:<anchor>"`` ranges as the configured (p, m) matrix and runs
 :class:`epp_ros.core.PostureEstimator`, warm-started from the previous pose. Publishes, with
 the range frame's stamp:
@@ -29,7 +30,7 @@ from visualization_msgs.msg import MarkerArray
 
 from epp_ros.core import METHODS, PostureEstimator
 from epp_ros.health import Thresholds, assess
-from epp_ros.nodes.common import (POSTURE_QOS, RANGES_QOS, StartupError, declare,
+from epp_ros.nodes.common import (POSTURE_QOS, RANGES_INPUT_QOS, StartupError, declare,
                                   declare_pump_parameters, posture_message, posture_markers,
                                   run_node, to_seconds, to_time)
 
@@ -65,7 +66,7 @@ class PostureEstimatorNode(Node):
         self.posture = self.create_publisher(PoseArray, 'arm_posture', POSTURE_QOS)
         self.markers = self.create_publisher(MarkerArray, 'arm_posture/markers', POSTURE_QOS)
         self.diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(JointState, 'uwb/ranges', self.on_ranges, RANGES_QOS)
+        self.create_subscription(JointState, 'uwb/ranges', self.on_ranges, RANGES_INPUT_QOS)
         self.create_timer(1.0, self.publish_diagnostics)
         self.counts = Counter()
         self.failures_in_a_row = 0

@@ -8,6 +8,8 @@ Suites:
   latency   A posture_estimator process fed over DDS: latency from a uwb/ranges publish to
             the matching arm_posture receive at 10 and 100 Hz, and the highest frame rate
             sustained with no frame lost.
+  bags      A synthesised 60 s bag: `epp_bag eval` frames/s, and `epp_bag play --fast`
+            through the live estimator node, frames/s and frames lost.
 Every table ends with the commit it was measured on. ``--option KEY=VALUE`` passes an
 option to the estimators (e.g. ``anchor_weight=inf``, ``slew_iterations=0``).
 """
@@ -141,7 +143,36 @@ def latency_suite(methods, seconds, seed, options):
     return {'suite': 'latency', 'seconds': seconds, 'rows': rows}
 
 
+def bags_suite(methods, seed):
+    """Offline evaluation and fast replay through the node, frames per second."""
+    import tempfile
+    from epp_ros import bags
+    from epp_ros.config import load_pump_config
+    from epp_ros.tools.node_bench import replay_rate
+    config = load_pump_config()
+    rows = []
+    with tempfile.TemporaryDirectory() as folder:
+        bag = Path(folder) / 'cycle'
+        frames = bags.synthesize(bag, config, duration=60.0, sigma=0.1, seed=seed)[bags.RANGES]
+        for method in methods:
+            start = time.perf_counter()
+            bags.evaluate(bag, config, method)
+            eval_rate = frames / (time.perf_counter() - start)
+            play_rate, lost = replay_rate(method, bag, frames)
+            rows.append({'method': method, 'eval_fps': eval_rate, 'play_fps': play_rate,
+                         'lost': lost})
+    return {'suite': 'bags', 'frames': frames, 'rows': rows}
+
+
 def markdown(report):
+    if report['suite'] == 'bags':
+        lines = [f'### A {report["frames"]}-frame bag: offline eval, and play --fast through '
+                 'the estimator node', '',
+                 '| method | eval [frames/s] | play --fast [frames/s] | frames lost |',
+                 '|---|---|---|---|']
+        lines += [f'| {r["method"]} | {r["eval_fps"]:.0f} | {r["play_fps"]:.0f} | '
+                  f'{r["lost"]} |' for r in report['rows']]
+        return '\n'.join(lines)
     if report['suite'] == 'latency':
         lines = [f'### posture_estimator over DDS, uwb/ranges publish -> arm_posture receive '
                  f'({report["seconds"]:g} s per rate)', '',
@@ -180,7 +211,7 @@ def main(argv=None):
                                      epilog=__doc__.split('\n', 1)[1],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('suites', nargs='*', metavar='suite',
-                        help='xie3dim, tracking, latency (default: all)')
+                        help='xie3dim, tracking, latency, bags (default: all)')
     parser.add_argument('--methods', nargs='+', choices=list(METHODS), default=list(METHODS))
     parser.add_argument('--trials', type=int, default=200, help='xie3dim trials')
     parser.add_argument('--seconds', type=float, default=60.0, help='tracking duration')
@@ -191,10 +222,11 @@ def main(argv=None):
                         metavar='KEY=VALUE', help='estimator option, repeatable')
     parser.add_argument('--json', action='store_true', help='also print the reports as JSON')
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
-    suites = args.suites or ['xie3dim', 'tracking', 'latency']
-    unknown = sorted(set(suites) - {'xie3dim', 'tracking', 'latency'})
+    known = ['xie3dim', 'tracking', 'latency', 'bags']
+    suites = args.suites or known
+    unknown = sorted(set(suites) - set(known))
     if unknown:
-        parser.error(f'unknown suite(s) {unknown}; choose from xie3dim, tracking, latency')
+        parser.error(f'unknown suite(s) {unknown}; choose from {", ".join(known)}')
     options = dict(args.option)
     reports = []
     for suite in suites:
@@ -202,9 +234,11 @@ def main(argv=None):
             reports.append(xie3dim_suite(args.methods, args.trials, args.seed, options))
         elif suite == 'tracking':
             reports.append(tracking_suite(args.methods, args.seconds, args.seed, options))
-        else:
+        elif suite == 'latency':
             reports.append(latency_suite(args.methods, args.latency_seconds, args.seed,
                                          options))
+        else:
+            reports.append(bags_suite(args.methods, args.seed))
         print(markdown(reports[-1]) + '\n', flush=True)
     print(f'commit {commit()}, Python {sys.version.split()[0]}, numpy {np.__version__}'
           + (f', options {options}' if options else ''))

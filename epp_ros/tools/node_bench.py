@@ -12,9 +12,9 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from epp_ros.config import default_config_path, load_pump_config
-from epp_ros.nodes.common import POSTURE_QOS, RANGES_QOS, to_time
+from epp_ros.nodes.common import POSTURE_QOS, RANGES_INPUT_QOS, RANGES_QOS, to_time
 
-__all__ = ['measure_latency', 'sustained_rate']
+__all__ = ['measure_latency', 'sustained_rate', 'replay_rate']
 
 
 class _Feeder(Node):
@@ -110,3 +110,25 @@ def sustained_rate(method, frames, options=None, rates=(50, 100, 150, 200, 300, 
             time.sleep(0.5)
         return best
     return _with_estimator(method, options, work)
+
+
+def replay_rate(method, bag, frames):
+    """Frames/s and lost frames when ``epp_bag play --fast`` feeds the estimator node."""
+    def work(feeder):
+        received = []
+        feeder.create_subscription(PoseArray, 'arm_posture',   # keep all: measure, not lose
+                                   lambda message: received.append(time.perf_counter()),
+                                   RANGES_INPUT_QOS)
+        player = subprocess.Popen([sys.executable, '-m', 'epp_ros.tools.bag', 'play',
+                                   str(bag), '--fast', '--topics', '/uwb/ranges'],
+                                  stdout=subprocess.DEVNULL)
+        start = time.perf_counter()
+        deadline = start + 60.0
+        while len(received) < frames and time.perf_counter() < deadline:
+            rclpy.spin_once(feeder, timeout_sec=0.01)
+        player.wait(30)
+        for _ in range(50):                     # late answers
+            rclpy.spin_once(feeder, timeout_sec=0.01)
+        elapsed = (received[-1] - received[0]) if len(received) > 1 else float('nan')
+        return (len(received) - 1) / elapsed, frames - len(received)
+    return _with_estimator(method, None, work)

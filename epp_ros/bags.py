@@ -1,0 +1,300 @@
+"""rosbag2 files without ROS: synthesise, read, evaluate and describe them (``rosbags``).
+
+Bags are standard rosbag2 (metadata version 9, MCAP or sqlite3 storage, explicit QoS per
+topic), so that ``ros2 bag play``/``record`` on a full ROS install read and write the same.
+Topics: ``/uwb/ranges`` (``sensor_msgs/JointState`` exactly as uwb_driver publishes it),
+``/arm_posture/ground_truth`` and ``/arm_posture`` (``geometry_msgs/PoseArray``), and
+optionally ``/uwb/raw`` (``std_msgs/String``, the devices' lines).
+"""
+import time
+from pathlib import Path
+
+import numpy as np
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
+from rosbags.interfaces import QosTime
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from epp_ros.core import PostureEstimator
+from epp_ros.core.metrics import frame_rmse, joint_errors, pooled_rmse
+from epp_ros.core.poses import boom_quaternions
+from epp_ros.core.simulate import RangeNoise, working_cycle
+from epp_ros.uwb.emulation import cycle_lines
+
+__all__ = ['BagError', 'RANGES', 'TRUTH', 'POSTURE', 'RAW', 'TYPES', 'synthesize', 'info',
+           'read_frames', 'read_truth', 'evaluate', 'qos_profile', 'read_all', 'write_raw']
+
+RANGES, TRUTH, POSTURE, RAW = ('/uwb/ranges', '/arm_posture/ground_truth', '/arm_posture',
+                               '/uwb/raw')
+TYPES = {RANGES: 'sensor_msgs/msg/JointState', TRUTH: 'geometry_msgs/msg/PoseArray',
+         POSTURE: 'geometry_msgs/msg/PoseArray', RAW: 'std_msgs/msg/String'}
+STORAGES = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+
+
+class BagError(Exception):
+    """A bag that cannot be used; the message is one line for the user."""
+
+
+def qos_profile(depth, reliable=True):
+    """A fully specified QoS profile to store with a connection."""
+    infinite = QosTime(sec=0, nsec=0)
+    return Qos(history=QosHistory.KEEP_LAST, depth=depth,
+               reliability=QosReliability.RELIABLE if reliable else QosReliability.BEST_EFFORT,
+               durability=QosDurability.VOLATILE, deadline=infinite, lifespan=infinite,
+               liveliness=QosLiveliness.AUTOMATIC, liveliness_lease_duration=infinite,
+               avoid_ros_namespace_conventions=False)
+
+
+#: The QoS each topic is published with (uwb_driver, posture_estimator, uwb_emulator).
+TOPIC_QOS = {RANGES: qos_profile(100), TRUTH: qos_profile(10), POSTURE: qos_profile(10),
+             RAW: qos_profile(100)}
+
+
+def _header(stamp_ns, frame_id):
+    types = TYPESTORE.types
+    return types['std_msgs/msg/Header'](
+        stamp=types['builtin_interfaces/msg/Time'](sec=int(stamp_ns // 10 ** 9),
+                                                    nanosec=int(stamp_ns % 10 ** 9)),
+        frame_id=frame_id)
+
+
+def _ranges_message(stamp_ns, frame_id, names, ranges):
+    empty = np.zeros(0, dtype=np.float64)
+    return TYPESTORE.types[TYPES[RANGES]](
+        header=_header(stamp_ns, frame_id), name=list(names),
+        position=np.asarray(ranges, dtype=np.float64).ravel(), velocity=empty, effort=empty)
+
+
+def _posture_message(stamp_ns, frame_id, base, joints):
+    types = TYPESTORE.types
+    poses = []
+    for position, quaternion in zip([base, *joints], boom_quaternions(base, joints)):
+        poses.append(types['geometry_msgs/msg/Pose'](
+            position=types['geometry_msgs/msg/Point'](*(float(v) for v in position)),
+            orientation=types['geometry_msgs/msg/Quaternion'](*(float(v) for v in quaternion))))
+    return types[TYPES[TRUTH]](header=_header(stamp_ns, frame_id), poses=poses)
+
+
+def _serialize(message):
+    return TYPESTORE.serialize_cdr(message, message.__msgtype__)
+
+
+class _BagWriter:
+    """A rosbag2 writer with one connection per topic, created on first use."""
+
+    def __init__(self, path, storage='mcap'):
+        if storage not in STORAGES:
+            raise BagError(f'storage must be one of {list(STORAGES)}, got {storage!r}')
+        if Path(path).exists():
+            raise BagError(f'{path} exists already')
+        self.writer = Writer(path, version=9, storage_plugin=STORAGES[storage])
+        self.connections = {}
+
+    def __enter__(self):
+        self.writer.open()
+        return self
+
+    def __exit__(self, *exc):
+        self.writer.close()
+
+    def write(self, topic, stamp_ns, raw, msgtype=None, qos=None):
+        if topic not in self.connections:
+            self.connections[topic] = self.writer.add_connection(
+                topic, msgtype or TYPES[topic], typestore=TYPESTORE,
+                offered_qos_profiles=[qos or TOPIC_QOS.get(topic, qos_profile(10))])
+        self.writer.write(self.connections[topic], int(stamp_ns), raw)
+
+
+def synthesize(path, config, duration=60.0, rate=10.0, sigma=0.1, nlos=0.0, drop=0.0,
+               seed=0, storage='mcap', raw_protocol=None, start_ns=None):
+    """Write a simulated working cycle as a bag.
+
+    Every cycle gives ``/uwb/ranges`` and ``/arm_posture/ground_truth`` with the same stamp
+    (and, with ``raw_protocol``, the devices' lines on ``/uwb/raw``).
+
+    Returns
+    -------
+    dict
+        Messages written per topic.
+    """
+    model = config.model()
+    rng = np.random.default_rng(seed)
+    trajectory = working_cycle(model, duration, rate, rng=np.random.default_rng(seed))
+    noise = RangeNoise(sigma=sigma, nlos_fraction=nlos, nlos_gamma=2.0, dropout=drop)
+    start_ns = time.time_ns() if start_ns is None else int(start_ns)
+    counts = {}
+    with _BagWriter(path, storage) as bag:
+        for cycle, (seconds, joints) in enumerate(zip(trajectory.times, trajectory.joints)):
+            stamp = start_ns + int(round(seconds * 1e9))
+            ranges, _ = noise.apply(model.ranges(joints), rng)
+            messages = [(RANGES, _ranges_message(stamp, config.frame_id, config.link_names,
+                                                 ranges)),
+                        (TRUTH, _posture_message(stamp, config.frame_id, model.base, joints))]
+            if raw_protocol:
+                messages += [(RAW, TYPESTORE.types[TYPES[RAW]](data=line))
+                             for _, line in cycle_lines(config, ranges, raw_protocol, cycle)]
+            for topic, message in messages:
+                bag.write(topic, stamp, _serialize(message))
+                counts[topic] = counts.get(topic, 0) + 1
+    return counts
+
+
+class _Bag:
+    """A bag opened for reading, with one-line errors."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+        if not self.path.exists():
+            raise BagError(f'{path}: no such bag')
+        try:
+            self.reader = Reader(self.path)
+            self.reader.open()
+        except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds on bad files
+            raise BagError(f'{path}: not a readable rosbag2 bag ({exc})') from None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.reader.close()
+
+    def connections(self, topic, msgtype):
+        found = [c for c in self.reader.connections if c.topic == topic]
+        if not found:
+            raise BagError(f'{self.path}: no {topic} topic (topics: '
+                           f'{sorted({c.topic for c in self.reader.connections})})')
+        wrong = [c.msgtype for c in found if c.msgtype != msgtype]
+        if wrong:
+            raise BagError(f'{self.path}: {topic} holds {wrong[0]}, expected {msgtype}')
+        return found
+
+    def messages(self, topic, msgtype):
+        """(t_ns, message) of one topic, deserialized; BagError on any broken message."""
+        connections = self.connections(topic, msgtype)
+        try:
+            for connection, t_ns, raw in self.reader.messages(connections=connections):
+                yield t_ns, TYPESTORE.deserialize_cdr(raw, connection.msgtype)
+        except BagError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - truncated files, other definitions
+            raise BagError(f'{self.path}: cannot read {topic}: {exc}') from None
+
+
+def _stamp_ns(message):
+    return message.header.stamp.sec * 10 ** 9 + message.header.stamp.nanosec
+
+
+def read_frames(path, config):
+    """(stamp_ns, (p, m) ranges) of every ``/uwb/ranges`` message, by the config's names."""
+    frames = []
+    with _Bag(path) as bag:
+        for _, message in bag.messages(RANGES, TYPES[RANGES]):
+            try:
+                ranges, _ = config.range_matrix(list(message.name), message.position)
+            except ValueError as exc:
+                raise BagError(f'{path}: a /uwb/ranges message is malformed: {exc}') from None
+            frames.append((_stamp_ns(message), ranges))
+    return frames
+
+
+def read_truth(path):
+    """{stamp_ns: (p, 3) joints} from ``/arm_posture/ground_truth``, or {} without it."""
+    with _Bag(path) as bag:
+        if not any(c.topic == TRUTH for c in bag.reader.connections):
+            return {}
+        return {_stamp_ns(m): np.array([[p.position.x, p.position.y, p.position.z]
+                                        for p in m.poses[1:]])
+                for _, m in bag.messages(TRUTH, TYPES[TRUTH])}
+
+
+def info(path):
+    """Storage, duration and topics of a bag, as ``ros2 bag info`` shows them."""
+    with _Bag(path) as bag:
+        reader = bag.reader
+        return {'path': str(path), 'storage': _storage_of(bag),
+                'duration_s': reader.duration / 1e9 if reader.message_count else 0.0,
+                'start_ns': reader.start_time if reader.message_count else 0,
+                'messages': reader.message_count,
+                'topics': [{'topic': c.topic, 'type': c.msgtype, 'count': c.msgcount}
+                           for c in reader.connections]}
+
+
+def evaluate(path, config, method='cepp', out=None, **options):
+    """Run an estimator over a bag's ``/uwb/ranges``; score it against the truth if any.
+
+    Parameters
+    ----------
+    out : path, optional
+        A copy of the bag with the estimated ``/arm_posture`` added.
+
+    Returns
+    -------
+    dict
+        ``frames``, ``solved``, ``rmse_m`` (NaN without truth), ``joint_rmse_m`` (p,),
+        ``max_arm_length_error_m``, ``ms_per_frame``, ``method``, and the per-frame series
+        ``stamps_ns``, ``frame_rmse_m`` for plotting.
+    """
+    frames = read_frames(path, config)
+    truth = read_truth(path)
+    model = config.model()
+    estimator = PostureEstimator(model, method, **options)
+    postures, rmses, squared, stamps, length_errors, elapsed = [], [], [], [], [], 0.0
+    for stamp, ranges in frames:
+        start = time.perf_counter()
+        joints = estimator.update(ranges)
+        elapsed += time.perf_counter() - start
+        diagnostics = estimator.last_diagnostics
+        if not diagnostics['valid']:
+            continue
+        postures.append((stamp, joints))
+        length_errors.append(float(np.max(diagnostics['arm_length_error'])))
+        if stamp in truth:
+            rmses.append(float(frame_rmse(joints, truth[stamp])))
+            squared.append(joint_errors(joints, truth[stamp]) ** 2)
+            stamps.append(stamp)
+    if out is not None:
+        _copy_with_postures(path, out, postures, config, model.base)
+    return {'frames': len(frames), 'solved': len(postures), 'method': method,
+            'rmse_m': pooled_rmse(rmses),
+            'joint_rmse_m': np.sqrt(np.mean(squared, axis=0)).tolist() if squared else [],
+            'max_arm_length_error_m': max(length_errors, default=float('nan')),
+            'ms_per_frame': 1e3 * elapsed / max(len(frames), 1),
+            'stamps_ns': stamps, 'frame_rmse_m': rmses}
+
+
+def _copy_with_postures(path, out, postures, config, base):
+    with _Bag(path) as bag, _BagWriter(out, _storage_of(bag)) as copy:
+        for connection, t_ns, raw in bag.reader.messages():
+            profiles = getattr(connection.ext, 'offered_qos_profiles', None) or None
+            copy.write(connection.topic, t_ns, raw, connection.msgtype,
+                       profiles[0] if profiles else None)
+        for stamp, joints in postures:
+            copy.write(POSTURE, stamp, _serialize(
+                _posture_message(stamp, config.frame_id, base, joints)))
+
+
+def _storage_of(bag):
+    files = [p.suffix for p in bag.path.iterdir()] if bag.path.is_dir() else []
+    return 'sqlite3' if '.db3' in files else 'mcap'
+
+
+def read_all(path):
+    """Every message of a bag as (topic, msgtype, t_ns, raw bytes, qos or None)."""
+    with _Bag(path) as bag:
+        messages = []
+        try:
+            for connection, t_ns, raw in bag.reader.messages():
+                profiles = getattr(connection.ext, 'offered_qos_profiles', None) or None
+                messages.append((connection.topic, connection.msgtype, t_ns, bytes(raw),
+                                 profiles[0] if profiles else None))
+        except Exception as exc:  # noqa: BLE001
+            raise BagError(f'{path}: cannot read: {exc}') from None
+        return messages
+
+
+def write_raw(path, messages, storage='mcap'):
+    """Write (topic, msgtype, t_ns, raw bytes, qos or None) messages as a bag."""
+    with _BagWriter(path, storage) as bag:
+        for topic, msgtype, t_ns, raw, qos in messages:
+            bag.write(topic, t_ns, raw, msgtype, qos)

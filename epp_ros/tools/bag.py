@@ -1,0 +1,234 @@
+"""epp_bag: synthesise, record, replay, evaluate and describe rosbag2 files.
+
+    epp_bag synth OUT [--storage mcap|sqlite3] [--duration S] [--sigma M] [--nlos F]
+                      [--drop F] [--seed N] [--config FILE] [--raw PROTOCOL]
+    epp_bag record OUT [--topics T ...] [--duration S] [--storage ...]
+    epp_bag play BAG [--rate R] [--loop] [--fast] [--topics T ...]
+    epp_bag eval BAG [--method M] [--config FILE] [--out BAG] [--plot FILE.png] [--json]
+    epp_bag info BAG
+
+A bag that cannot be used (missing, truncated, without the topic, another message type)
+gives one error line and exit status 2.
+"""
+import argparse
+import importlib
+import json
+import signal
+import sys
+import time
+
+import numpy as np
+
+from epp_ros import bags
+from epp_ros.config import ConfigError, load_pump_config
+from epp_ros.core import METHODS
+
+DEFAULT_RECORD = [bags.RANGES, bags.POSTURE, bags.TRUTH, '/diagnostics']
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(prog='epp_bag', description=__doc__.splitlines()[0],
+                                     epilog=__doc__.split('\n', 2)[2],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    commands = parser.add_subparsers(dest='command', required=True)
+    synth = commands.add_parser('synth', help='write a simulated working cycle')
+    synth.add_argument('out')
+    synth.add_argument('--storage', choices=sorted(bags.STORAGES), default='mcap')
+    synth.add_argument('--duration', type=float, default=60.0)
+    synth.add_argument('--rate', type=float, default=10.0)
+    synth.add_argument('--sigma', type=float, default=0.1)
+    synth.add_argument('--nlos', type=float, default=0.0)
+    synth.add_argument('--drop', type=float, default=0.0)
+    synth.add_argument('--seed', type=int, default=0)
+    synth.add_argument('--config')
+    synth.add_argument('--raw', choices=['json', 'lec', 'arduino', 'trek'],
+                       help='also write the device lines on /uwb/raw')
+    record = commands.add_parser('record', help='record topics until Ctrl-C or --duration')
+    record.add_argument('out')
+    record.add_argument('--topics', nargs='+', default=DEFAULT_RECORD)
+    record.add_argument('--duration', type=float)
+    record.add_argument('--storage', choices=sorted(bags.STORAGES), default='mcap')
+    play = commands.add_parser('play', help='publish a bag with its recorded timing')
+    play.add_argument('bag')
+    play.add_argument('--rate', type=float, default=1.0, help='speed factor')
+    play.add_argument('--loop', action='store_true')
+    play.add_argument('--fast', action='store_true',
+                      help='as fast as the subscribers keep up (reliable, nothing lost)')
+    play.add_argument('--topics', nargs='+')
+    evaluate = commands.add_parser('eval', help='run an estimator offline over a bag')
+    evaluate.add_argument('bag')
+    evaluate.add_argument('--method', choices=list(METHODS), default='cepp')
+    evaluate.add_argument('--config')
+    evaluate.add_argument('--out', help='write a copy with /arm_posture added')
+    evaluate.add_argument('--plot', help='PNG of the error over time')
+    evaluate.add_argument('--json', action='store_true')
+    show = commands.add_parser('info', help='topics, counts, duration')
+    show.add_argument('bag')
+    args = parser.parse_args(argv)
+    if getattr(args, 'rate', 1.0) <= 0:
+        parser.error('--rate must be positive')
+    return args
+
+
+def run_synth(args):
+    config = load_pump_config(args.config)
+    counts = bags.synthesize(args.out, config, args.duration, args.rate, args.sigma,
+                             args.nlos, args.drop, args.seed, args.storage, args.raw)
+    print(f'wrote {args.out}: ' + ', '.join(f'{t} {n}' for t, n in counts.items()))
+
+
+def run_info(args):
+    summary = bags.info(args.bag)
+    print(f'Bag:       {summary["path"]}\nStorage:   {summary["storage"]}\n'
+          f'Duration:  {summary["duration_s"]:.3f} s\nMessages:  {summary["messages"]}')
+    for topic in summary['topics']:
+        print(f'Topic: {topic["topic"]} | Type: {topic["type"]} | Count: {topic["count"]}')
+
+
+def run_eval(args):
+    config = load_pump_config(args.config)
+    result = bags.evaluate(args.bag, config, args.method, out=args.out)
+    joints = ' '.join(f'{e:.3f}' for e in result['joint_rmse_m']) or '-'
+    print(f'{args.bag}: {result["frames"]} frames, {result["solved"]} solved by '
+          f'{result["method"]}; RMSE {result["rmse_m"]:.3f} m (per joint {joints}); '
+          f'max arm-length error {result["max_arm_length_error_m"]:.2e} m; '
+          f'{result["ms_per_frame"]:.2f} ms/frame')
+    if args.plot and result['stamps_ns']:
+        import matplotlib
+        matplotlib.use('Agg')
+        from matplotlib import pyplot
+        seconds = (np.array(result['stamps_ns']) - result['stamps_ns'][0]) / 1e9
+        figure, axis = pyplot.subplots(figsize=(8, 3.5))
+        axis.plot(seconds, result['frame_rmse_m'])
+        axis.set_xlabel('time [s]')
+        axis.set_ylabel('frame RMSE [m]')
+        axis.set_title(f'{args.method}: RMSE {result["rmse_m"]:.3f} m')
+        axis.grid(True)
+        figure.savefig(args.plot, dpi=100, bbox_inches='tight')
+        pyplot.close(figure)
+    if args.json:
+        print(json.dumps({key: value for key, value in result.items()
+                          if key not in ('stamps_ns', 'frame_rmse_m')}))
+
+
+def _message_class(msgtype):
+    package, _, name = msgtype.split('/')
+    return getattr(importlib.import_module(f'{package}.msg'), name)
+
+
+def _rclpy_qos(profile, fast):
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    if fast:       # flow control: a reliable writer that keeps all blocks, never drops
+        return QoSProfile(history=HistoryPolicy.KEEP_ALL,
+                          reliability=ReliabilityPolicy.RELIABLE)
+    if profile is None:
+        return QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_ALL if profile.history.name == 'KEEP_ALL'
+        else HistoryPolicy.KEEP_LAST, depth=max(int(profile.depth), 1),
+        reliability=ReliabilityPolicy.BEST_EFFORT if profile.reliability.name == 'BEST_EFFORT'
+        else ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL
+        if profile.durability.name == 'TRANSIENT_LOCAL' else DurabilityPolicy.VOLATILE)
+
+
+def run_play(args):
+    import rclpy
+    messages = bags.read_all(args.bag)
+    if args.topics:
+        messages = [m for m in messages if m[0] in args.topics]
+    if not messages:
+        raise bags.BagError(f'{args.bag}: nothing to play')
+    rclpy.init()
+    node = rclpy.create_node('epp_bag_player')
+    publishers = {}
+    for topic, msgtype, _, _, qos in messages:
+        if topic not in publishers:
+            publishers[topic] = node.create_publisher(_message_class(msgtype), topic,
+                                                      _rclpy_qos(qos, args.fast))
+    try:
+        # Give subscribers a moment to match, as ros2 bag play does with its delay.
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline and not all(
+                p.get_subscription_count() for p in publishers.values()):
+            rclpy.spin_once(node, timeout_sec=0.05)
+        while True:
+            start, first = time.monotonic(), messages[0][2]
+            for topic, _, t_ns, raw, _ in messages:
+                if not args.fast:
+                    delay = start + (t_ns - first) / 1e9 / args.rate - time.monotonic()
+                    if delay > 0:
+                        time.sleep(delay)
+                publishers[topic].publish(raw)
+            if not args.loop:
+                break
+        time.sleep(0.5)                 # let the last messages leave
+        print(f'played {len(messages)} messages from {args.bag}')
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def run_record(args):
+    import rclpy
+    import rclpy.executors
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    rclpy.init()
+    node = rclpy.create_node('epp_bag_recorder')
+    received = []
+    subscribed = {}
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                     reliability=ReliabilityPolicy.RELIABLE)
+    stop = {'now': False}
+    signal.signal(signal.SIGINT, lambda *_: stop.update(now=True))
+    signal.signal(signal.SIGTERM, lambda *_: stop.update(now=True))
+    start = last_lookup = time.monotonic()
+    executor = rclpy.executors.SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        while not stop['now'] and (args.duration is None
+                                   or time.monotonic() - start < args.duration):
+            if len(subscribed) < len(args.topics) and time.monotonic() - last_lookup > 0.2:
+                last_lookup = time.monotonic()
+                for topic, types in node.get_topic_names_and_types():
+                    if topic in args.topics and topic not in subscribed:
+                        msgtype = types[0]
+
+                        def keep(raw, topic=topic, msgtype=msgtype):
+                            received.append((topic, msgtype, time.time_ns(), raw))
+                        subscribed[topic] = node.create_subscription(
+                            _message_class(msgtype), topic, keep, qos, raw=True)
+            executor.spin_once(timeout_sec=0.02)
+        # Lose nothing that arrived: drain until the topics are quiet.
+        count = -1
+        while count != len(received):
+            count = len(received)
+            deadline = time.monotonic() + 0.3
+            while time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.01)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    bags.write_raw(args.out, [(topic, msgtype, t_ns, raw, bags.TOPIC_QOS.get(topic))
+                              for topic, msgtype, t_ns, raw in received], args.storage)
+    print(f'recorded {len(received)} messages on {len(subscribed)} topics to {args.out}')
+
+
+COMMANDS = {'synth': run_synth, 'record': run_record, 'play': run_play, 'eval': run_eval,
+            'info': run_info}
+
+
+def main(argv=None):
+    args = parse_args(sys.argv[1:] if argv is None else argv)
+    try:
+        COMMANDS[args.command](args)
+    except (bags.BagError, ConfigError) as exc:
+        print(f'epp_bag: {exc}', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

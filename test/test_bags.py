@@ -1,0 +1,132 @@
+"""epp_bag and epp_ros.bags: round trips, live replay, and broken bags."""
+import json
+import signal
+import subprocess
+import time
+
+import numpy as np
+import pytest
+from system import PUMP_YAML, script
+
+from epp_ros import bags
+from epp_ros.config import load_pump_config
+from epp_ros.nodes.common import to_seconds
+
+CONFIG = load_pump_config(PUMP_YAML)
+pytestmark = pytest.mark.usefixtures('fresh_listener')
+
+
+def epp_bag(*args, timeout=60):
+    return subprocess.run([script('epp_bag'), *map(str, args)], capture_output=True,
+                          text=True, timeout=timeout)
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_synth_then_eval(storage, tmp_path):
+    bag = tmp_path / 'cycle'
+    result = epp_bag('synth', bag, '--storage', storage, '--duration', '8', '--sigma', '0.1',
+                     '--seed', '3', '--raw', 'json')
+    assert result.returncode == 0, result.stderr
+    summary = bags.info(bag)
+    assert summary['storage'] == storage and summary['duration_s'] == pytest.approx(7.9)
+    counts = {t['topic']: t['count'] for t in summary['topics']}
+    assert counts == {bags.RANGES: 80, bags.TRUTH: 80, bags.RAW: 400}
+    assert 'metadata.yaml' in {p.name for p in bag.iterdir()}
+    assert 'version: 9' in (bag / 'metadata.yaml').read_text()
+    report = epp_bag('eval', bag, '--method', 'chain', '--json')
+    assert report.returncode == 0, report.stderr
+    result = json.loads(report.stdout.strip().splitlines()[-1])
+    assert result['frames'] == 80 and result['method'] == 'chain'
+    assert 0.05 < result['rmse_m'] < 0.5 and result['max_arm_length_error_m'] < 1e-9
+    assert result['ms_per_frame'] > 0
+    info = epp_bag('info', bag)
+    assert 'Count: 80' in info.stdout and bags.RANGES in info.stdout
+
+
+def test_eval_out_adds_the_estimated_posture(tmp_path):
+    bags.synthesize(tmp_path / 'in', CONFIG, duration=3.0, drop=0.6, seed=4)
+    result = bags.evaluate(tmp_path / 'in', CONFIG, 'cepp', out=tmp_path / 'out')
+    assert 0 < result['solved'] < result['frames']          # sparse frames are skipped
+    counts = {t['topic']: t['count'] for t in bags.info(tmp_path / 'out')['topics']}
+    assert counts[bags.POSTURE] == result['solved'] and counts[bags.RANGES] == 30
+    with bags._Bag(tmp_path / 'out') as bag:
+        postures = list(bag.messages(bags.POSTURE, bags.TYPES[bags.POSTURE]))
+    assert all(len(m.poses) == 6 and np.isfinite(m.poses[5].position.z) for _, m in postures)
+
+
+def test_broken_bags_give_one_error_line(tmp_path):
+    bag = tmp_path / 'cycle'
+    bags.synthesize(bag, CONFIG, duration=5.0)
+    mcap = next(bag.glob('*.mcap'))
+    mcap.write_bytes(mcap.read_bytes()[:len(mcap.read_bytes()) // 2])      # truncated
+    for target, expected in ((tmp_path / 'missing', 'no such bag'), (bag, 'cycle')):
+        result = epp_bag('eval', target)
+        lines = [line for line in result.stderr.splitlines() if line.strip()]
+        assert result.returncode == 2 and len(lines) == 1 and expected in lines[0]
+
+
+def test_missing_topic_and_other_message_types_are_refused(tmp_path):
+    truth_only = tmp_path / 'truth_only'
+    source = tmp_path / 'source'
+    bags.synthesize(source, CONFIG, duration=2.0)
+    bags.write_raw(truth_only, [m for m in bags.read_all(source) if m[0] == bags.TRUTH])
+    result = epp_bag('eval', truth_only)
+    assert result.returncode == 2 and 'no /uwb/ranges topic' in result.stderr
+    retyped = tmp_path / 'retyped'
+    bags.write_raw(retyped, [(bags.RANGES, 'std_msgs/msg/String', 1, bags._serialize(
+        bags.TYPESTORE.types['std_msgs/msg/String'](data='hello')), None)])
+    result = epp_bag('eval', retyped)
+    assert result.returncode == 2 and 'expected sensor_msgs/msg/JointState' in result.stderr
+
+
+def decoded(path, topic):
+    with bags._Bag(path) as bag:
+        return [m for _, m in bag.messages(topic, bags.TYPES[topic])]
+
+
+def test_play_then_record_gives_identical_messages(tmp_path, processes):
+    source = tmp_path / 'source'
+    bags.synthesize(source, CONFIG, duration=5.0, seed=5)
+    recording = tmp_path / 'recording'
+    recorder = processes([script('epp_bag'), 'record', str(recording), '--topics',
+                          bags.RANGES, bags.TRUTH])
+    time.sleep(2.0)
+    played = epp_bag('play', source, '--rate', '4')
+    assert played.returncode == 0, played.stderr
+    time.sleep(1.0)
+    recorder.send_signal(signal.SIGINT)
+    assert recorder.wait(20) == 0, recorder.stderr.read()
+    for topic in (bags.RANGES, bags.TRUTH):
+        original, copy = decoded(source, topic), decoded(recording, topic)
+        assert len(copy) == len(original) == 50
+        for a, b in zip(original, copy):
+            assert a.header == b.header
+            if topic == bags.RANGES:
+                assert list(a.name) == list(b.name)
+                np.testing.assert_array_equal(a.position, b.position)
+            else:
+                assert a.poses == b.poses
+
+
+def test_play_into_the_live_estimator_equals_eval(tmp_path, listener, processes):
+    bag = tmp_path / 'cycle'
+    bags.synthesize(bag, CONFIG, duration=6.0, sigma=0.1, drop=0.1, seed=6)
+    expected = bags.evaluate(bag, CONFIG, 'cepp', out=tmp_path / 'evaluated')
+    offline = {(m.header.stamp.sec, m.header.stamp.nanosec): m
+               for m in decoded(tmp_path / 'evaluated', bags.POSTURE)}
+    processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML)])
+    # The listener subscribes too: wait for the estimator as the second subscriber.
+    assert listener.spin_until(lambda: listener.count_subscribers('/uwb/ranges') >= 2, 10)
+    # Keep spinning while the bag plays: the listener's queue is only 10 deep.
+    player = processes([script('epp_bag'), 'play', str(bag), '--fast', '--topics',
+                        bags.RANGES])
+    assert listener.spin_until(lambda: len(listener.postures) >= expected['solved'], 20)
+    assert player.wait(10) == 0
+    assert len(listener.postures) == expected['solved']
+    for live in listener.postures:
+        key = (live.header.stamp.sec, live.header.stamp.nanosec)
+        reference = offline[key]
+        for a, b in zip(live.poses, reference.poses):
+            np.testing.assert_allclose([a.position.x, a.position.y, a.position.z],
+                                       [b.position.x, b.position.y, b.position.z], atol=1e-9)
+    assert to_seconds(listener.postures[-1].header.stamp) > 0
