@@ -33,8 +33,10 @@ def test_synth_then_eval(storage, tmp_path):
     assert counts == {bags.RANGES: 80, bags.TRUTH: 80, bags.RAW: 400}
     assert 'metadata.yaml' in {p.name for p in bag.iterdir()}
     assert 'version: 9' in (bag / 'metadata.yaml').read_text()
-    report = epp_bag('eval', bag, '--method', 'chain', '--json')
+    plot = tmp_path / 'error.png'
+    report = epp_bag('eval', bag, '--method', 'chain', '--json', '--plot', plot)
     assert report.returncode == 0, report.stderr
+    assert plot.read_bytes()[:4] == b'\x89PNG'
     result = json.loads(report.stdout.strip().splitlines()[-1])
     assert result['frames'] == 80 and result['method'] == 'chain'
     assert 0.05 < result['rmse_m'] < 0.5 and result['max_arm_length_error_m'] < 1e-9

@@ -96,15 +96,19 @@ def measure_latency(method, frames, rate, seconds, options=None):
 
 
 def sustained_rate(method, frames, options=None, rates=(50, 100, 150, 200, 300, 500, 700,
-                                                        1000, 1500, 2000), seconds=2.0):
-    """Highest of ``rates`` (frames/s) at which every frame of ``seconds`` was answered."""
+                                                        1000, 1500, 2000), seconds=2.0,
+                   max_latency=0.1):
+    """Highest of ``rates`` (frames/s) at which the node keeps up for ``seconds``: every
+    frame answered, none later than ``max_latency`` s (the input queue keeps everything, so
+    a node that is too slow loses nothing but falls ever further behind)."""
     def work(feeder):
         _feed(feeder, frames, 10.0, 10)
         best = 0
         for rate in rates:
             feeder.sent.clear()
             feeder.answered.clear()
-            if _feed(feeder, frames, rate, int(rate * seconds)) > 0:
+            lost = _feed(feeder, frames, rate, int(rate * seconds))
+            if lost > 0 or max(feeder.answered.values()) > max_latency:
                 break
             best = rate
             time.sleep(0.5)
