@@ -61,6 +61,8 @@ class ChainMethod:
         Slews tried by the cold start.
     """
 
+    needs_prior = False         # the cold start finds the global solution by itself
+
     def __init__(self, model, sigma=0.1, nlos_threshold=3.0, tol=1e-10, max_iter=50,
                  slew_starts=16):
         self.model = model
@@ -70,8 +72,6 @@ class ChainMethod:
         self.max_iter = int(max_iter)
         self.slew_starts = int(slew_starts)
         self._angles = None
-
-    needs_prior = False
 
     def enough_information(self, valid):
         """p + 1 unknowns; the tip's pitch is seen by the tip's ranges only."""

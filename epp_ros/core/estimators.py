@@ -115,6 +115,7 @@ class _EDMMethod:
 
     rank = 3
     fix_lengths = True
+    needs_prior = True          # the tag-tag entries of G come from a prior posture
 
     def __init__(self, model, prior_weight=0.0, anchor_weight=np.inf, tol=1e-6, max_iter=500):
         self.model = model
@@ -126,8 +127,6 @@ class _EDMMethod:
         self._base_anchor = base_anchor
         self._other_anchors = np.array([j for j in range(model.n_anchors) if j != base_anchor],
                                        dtype=int)
-
-    needs_prior = True
 
     def enough_information(self, valid):
         """Whether the valid links (p, m) can determine the posture."""
