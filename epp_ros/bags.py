@@ -264,14 +264,12 @@ def evaluate(path, config, method='cepp', out=None, **options):
 
 
 def _copy_with_postures(path, out, postures, config, base):
-    with _Bag(path) as bag, _BagWriter(out, _storage_of(bag)) as copy:
-        for connection, t_ns, raw in bag.reader.messages():
-            profiles = getattr(connection.ext, 'offered_qos_profiles', None) or None
-            copy.write(connection.topic, t_ns, raw, connection.msgtype,
-                       profiles[0] if profiles else None)
-        for stamp, joints in postures:
-            copy.write(POSTURE, stamp, _serialize(
-                _posture_message(stamp, config.frame_id, base, joints)))
+    with _Bag(path) as bag:
+        storage = _storage_of(bag)
+    estimated = [(POSTURE, TYPES[POSTURE], stamp, _serialize(
+        _posture_message(stamp, config.frame_id, base, joints)), None)
+        for stamp, joints in postures]
+    write_raw(out, read_all(path) + estimated, storage)
 
 
 def _storage_of(bag):
@@ -285,7 +283,7 @@ def read_all(path):
         messages = []
         try:
             for connection, t_ns, raw in bag.reader.messages():
-                profiles = getattr(connection.ext, 'offered_qos_profiles', None) or None
+                profiles = getattr(connection.ext, 'offered_qos_profiles', None)
                 messages.append((connection.topic, connection.msgtype, t_ns, bytes(raw),
                                  profiles[0] if profiles else None))
         except Exception as exc:  # noqa: BLE001

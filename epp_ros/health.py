@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ['OK', 'WARN', 'ERROR', 'Thresholds', 'assess']
+__all__ = ['OK', 'WARN', 'ERROR', 'Thresholds', 'grade', 'report', 'assess']
 
 OK, WARN, ERROR = 0, 1, 2
 
@@ -21,8 +21,10 @@ class Thresholds:
     residual_error: float = 2.0       #: ... for ERROR
 
 
-def assess(diagnostics, thresholds, lengths):
-    """Level, message and values of one frame's ``PostureEstimator.last_diagnostics``.
+def grade(diagnostics, thresholds, lengths):
+    """Level and message of one frame's ``PostureEstimator.last_diagnostics``.
+
+    Cheap enough for every frame (no formatting of the values).
 
     Parameters
     ----------
@@ -36,28 +38,28 @@ def assess(diagnostics, thresholds, lengths):
     level : int
         OK, WARN or ERROR.
     message : str
-    values : dict of str -> str
     """
-    estimated = np.asarray(diagnostics.get('section_lengths', np.full(len(lengths), np.nan)))
-    length_error = np.abs(estimated - lengths)
-    worst = float(np.nanmax(length_error)) if np.isfinite(length_error).any() else np.inf
-    residual = float(diagnostics.get('range_residual_rms', np.nan))
-    if diagnostics.get('method') == 'epp1':
-        worst = 0.0                 # EPP1 does not model the lengths: not judged on them
     if not diagnostics.get('valid', False):
-        level, message = ERROR, f'no estimate: {diagnostics.get("status", "unknown")}'
-    elif not diagnostics.get('converged', True):
-        level, message = WARN, 'solver stopped before converging'
-    elif worst > thresholds.arm_length_error or residual > thresholds.residual_error:
-        level, message = ERROR, f'poor fit: arm length error {worst:.3f} m, ' \
-                                f'range residual {residual:.3f} m'
-    elif worst > thresholds.arm_length_warn or residual > thresholds.residual_warn:
-        level, message = WARN, f'weak fit: arm length error {worst:.3f} m, ' \
-                               f'range residual {residual:.3f} m'
-    else:
-        level, message = OK, 'tracking'
+        return ERROR, f'no estimate: {diagnostics.get("status", "unknown")}'
+    if not diagnostics.get('converged', True):
+        return WARN, 'solver stopped before converging'
+    error = np.abs(np.asarray(diagnostics['section_lengths']) - lengths)
+    # EPP1 does not model the lengths: it is not judged on them.
+    worst = 0.0 if diagnostics.get('method') == 'epp1' else float(np.max(error))
+    residual = float(diagnostics.get('range_residual_rms', np.nan))
+    fit = f'arm length error {worst:.3f} m, range residual {residual:.3f} m'
+    if worst > thresholds.arm_length_error or residual > thresholds.residual_error:
+        return ERROR, f'poor fit: {fit}'
+    if worst > thresholds.arm_length_warn or residual > thresholds.residual_warn:
+        return WARN, f'weak fit: {fit}'
+    return OK, 'tracking'
+
+
+def report(diagnostics, lengths):
+    """The key values of one frame's diagnostics, as text for ``/diagnostics``."""
+    estimated = np.asarray(diagnostics.get('section_lengths', np.full(len(lengths), np.nan)))
     values = {'method': diagnostics.get('method', ''), 'status': diagnostics.get('status', ''),
-              'range residual RMS [m]': f'{residual:.4f}',
+              'range residual RMS [m]': f'{diagnostics.get("range_residual_rms", np.nan):.4f}',
               'missing links': str(diagnostics.get('missing_links', '')),
               'iterations': str(diagnostics.get('iterations', '')),
               'solve time [ms]': f'{1e3 * diagnostics.get("solve_time", np.nan):.2f}'}
@@ -67,9 +69,13 @@ def assess(diagnostics, thresholds, lengths):
             values[f'joint {k} predicted std [m]'] = f'{std:.4f}'
     if 'nlos_links' in diagnostics:
         values['NLOS links'] = str(int(np.sum(diagnostics['nlos_links'])))
-    for k, (estimate, configured, error) in enumerate(zip(estimated, lengths, length_error),
-                                                    start=1):
+    for k, (estimate, configured) in enumerate(zip(estimated, lengths), start=1):
         values[f'section {k} length [m]'] = f'{estimate:.4f}'
         values[f'section {k} configured [m]'] = f'{configured:.4f}'
-        values[f'section {k} abs error [m]'] = f'{error:.4f}'
-    return level, message, values
+        values[f'section {k} abs error [m]'] = f'{abs(estimate - configured):.4f}'
+    return values
+
+
+def assess(diagnostics, thresholds, lengths):
+    """:func:`grade` and :func:`report` together: (level, message, values)."""
+    return (*grade(diagnostics, thresholds, lengths), report(diagnostics, lengths))

@@ -29,7 +29,7 @@ from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
 from epp_ros.core import METHODS, PostureEstimator
-from epp_ros.health import Thresholds, assess
+from epp_ros.health import Thresholds, assess, grade
 from epp_ros.nodes.common import (POSTURE_QOS, RANGES_INPUT_QOS, StartupError, declare,
                                   declare_pump_parameters, posture_message, posture_markers,
                                   run_node, to_seconds, to_time)
@@ -104,8 +104,7 @@ class PostureEstimatorNode(Node):
         self.last_stamp = stamp
         self.last_frame_time = time.monotonic()
         joints = self.estimator.update(ranges)
-        level, summary, _ = assess(self.estimator.last_diagnostics, self.thresholds,
-                                   self.lengths)
+        level, summary = grade(self.estimator.last_diagnostics, self.thresholds, self.lengths)
         if self.worst is None or level > self.worst[0]:
             self.worst = (level, summary)
         if not self.estimator.last_diagnostics['valid']:

@@ -40,18 +40,16 @@ class _Feeder(Node):
         self.publisher.publish(message)
 
 
-def _with_estimator(method, options, work):
-    """Run ``work(feeder)`` against a fresh posture_estimator process."""
+def _with_estimator(method, work):
+    """Run ``work(feeder)`` against a fresh posture_estimator process, on a domain of its own
+    (set in this process's environment, which the estimator inherits)."""
     config = default_config_path()
     names = load_pump_config(config).link_names
     args = [sys.executable, '-m', 'epp_ros.nodes.estimator', '--ros-args', '--params-file',
             str(config), '-p', f'method:={method}', '-p', 'publish_markers:=false',
             '--log-level', 'warn']
-    if options:
-        raise ValueError('estimator options are not passed to the node benchmark')
-    env = dict(os.environ, ROS_DOMAIN_ID=str(100 + os.getpid() % 100))
-    os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']
-    estimator = subprocess.Popen(args, env=env)
+    os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 100)
+    estimator = subprocess.Popen(args)
     rclpy.init()
     feeder = _Feeder(names)
     try:
@@ -84,7 +82,7 @@ def _feed(feeder, frames, rate, count):
     return len(feeder.sent) - len(feeder.answered)
 
 
-def measure_latency(method, frames, rate, seconds, options=None):
+def measure_latency(method, frames, rate, seconds):
     """Latencies (s) of the answered frames at ``rate`` Hz, and how many were not answered."""
     def work(feeder):
         _feed(feeder, frames, 10.0, 10)                  # warm start and DDS settle
@@ -92,10 +90,10 @@ def measure_latency(method, frames, rate, seconds, options=None):
         feeder.answered.clear()
         lost = _feed(feeder, frames, rate, int(rate * seconds))
         return np.array(list(feeder.answered.values())), lost
-    return _with_estimator(method, options, work)
+    return _with_estimator(method, work)
 
 
-def sustained_rate(method, frames, options=None, rates=(50, 100, 150, 200, 300, 500, 700,
+def sustained_rate(method, frames, rates=(50, 100, 150, 200, 300, 500, 700,
                                                         1000, 1500, 2000), seconds=2.0,
                    max_latency=0.1):
     """Highest of ``rates`` (frames/s) at which the node keeps up for ``seconds``: every
@@ -113,7 +111,7 @@ def sustained_rate(method, frames, options=None, rates=(50, 100, 150, 200, 300, 
             best = rate
             time.sleep(0.5)
         return best
-    return _with_estimator(method, options, work)
+    return _with_estimator(method, work)
 
 
 def replay_rate(method, bag, frames):
@@ -135,4 +133,4 @@ def replay_rate(method, bag, frames):
             rclpy.spin_once(feeder, timeout_sec=0.01)
         elapsed = (received[-1] - received[0]) if len(received) > 1 else float('nan')
         return (len(received) - 1) / elapsed, frames - len(received)
-    return _with_estimator(method, None, work)
+    return _with_estimator(method, work)
