@@ -130,7 +130,8 @@ def synthesize(path, config, duration=60.0, rate=10.0, sigma=0.1, nlos=0.0, drop
             ranges, _ = noise.apply(model.ranges(joints), rng)
             messages = [(RANGES, _ranges_message(stamp, config.frame_id, config.link_names,
                                                  ranges)),
-                        (TRUTH, _posture_message(stamp, config.frame_id, model.base, joints))]
+                        (TRUTH, _posture_message(stamp, config.frame_id,
+                                                 model.pivot_of(joints), joints))]
             if raw_protocol:
                 messages += [(RAW, TYPESTORE.types[TYPES[RAW]](data=line))
                              for _, line in cycle_lines(config, ranges, raw_protocol, cycle)]
@@ -254,7 +255,7 @@ def evaluate(path, config, method='cepp', out=None, **options):
             squared.append(joint_errors(joints, truth[stamp]) ** 2)
             stamps.append(stamp)
     if out is not None:
-        _copy_with_postures(path, out, postures, config, model.base)
+        _copy_with_postures(path, out, postures, config, model)
     return {'frames': len(frames), 'solved': len(postures), 'method': method,
             'rmse_m': pooled_rmse(rmses),
             'joint_rmse_m': np.sqrt(np.mean(squared, axis=0)).tolist() if squared else [],
@@ -263,11 +264,11 @@ def evaluate(path, config, method='cepp', out=None, **options):
             'stamps_ns': stamps, 'frame_rmse_m': rmses}
 
 
-def _copy_with_postures(path, out, postures, config, base):
+def _copy_with_postures(path, out, postures, config, model):
     with _Bag(path) as bag:
         storage = _storage_of(bag)
     estimated = [(POSTURE, TYPES[POSTURE], stamp, _serialize(
-        _posture_message(stamp, config.frame_id, base, joints)), None)
+        _posture_message(stamp, config.frame_id, model.pivot_of(joints), joints)), None)
         for stamp, joints in postures]
     write_raw(out, read_all(path) + estimated, storage)
 

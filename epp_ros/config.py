@@ -23,7 +23,10 @@ _DEVICE_ID = re.compile(r'^[0-9A-F]{1,16}$')
 PUMP_PARAMETERS = {
     'frame_id': ('pump_base', 'World frame of ranges and postures (truck frame, z up).'),
     'arm_lengths': ([0.0], 'Section lengths in metres, base outward.'),
-    'base': ([0.0, 0.0, 0.0], 'Base pivot [x, y, z] in metres, world frame.'),
+    'base': ([0.0, 0.0, 0.0], 'Base pivot [x, y, z] in metres, world frame; with a '
+                              'pivot_offset, the slew axis at the pivot height.'),
+    'pivot_offset': (0.0, 'Horizontal distance from the slew axis to the boom pivot, '
+                          'metres, along the slew direction (0: pivot on the axis).'),
     'tag_names': ([''], 'Tag names, one per joint, base outward.'),
     'tag_ids': ([''], 'Tag device ids (hexadecimal short addresses), as tag_names.'),
     'anchor_names': ([''], 'Anchor names.'),
@@ -62,10 +65,11 @@ class PumpConfig:
     anchor_ids: tuple
     anchor_positions: tuple     #: ((x, y, z), ...) per anchor
     sources: tuple              #: (Source, ...)
+    pivot_offset: float = 0.0   #: metres from the slew axis to the boom pivot
 
     def model(self):
         """The :class:`BoomModel` of this pump."""
-        return BoomModel(self.arm_lengths, self.base, self.anchor_positions)
+        return BoomModel(self.arm_lengths, self.base, self.anchor_positions, self.pivot_offset)
 
     @property
     def link_names(self):
@@ -207,13 +211,18 @@ def pump_config_from_parameters(values):
                           f'got {len(arm_lengths)}')
     base = _numbers(get['base'], 'base')
     try:
-        BoomModel(arm_lengths, base, positions)
+        pivot_offset = float(get['pivot_offset'])
+    except (TypeError, ValueError):
+        raise ConfigError(f"pivot_offset: must be a number, got {get['pivot_offset']!r}") \
+            from None
+    try:
+        BoomModel(arm_lengths, base, positions, pivot_offset)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     sources = _sources(get['source_ports'], get['source_protocols'], get['source_tags'],
                        tag_ids)
     return PumpConfig(frame_id, arm_lengths, base, tag_names, tag_ids, anchor_names,
-                      anchor_ids, positions, sources)
+                      anchor_ids, positions, sources, pivot_offset)
 
 
 def _sources(ports, protocols, tags, tag_ids):

@@ -93,7 +93,7 @@ def test_play_then_record_gives_identical_messages(tmp_path, processes):
     recorder = processes([script('epp_bag'), 'record', str(recording), '--topics',
                           bags.RANGES, bags.TRUTH])
     time.sleep(2.0)
-    played = epp_bag('play', source, '--rate', '4')
+    played = epp_bag('play', source, '--rate', '4', '--subscribers', '1')
     assert played.returncode == 0, played.stderr
     time.sleep(1.0)
     recorder.send_signal(signal.SIGINT)
@@ -120,8 +120,9 @@ def test_play_into_the_live_estimator_equals_eval(tmp_path, listener, processes)
     # The listener subscribes too: wait for the estimator as the second subscriber.
     assert listener.spin_until(lambda: listener.count_subscribers('/uwb/ranges') >= 2, 10)
     # Keep spinning while the bag plays: the listener's queue is only 10 deep.
+    # The player must match the estimator, not only the listener, before it starts.
     player = processes([script('epp_bag'), 'play', str(bag), '--fast', '--topics',
-                        bags.RANGES])
+                        bags.RANGES, '--subscribers', '2'])
     assert listener.spin_until(lambda: len(listener.postures) >= expected['solved'], 20)
     assert player.wait(10) == 0
     assert len(listener.postures) == expected['solved']

@@ -58,6 +58,8 @@ def test_device_ids_compare_case_insensitively():
     ({'arm_lengths': [9.0, 7.0]}, 'arm_lengths'),
     ({'arm_lengths': [9.0, 7.0, 7.0, 9.0, -1.0]}, 'arm_lengths'),
     ({'base': [0.0, 0.0]}, 'base'),
+    ({'pivot_offset': 'far'}, 'pivot_offset'),
+    ({'pivot_offset': float('nan')}, 'pivot_offset'),
     ({'frame_id': ' '}, 'frame_id'),
     ({'source_protocols': ['morse']}, 'source_protocols'),
     ({'source_protocols': ['lec']}, 'source_tags'),
@@ -85,3 +87,12 @@ def test_unreadable_files_give_one_clear_error(tmp_path):
     bad.write_text(': : [\n')
     with pytest.raises(ConfigError, match='cannot read'):
         load_pump_config(bad)
+
+
+def test_pivot_offset_reaches_the_model():
+    values = shared_values()
+    values['pivot_offset'] = 0.8
+    model = pump_config_from_parameters(values).model()
+    assert model.pivot_offset == 0.8
+    np.testing.assert_allclose(model.pivot(np.pi / 2), np.array(values['base']) + [0, 0.8, 0],
+                               atol=1e-12)

@@ -153,7 +153,8 @@ def test_trek_with_more_than_four_anchors_is_refused_at_start():
 @pytest.mark.parametrize('executable, name, value', [('uwb_driver', 'frame_period', 'fast'),
                                                      ('posture_estimator', 'residual_warn',
                                                       [1.0]),
-                                                     ('posture_estimator', 'method', 'magic')])
+                                                     ('posture_estimator', 'method', 'magic'),
+                                                     ('posture_estimator', 'method', 'tpsm')])
 def test_bad_settings_stop_a_node_with_one_line(executable, name, value, tmp_path):
     document = yaml.safe_load(PUMP_YAML.read_text())
     document['/**']['ros__parameters'][name] = value

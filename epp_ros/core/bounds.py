@@ -5,11 +5,14 @@ Gaussian range errors of standard deviation sigma_kj, the Fisher information of 
 ``F = A^T Sigma^-1 A``, ``A[(k, j), :] = u_kj^T dw_k/dpsi`` with ``u_kj`` the unit vector from
 anchor j to tag k. Any unbiased estimator has ``cov(psi_hat) >= F^-1``; for the joints,
 ``cov(w_hat) >= G F^-1 G^T`` with ``G = dw/dpsi``, and the paper's RMSE is bounded below by
-``sqrt(trace / p)``.
+``sqrt(trace / p)``. Tag-tag ranges, inclinometers and a slew encoder add their own rows
+to ``A`` (``core.measurements``).
 """
 from dataclasses import dataclass
 
 import numpy as np
+
+from .measurements import Measurements, Residuals, SensorNoise
 
 __all__ = ['range_jacobian', 'fisher_information', 'Bound', 'crlb']
 
@@ -27,17 +30,20 @@ def fisher_information(model, slew, pitches, sigma, measured=None):
 
     Parameters
     ----------
-    sigma : float or ndarray, shape (p, m)
-        Range standard deviations, metres.
-    measured : ndarray of bool, shape (p, m), optional
-        Links that are measured (all by default).
+    sigma : float, ndarray of shape (p, m), or SensorNoise
+        Range standard deviations, metres, or the noise of every sensor.
+    measured : ndarray of bool, shape (p, m), or Measurements, optional
+        The tag-anchor links measured (all by default), or a frame whose finite entries
+        (ranges, tag-tag ranges, inclinometers, slew encoder) say what is measured.
     """
-    jacobian = range_jacobian(model, slew, pitches)
-    precision = np.broadcast_to(1.0 / np.asarray(sigma, dtype=float) ** 2,
-                                jacobian.shape[:2])
-    if measured is not None:
-        precision = precision * np.asarray(measured, dtype=bool)
-    return np.einsum('kjq,kj,kjr->qr', jacobian, precision, jacobian)
+    noise = sigma if isinstance(sigma, SensorNoise) else SensorNoise(range_sigma=sigma)
+    if not isinstance(measured, Measurements):
+        mask = np.ones((model.n_sections, model.n_anchors), bool) if measured is None \
+            else np.asarray(measured, dtype=bool)
+        measured = Measurements.ranges_only(np.where(mask, 1.0, np.nan))
+    psi = np.r_[slew, pitches]
+    jacobian = Residuals(model, measured, noise).jacobian(psi)
+    return jacobian.T @ jacobian
 
 
 @dataclass
@@ -55,7 +61,9 @@ class Bound:
 
 
 def crlb(model, slew, pitches, sigma, measured=None):
-    """Cramér–Rao bound of the joints for a posture, anchor set and range noise.
+    """Cramér–Rao bound of the joints for a posture, anchor set and sensor noise.
+
+    ``sigma`` and ``measured`` are as in :func:`fisher_information`.
 
     Returns
     -------

@@ -7,47 +7,24 @@ positions (p, 3), keeping the previous estimate as the warm start. Methods:
 - ``epp2``: the same with the arm lengths (base-joint 1 included) as equality constraints.
 - ``cepp``: EPP2 in the boom's vertical plane (rank 2) after projecting the ranges.
 - ``chain``: least squares over the slew and the pitches (``core.chain``), at the
-  Cramér–Rao bound, robust to NLOS ranges.
+  Cramér–Rao bound, robust to NLOS ranges; also fuses tag-tag ranges and angle sensors.
+- the paper's baselines (``core.baselines``): ``srls`` (each tag alone), ``sdp`` (the
+  Biswas–Ye relaxation; needs the optional cvxpy) and ``tpsm`` (angle sensors only).
 """
 import inspect
 import time
 
 import numpy as np
 
+from .baselines import SDPMethod, SRLSMethod, TPSMMethod
 from .chain import ChainMethod
+from .measurements import Measurements
 from .edm import align_to_known, squared_distances
 from .multilateration import intersect_spheres, srls
 from .nedm import nearest_edm
 from .plane import fit_slew, from_plane, project_ranges, to_plane
 
-__all__ = ['PostureEstimator', 'METHODS', 'cold_start_guess']
-
-
-def clean_ranges(ranges, shape, max_ranges=None):
-    """Validate a (p, m) range frame and mark unusable entries missing.
-
-    NaN, inf and negative entries become NaN. So do entries longer than twice the longest
-    geometrically possible range plus 10 m (``max_ranges``, (p, m)): no noise or NLOS excess
-    explains them.
-
-    Returns
-    -------
-    ranges : ndarray, shape (p, m)
-    implausible : int
-        How many finite, non-negative entries were dropped as too long.
-    """
-    try:
-        array = np.array(ranges, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f'ranges must be a numeric array of shape {shape}') from exc
-    if array.shape != shape:
-        raise ValueError(f'ranges must have shape {shape} (tags, anchors), got {array.shape}')
-    with np.errstate(invalid='ignore'):
-        array[~np.isfinite(array) | (array < 0)] = np.nan
-        too_long = (array > 2.0 * max_ranges + 10.0) if max_ranges is not None else \
-            np.zeros(shape, bool)
-    array[too_long] = np.nan
-    return array, int(too_long.sum())
+__all__ = ['PostureEstimator', 'METHODS', 'RANGE_METHODS', 'cold_start_guess']
 
 
 def cold_start_guess(model, ranges):
@@ -68,7 +45,9 @@ def cold_start_guess(model, ranges):
 
     def neighbour_spheres(k):
         centres, radii = [], []
-        inner = model.base if k == 0 else joints[k - 1]
+        # A pivot off the slew axis moves with the unknown slew: no sphere around it.
+        inner = (model.base if model.pivot_offset == 0.0 else np.full(3, np.nan)) if k == 0 \
+            else joints[k - 1]
         if np.isfinite(inner[0]):
             centres.append(inner)
             radii.append(lengths[k])
@@ -115,7 +94,8 @@ class _EDMMethod:
 
     rank = 3
     fix_lengths = True
-    needs_prior = True          # the tag-tag entries of G come from a prior posture
+    prior = 'required'          # the tag-tag entries of G come from a prior posture
+    inputs = ('ranges', 'tag_ranges')
 
     def __init__(self, model, prior_weight=0.0, anchor_weight=np.inf, tol=1e-6, max_iter=500):
         self.model = model
@@ -128,8 +108,9 @@ class _EDMMethod:
         self._other_anchors = np.array([j for j in range(model.n_anchors) if j != base_anchor],
                                        dtype=int)
 
-    def enough_information(self, valid):
-        """Whether the valid links (p, m) can determine the posture."""
+    def enough_information(self, measurements):
+        """Whether the frame's tag-anchor links can determine the posture."""
+        valid = np.isfinite(measurements.ranges)
         p = self.model.n_sections
         # Without lengths each tag stands alone: r + 1 ranges, or its mirror image fits too.
         per_tag, total = ((1, (self.rank - 1) * p) if self.fix_lengths
@@ -146,8 +127,12 @@ class _EDMMethod:
                        else np.full(p, np.nan))
         return np.column_stack([base_column, ranges[:, self._other_anchors]])
 
-    def _solve_edm(self, known, tag_squared, tag_weights, prior):
-        """Solve the NEDM for tags given known points (k, d), squared ranges (p, k), prior."""
+    def _solve_edm(self, known, tag_squared, tag_weights, prior, tag_tag_ranges):
+        """Solve the NEDM for tags given known points (k, d), squared ranges (p, k), prior.
+
+        ``tag_tag_ranges`` (p, p), NaN where not measured, replace the prior's tag-tag
+        entries of G with weight 1 (both directions measured: their mean square).
+        """
         k, p = known.shape[0], prior.shape[0]
         n = k + p
         lengths_sq = self.model.arm_lengths ** 2
@@ -171,6 +156,13 @@ class _EDMMethod:
         weights[tags, :k] = np.where(measured, tag_weights, 0.0)
         weights[:k, tags] = weights[tags, :k].T
         weights[tags, tags] = self.prior_weight
+        measured_sq = tag_tag_ranges ** 2
+        both = np.isfinite(measured_sq) & np.isfinite(measured_sq.T)
+        measured_sq = np.where(both, 0.5 * (measured_sq + measured_sq.T),
+                               np.where(np.isfinite(measured_sq), measured_sq, measured_sq.T))
+        tag_measured = np.isfinite(measured_sq)
+        target[tags, tags] = np.where(tag_measured, measured_sq, target[tags, tags])
+        weights[tags, tags] = np.where(tag_measured, 1.0, self.prior_weight)
         if self.fix_lengths:
             chain = np.r_[0, np.arange(k, n)]              # base, joint 1, ..., joint p
             target[chain[:-1], chain[1:]] = target[chain[1:], chain[:-1]] = lengths_sq
@@ -189,10 +181,13 @@ class EPP1(_EDMMethod):
 
     fix_lengths = False
 
-    def solve(self, ranges, prior):
-        known = np.vstack([self.model.base, self.model.anchors[self._other_anchors]])
-        columns = self._known_columns(ranges)
-        return self._solve_edm(known, columns ** 2, np.ones_like(columns), prior)
+    def solve(self, measurements, prior):
+        # A pivot off the slew axis is placed at the prior's slew.
+        pivot = self.model.pivot_of(prior)
+        known = np.vstack([pivot, self.model.anchors[self._other_anchors]])
+        columns = self._known_columns(measurements.ranges)
+        return self._solve_edm(known, columns ** 2, np.ones_like(columns), prior,
+                               measurements.tag_ranges)
 
 
 class EPP2(EPP1):
@@ -217,26 +212,29 @@ class CEPP(_EDMMethod):
         self.slew_iterations = int(slew_iterations)
         self.slew_tol = float(slew_tol)
 
-    def _solve_in_plane(self, ranges, prior, slew):
+    def _solve_in_plane(self, measurements, prior, slew):
+        ranges = measurements.ranges
         base = self.model.base
         squared, clipped = project_ranges(ranges, self.model.anchors, base, slew)
         weights = np.where(clipped, self.clip_weight, 1.0)
         anchors_2d = to_plane(self.model.anchors, base, slew)
-        known = np.vstack([[0.0, base[2]], anchors_2d[self._other_anchors]])
+        known = np.vstack([[self.model.pivot_offset, base[2]], anchors_2d[self._other_anchors]])
         columns = self._known_columns(squared)
         column_weights = self._known_columns(weights)
+        # Two tags in the plane are as far apart in it as in space.
         coords, info = self._solve_edm(known, columns, column_weights,
-                                       to_plane(prior, base, slew))
+                                       to_plane(prior, base, slew), measurements.tag_ranges)
         return coords, info
 
-    def solve(self, ranges, prior):
+    def solve(self, measurements, prior):
+        ranges = measurements.ranges
         slew = fit_slew(prior, self.model.base)
         if self.slew_iterations:
             # Move last frame's plane to this frame's ranges before the first solve.
             slew += slew_step(self.model, to_plane(prior, self.model.base, slew), ranges, slew)
         totals = {'iterations': 0, 'inner_iterations': 0}
         for attempt in range(self.slew_iterations + 1):
-            coords, info = self._solve_in_plane(ranges, prior, slew)
+            coords, info = self._solve_in_plane(measurements, prior, slew)
             for key in totals:
                 totals[key] += info[key]
             joints = from_plane(coords, self.model.base, slew)
@@ -268,7 +266,11 @@ def slew_step(model, coords, ranges, slew):
     return float(-np.sum(jac * residual) / curvature) if curvature > 1e-12 else 0.0
 
 
-METHODS = {'epp1': EPP1, 'epp2': EPP2, 'cepp': CEPP, 'chain': ChainMethod}
+METHODS = {'epp1': EPP1, 'epp2': EPP2, 'cepp': CEPP, 'chain': ChainMethod,
+           'srls': SRLSMethod, 'sdp': SDPMethod, 'tpsm': TPSMMethod}
+
+#: Methods that work from UWB ranges alone (what the estimator node receives).
+RANGE_METHODS = [name for name, cls in METHODS.items() if 'ranges' in cls.inputs]
 
 
 def accepted_options(method):
@@ -285,19 +287,21 @@ def accepted_options(method):
 
 
 class PostureEstimator:
-    """Frame-by-frame boom posture from UWB ranges.
+    """Frame-by-frame boom posture from UWB ranges (and, for some methods, angle sensors).
 
     Parameters
     ----------
     model : BoomModel
     method : str
-        One of ``METHODS``: ``"epp1"``, ``"epp2"``, ``"cepp"``, ``"chain"``.
+        One of ``METHODS``: ``"epp1"``, ``"epp2"``, ``"cepp"``, ``"chain"``, or a baseline,
+        ``"srls"``, ``"sdp"``, ``"tpsm"``.
     **options
         Passed to the method: ``prior_weight`` (weight of tag-tag distances from the
         previous pose, default 0; the paper uses 1), ``anchor_weight`` (inf: anchor-anchor
         distances fixed, the default; a number: weighted), ``tol``, ``max_iter``; CEPP also
         ``slew_iterations`` (default 1) and ``clip_weight``; chain: ``sigma`` (range noise,
-        0.1 m), ``nlos_threshold`` (3 sigma), ``tol``, ``max_iter``, ``slew_starts``.
+        0.1 m), ``tag_sigma``, ``pitch_sigma``, ``slew_sigma``, ``nlos_threshold`` (3
+        sigma), ``tol``, ``max_iter``, ``slew_starts``; sdp: ``solver``.
 
     Attributes
     ----------
@@ -320,7 +324,6 @@ class PostureEstimator:
         self.model = model
         self.method = method
         self._solver = METHODS[method](model, **options)
-        self._max_ranges = model.max_ranges()
         self._previous = None
         self.last_diagnostics = {}
 
@@ -340,14 +343,22 @@ class PostureEstimator:
         # Nothing known yet: a straight horizontal boom along +x, flagged invalid.
         return self.model.forward_kinematics(0.0, np.zeros(self.model.n_sections))
 
-    def update(self, ranges):
-        """Estimate the joint positions from one frame of ranges.
+    def update(self, ranges, *, tag_ranges=None, pitches=None, slew=None):
+        """Estimate the joint positions from one frame of measurements.
 
         Parameters
         ----------
         ranges : array_like, shape (p, m)
-            Metres; row k is the tag on joint k+1, column j anchor j; NaN, inf, negative or
-            impossibly long entries count as missing.
+            Tag-anchor distances, metres; row k is the tag on joint k+1, column j anchor j;
+            NaN, inf, negative or impossibly long entries count as missing.
+        tag_ranges : array_like, shape (p, p), optional
+            Tag-tag distances, metres, NaN where not measured.
+        pitches : array_like, shape (p,), optional
+            Inclinometer pitch of each section, radians, NaN where not measured.
+        slew : float, optional
+            Slew encoder angle, radians.
+
+        Inputs a method does not use are listed in ``last_diagnostics["ignored_inputs"]``.
 
         Returns
         -------
@@ -357,28 +368,34 @@ class PostureEstimator:
         """
         start = time.perf_counter()
         p, m = self.model.n_sections, self.model.n_anchors
-        ranges, implausible = clean_ranges(ranges, (p, m), self._max_ranges)
-        valid = np.isfinite(ranges)
+        measurements, implausible = Measurements.clean(self.model, ranges, tag_ranges,
+                                                       pitches, slew)
+        valid = np.isfinite(measurements.ranges)
         diagnostics = {'method': self.method, 'missing_links': int(p * m - valid.sum()),
                        'implausible_links': implausible, 'cold_start': self._previous is None,
-                       'iterations': 0}
-        enough = self._solver.enough_information(valid)
+                       'iterations': 0,
+                       'ignored_inputs': [name for name in measurements.present()
+                                          if name not in self._solver.inputs]}
+        enough = self._solver.enough_information(measurements)
+        # Methods declare ``prior``: 'required', 'optional' (a start) or 'unused'.
         prior = self._previous
-        if enough and prior is None:
-            prior = cold_start_guess(self.model, ranges)
-        if not enough or (prior is None and self._solver.needs_prior):
-            return self._finish(self._fallback(), 'insufficient_data', diagnostics, ranges,
-                                start)
+        if enough and prior is None and self._solver.prior != 'unused':
+            prior = cold_start_guess(self.model, measurements.ranges)
+        if not enough or (prior is None and self._solver.prior == 'required'):
+            return self._finish(self._fallback(), 'insufficient_data', diagnostics,
+                                measurements.ranges, start)
         try:
-            joints, info = self._solver.solve(ranges, prior)
-        except np.linalg.LinAlgError as exc:
+            joints, info = self._solver.solve(measurements, prior)
+        except (np.linalg.LinAlgError, RuntimeError) as exc:
             diagnostics['error'] = str(exc)
-            return self._finish(self._fallback(), 'solver_failed', diagnostics, ranges, start)
+            return self._finish(self._fallback(), 'solver_failed', diagnostics,
+                                measurements.ranges, start)
         diagnostics.update(info)
         if not np.all(np.isfinite(joints)):
-            return self._finish(self._fallback(), 'solver_failed', diagnostics, ranges, start)
+            return self._finish(self._fallback(), 'solver_failed', diagnostics,
+                                measurements.ranges, start)
         self._previous = joints.copy()
-        return self._finish(joints, 'ok', diagnostics, ranges, start)
+        return self._finish(joints, 'ok', diagnostics, measurements.ranges, start)
 
     def _finish(self, joints, status, diagnostics, ranges, start):
         lengths = self.model.section_lengths(joints)

@@ -3,8 +3,14 @@
 Conventions (REP 103, SI): world frame in metres with z up. Sections are numbered from the
 base outward; section k (k = 1..p) has length ``arm_lengths[k-1]`` and joint k is its distal
 end, joint p the tip. One UWB tag sits on each joint, anchors are at known positions.
+
+The slew axis is vertical through ``base``. On real turntables the boom's pivot sits
+``pivot_offset`` metres from that axis, along the slew direction, and moves on a circle as
+the boom slews; with the default 0 the pivot is ``base`` itself, as in the paper.
 """
 import numpy as np
+
+from .plane import fit_slew
 
 __all__ = ['BoomModel']
 
@@ -29,9 +35,13 @@ class BoomModel:
     arm_lengths : array_like, shape (p,)
         Section lengths in metres, base outward; finite and > 0, p >= 1.
     base : array_like, shape (3,)
-        Base pivot (the first section's proximal joint) in the world frame, metres.
+        Base pivot (the first section's proximal joint) in the world frame, metres; with a
+        ``pivot_offset``, the point of the slew axis at the pivot's height.
     anchors : array_like, shape (m, 3)
         Known anchor positions in the world frame, metres; m >= 3.
+    pivot_offset : float
+        Horizontal distance from the slew axis to the pivot, metres, positive along the
+        slew direction. ``base`` is then the point of the slew axis at the pivot's height.
 
     Raises
     ------
@@ -39,7 +49,7 @@ class BoomModel:
         Naming the offending field and value.
     """
 
-    def __init__(self, arm_lengths, base, anchors):
+    def __init__(self, arm_lengths, base, anchors, pivot_offset=0.0):
         arm_lengths = _as_finite_array(arm_lengths, 'arm_lengths', 1)
         if arm_lengths.size < 1:
             raise ValueError('arm_lengths must hold at least one section, got []')
@@ -51,8 +61,15 @@ class BoomModel:
         anchors = _as_finite_array(anchors, 'anchors', 2)
         if anchors.shape[1] != 3 or anchors.shape[0] < 3:
             raise ValueError(f'anchors must have shape (m, 3) with m >= 3, got {anchors.shape}')
+        try:
+            pivot_offset = float(pivot_offset)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f'pivot_offset must be a number, got {pivot_offset!r}') from exc
+        if not np.isfinite(pivot_offset):
+            raise ValueError(f'pivot_offset must be finite, got {pivot_offset!r}')
         self.arm_lengths = arm_lengths
         self.base = base
+        self.pivot_offset = pivot_offset
         self.anchors = anchors
         for array in (self.arm_lengths, self.base, self.anchors):
             array.flags.writeable = False
@@ -73,9 +90,26 @@ class BoomModel:
         return float(self.arm_lengths.sum())
 
     def base_anchor(self, atol=1e-9):
-        """Index of the anchor that sits at the base pivot, or None."""
+        """Index of the anchor that sits at the base pivot, or None (also when it slews)."""
+        if self.pivot_offset != 0.0:
+            return None
         hits = np.flatnonzero(np.linalg.norm(self.anchors - self.base, axis=1) <= atol)
         return int(hits[0]) if hits.size else None
+
+    def pivot(self, slew):
+        """The boom's pivot for a slew (radians, shape (...)): shape (..., 3), metres."""
+        slew = np.asarray(slew, dtype=float)
+        return self.base + self.pivot_offset * np.stack(
+            [np.cos(slew), np.sin(slew), np.zeros_like(slew)], axis=-1)
+
+    def pivot_of(self, joints):
+        """The pivot of an estimated boom (p, 3), at the slew its joints point along."""
+        if self.pivot_offset == 0.0:
+            return self.base.copy()
+        joints = np.asarray(joints, dtype=float)
+        if np.linalg.norm(joints[:, :2] - self.base[:2], axis=1).max() <= 1e-9:
+            return self.pivot(0.0)          # straight up: no slew to read
+        return self.pivot(fit_slew(joints, self.base))
 
     def forward_kinematics(self, slew, pitches):
         """Joint positions of the boom.
@@ -90,16 +124,17 @@ class BoomModel:
         Returns
         -------
         joints : ndarray, shape (..., p, 3)
-            ``w_k = base + sum_{i<=k} L_i (cos phi_i cos theta, cos phi_i sin theta, sin phi_i)``.
+            ``w_k = pivot(theta) + sum_{i<=k} L_i (cos phi_i cos theta, cos phi_i sin theta,
+            sin phi_i)``.
         """
         slew = np.asarray(slew, dtype=float)
         pitches = np.asarray(pitches, dtype=float)
         if pitches.shape[-1] != self.n_sections:
             raise ValueError(f'pitches must end in p={self.n_sections}, got {pitches.shape}')
-        reach = self.arm_lengths * np.cos(pitches)
-        steps = np.stack([reach * np.cos(slew)[..., None], reach * np.sin(slew)[..., None],
-                          self.arm_lengths * np.sin(pitches)], axis=-1)
-        return self.base + np.cumsum(steps, axis=-2)
+        reach = self.pivot_offset + np.cumsum(self.arm_lengths * np.cos(pitches), axis=-1)
+        height = np.cumsum(self.arm_lengths * np.sin(pitches), axis=-1)
+        return self.base + np.stack([reach * np.cos(slew)[..., None],
+                                     reach * np.sin(slew)[..., None], height], axis=-1)
 
     def joint_jacobian(self, slew, pitches):
         """Derivatives of the joints with respect to the posture angles.
@@ -121,7 +156,7 @@ class BoomModel:
         p = self.n_sections
         along = np.array([np.cos(slew), np.sin(slew), 0.0])
         across = np.array([-np.sin(slew), np.cos(slew), 0.0])
-        reach = np.cumsum(self.arm_lengths * np.cos(pitches))
+        reach = self.pivot_offset + np.cumsum(self.arm_lengths * np.cos(pitches))
         # d/dpitch_i of section i's vector: L_i (-sin phi_i along + cos phi_i up).
         section = self.arm_lengths[:, None] * (-np.sin(pitches)[:, None] * along
                                                + np.cos(pitches)[:, None] * [0.0, 0.0, 1.0])
@@ -138,16 +173,21 @@ class BoomModel:
 
     def max_ranges(self):
         """Longest possible tag-anchor distances, shape (p, m): anchor to base plus reach."""
-        to_base = np.linalg.norm(self.anchors - self.base, axis=1)
+        to_base = np.linalg.norm(self.anchors - self.base, axis=1) + abs(self.pivot_offset)
         return np.cumsum(self.arm_lengths)[:, None] + to_base[None, :]
 
     def section_lengths(self, joints):
-        """Lengths ``||w_k - w_{k-1}||`` (w_0 = base) of an estimated boom, shape (..., p)."""
+        """Lengths ``||w_k - w_{k-1}||`` (w_0: the pivot) of an estimated boom, (..., p)."""
         joints = np.asarray(joints, dtype=float)
-        base = np.broadcast_to(self.base, joints[..., :1, :].shape)
+        if self.pivot_offset == 0.0:
+            base = np.broadcast_to(self.base, joints[..., :1, :].shape)
+        else:
+            flat = joints.reshape(-1, *joints.shape[-2:])
+            base = np.stack([self.pivot_of(j) for j in flat]).reshape(joints[..., :1, :].shape)
         chain = np.concatenate([base, joints], axis=-2)
         return np.linalg.norm(np.diff(chain, axis=-2), axis=-1)
 
     def __repr__(self):
+        offset = f', pivot_offset={self.pivot_offset}' if self.pivot_offset else ''
         return (f'BoomModel(arm_lengths={self.arm_lengths.tolist()}, base={self.base.tolist()}, '
-                f'anchors={self.anchors.tolist()})')
+                f'anchors={self.anchors.tolist()}{offset})')

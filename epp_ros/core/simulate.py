@@ -8,8 +8,8 @@ import numpy as np
 
 from .model import BoomModel
 
-__all__ = ['XIE3DIM', 'xie3dim', 'truck_pump', 'random_posture', 'RangeNoise',
-           'Trajectory', 'working_cycle']
+__all__ = ['XIE3DIM', 'xie3dim', 'truck_pump', 'random_posture', 'RangeNoise', 'AngleNoise',
+           'observe', 'Trajectory', 'working_cycle']
 
 #: The seed paper's authors' published test geometry ("xie3dim", repository
 #: daiyijue/EMBED-SRLS, file time-1.mat): anchor 0 is the base pivot; metres.
@@ -125,6 +125,68 @@ class RangeNoise:
         noisy = np.maximum(noisy, 0.0)
         noisy[rng.random(ranges.shape) < self.dropout] = np.nan
         return noisy, nlos
+
+
+@dataclass
+class AngleNoise:
+    """Errors of the paper's TPSM angle sensors.
+
+    The slew encoder reads the slew plus a turntable error uniform in
+    ``[-slew_error, slew_error]`` (the paper: +-0.5 deg); each inclinometer reads its
+    section's pitch plus Gaussian noise of ``pitch_sigma`` (the paper gives no value).
+    """
+
+    slew_error: float = np.radians(0.5)     #: rad, bound of the uniform turntable error
+    pitch_sigma: float = np.radians(0.5)    #: rad
+
+    @property
+    def slew_sigma(self):
+        """Standard deviation of the slew error, radians."""
+        return self.slew_error / np.sqrt(3.0)
+
+    def apply(self, slew, pitches, rng):
+        """Measured (slew, pitches) of a true posture."""
+        pitches = np.asarray(pitches, dtype=float)
+        return (float(slew + rng.uniform(-self.slew_error, self.slew_error)),
+                pitches + self.pitch_sigma * rng.standard_normal(pitches.shape))
+
+
+def observe(model, slew, pitches, rng, range_noise, tag_noise=None, angle_noise=None):
+    """One simulated frame of a posture, as keyword arguments of ``PostureEstimator.update``.
+
+    Parameters
+    ----------
+    model : BoomModel
+    slew : float
+    pitches : ndarray, shape (p,)
+    rng : numpy.random.Generator
+    range_noise : RangeNoise
+        Of the tag-anchor ranges.
+    tag_noise : RangeNoise, optional
+        Of tag-tag ranges between neighbouring joints (both directions); none without it.
+    angle_noise : AngleNoise, optional
+        Of an inclinometer on each section and a slew encoder; none without it.
+
+    Returns
+    -------
+    frame : dict
+        ``ranges`` (p, m) and, when simulated, ``tag_ranges`` (p, p), ``pitches`` (p,),
+        ``slew``.
+    nlos : ndarray of bool, shape (p, m)
+        The tag-anchor links given an NLOS excess.
+    """
+    joints = model.forward_kinematics(slew, pitches)
+    ranges, nlos = range_noise.apply(model.ranges(joints), rng)
+    frame = {'ranges': ranges}
+    if tag_noise is not None:
+        p = model.n_sections
+        neighbours = np.abs(np.subtract.outer(np.arange(p), np.arange(p))) == 1
+        distances = np.linalg.norm(joints[:, None] - joints[None, :], axis=-1)
+        tag_ranges, _ = tag_noise.apply(distances, rng)
+        frame['tag_ranges'] = np.where(neighbours, tag_ranges, np.nan)
+    if angle_noise is not None:
+        frame['slew'], frame['pitches'] = angle_noise.apply(slew, pitches, rng)
+    return frame, nlos
 
 
 @dataclass

@@ -110,7 +110,7 @@ class UwbEmulator(Node):
                 data = corrupt(line, self.rng) + b'\r\n'
             self.outputs[channel].write(data)
         if self.truth is not None:
-            self.truth.publish(posture_message(self.model.base, joints, stamp,
+            self.truth.publish(posture_message(self.model.pivot_of(joints), joints, stamp,
                                                self.config.frame_id))
         self.cycle += 1
 

@@ -28,7 +28,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
-from epp_ros.core import METHODS, PostureEstimator
+from epp_ros.core import RANGE_METHODS, PostureEstimator
 from epp_ros.health import Thresholds, assess, grade
 from epp_ros.nodes.common import (POSTURE_QOS, RANGES_INPUT_QOS, StartupError, declare,
                                   declare_pump_parameters, posture_message, posture_markers,
@@ -46,9 +46,10 @@ class PostureEstimatorNode(Node):
     def __init__(self):
         super().__init__(self.node_name)
         self.config = declare_pump_parameters(self)
-        method = declare(self, 'method', 'cepp', f'Estimator: {", ".join(METHODS)}.')
-        if method not in METHODS:
-            raise StartupError(f'method: {method!r} is not one of {list(METHODS)}')
+        method = declare(self, 'method', 'cepp', f'Estimator: {", ".join(RANGE_METHODS)}.')
+        if method not in RANGE_METHODS:
+            raise StartupError(f'method: {method!r} is not one of {RANGE_METHODS} (the node '
+                               'receives UWB ranges only)')
         self.reset_after = declare(self, 'reset_after_failures', 10,
                                    'Unsolvable frames in a row before a cold start.')
         self.thresholds = Thresholds(
@@ -61,7 +62,10 @@ class PostureEstimatorNode(Node):
         if self.reset_after < 1:
             raise StartupError('reset_after_failures: must be >= 1')
         self.model = self.config.model()
-        self.estimator = PostureEstimator(self.model, method)
+        try:
+            self.estimator = PostureEstimator(self.model, method)
+        except ImportError as exc:
+            raise StartupError(f'method: {exc}') from None
         self.lengths = self.model.arm_lengths
         self.posture = self.create_publisher(PoseArray, 'arm_posture', POSTURE_QOS)
         self.markers = self.create_publisher(MarkerArray, 'arm_posture/markers', POSTURE_QOS)
@@ -119,9 +123,10 @@ class PostureEstimatorNode(Node):
         self.counts['published'] += 1
         frame_id = message.header.frame_id or self.config.frame_id
         stamp = message.header.stamp                 # the frame's, exactly
-        self.posture.publish(posture_message(self.model.base, joints, stamp, frame_id))
+        pivot = self.model.pivot_of(joints)
+        self.posture.publish(posture_message(pivot, joints, stamp, frame_id))
         if self.publish_markers:
-            self.markers.publish(posture_markers(self.model.base, joints, stamp, frame_id))
+            self.markers.publish(posture_markers(pivot, joints, stamp, frame_id))
 
     def publish_diagnostics(self):
         diagnostics = self.estimator.last_diagnostics

@@ -21,7 +21,7 @@ import numpy as np
 
 from epp_ros import bags
 from epp_ros.config import ConfigError, load_pump_config
-from epp_ros.core import METHODS
+from epp_ros.core import RANGE_METHODS
 
 DEFAULT_RECORD = [bags.RANGES, bags.POSTURE, bags.TRUTH, '/diagnostics']
 
@@ -55,9 +55,12 @@ def parse_args(argv):
     play.add_argument('--fast', action='store_true',
                       help='as fast as the subscribers keep up (reliable, nothing lost)')
     play.add_argument('--topics', nargs='+')
+    play.add_argument('--subscribers', type=int, metavar='N',
+                      help='wait up to 10 s until every topic has N subscribers (without: '
+                           'up to 2 s for one)')
     evaluate = commands.add_parser('eval', help='run an estimator offline over a bag')
     evaluate.add_argument('bag')
-    evaluate.add_argument('--method', choices=list(METHODS), default='cepp')
+    evaluate.add_argument('--method', choices=RANGE_METHODS, default='cepp')
     evaluate.add_argument('--config')
     evaluate.add_argument('--out', help='write a copy with /arm_posture added')
     evaluate.add_argument('--plot', help='PNG of the error over time')
@@ -148,9 +151,10 @@ def run_play(args):
                                                       _rclpy_qos(qos, args.fast))
     try:
         # Give subscribers a moment to match, as ros2 bag play does with its delay.
-        deadline = time.monotonic() + 2.0
+        wanted, patience = (1, 2.0) if args.subscribers is None else (args.subscribers, 10.0)
+        deadline = time.monotonic() + patience
         while time.monotonic() < deadline and not all(
-                p.get_subscription_count() for p in publishers.values()):
+                p.get_subscription_count() >= wanted for p in publishers.values()):
             rclpy.spin_once(node, timeout_sec=0.05)
         while True:
             start, first = time.monotonic(), messages[0][2]

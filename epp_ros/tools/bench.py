@@ -10,6 +10,10 @@ Suites:
             sustained with no frame lost and none answered later than 100 ms.
   bags      A synthesised 60 s bag: `epp_bag eval` frames/s, and `epp_bag play --fast`
             through the live estimator node, frames/s and frames lost.
+  paper     The seed paper's experiments side by side with its figures, every method
+            including the baselines (SDP needs cvxpy): RMSE vs noise with the CRLB,
+            Table 1, Table 3 (NLOS), xie3dim, tracking, and the chain's targets. Writes
+            paper.md, paper.json and PNG plots into --out. Not part of the default run.
 Every table ends with the commit it was measured on. ``--option KEY=VALUE`` passes an
 option to the estimators (e.g. ``anchor_weight=inf``, ``slew_iterations=0``).
 """
@@ -26,10 +30,16 @@ from epp_ros.core import METHODS, PostureEstimator
 from epp_ros.core.bounds import crlb
 from epp_ros.core.chain import angles_from_joints
 from epp_ros.core.estimators import accepted_options
+from epp_ros.core.measurements import Measurements, SensorNoise
 from epp_ros.core.metrics import frame_rmse, pooled_rmse
-from epp_ros.core.simulate import XIE3DIM, RangeNoise, truck_pump, working_cycle, xie3dim
+from epp_ros.core.simulate import (XIE3DIM, AngleNoise, RangeNoise, observe, truck_pump,
+                                   working_cycle, xie3dim)
 
-PUBLISHED_XIE3DIM = {'cepp': ('EMBED/CEPP', XIE3DIM['published_rmse_m']['EMBED_CEPP'])}
+PUBLISHED_XIE3DIM = {'cepp': ('EMBED/CEPP', XIE3DIM['published_rmse_m']['EMBED_CEPP']),
+                     'srls': ('SR-LS 3-D', XIE3DIM['published_rmse_m']['SR-LS_3D']),
+                     'sdp': ('SDP 3-D', XIE3DIM['published_rmse_m']['SDP_3D'])}
+#: The estimators of the runtime suites by default; the baselines are there on request.
+DEFAULT_METHODS = ['epp1', 'epp2', 'cepp', 'chain']
 
 
 def parse_option(text):
@@ -54,12 +64,35 @@ def commit():
         return 'unknown'
 
 
-def run_frames(estimator, frames, truths):
-    """Feed frames to an estimator; per-frame RMSE, arm-length error and wall time."""
+def method_inputs(method, frame, fused=False):
+    """What a method is given of a simulated frame (a dict of ``update`` keywords).
+
+    Methods that use ranges get the tag-anchor ranges alone, unless ``fused``; the others
+    (TPSM) their angle sensors.
+    """
+    if not isinstance(frame, dict):
+        frame = {'ranges': frame}
+    inputs = METHODS[method].inputs
+    if 'ranges' in inputs and not fused:
+        inputs = ('ranges',)
+    return {'ranges': frame['ranges'] if 'ranges' in inputs else
+            np.full_like(frame['ranges'], np.nan),
+            **{key: value for key, value in frame.items() if key in inputs and key != 'ranges'}}
+
+
+def run_frames(estimator, frames, truths, cold=False, fused=False):
+    """Feed frames to an estimator; per-frame RMSE, arm-length error and wall time.
+
+    ``frames`` are range arrays (p, m) or dicts of ``update`` keywords, passed through
+    :func:`method_inputs`. ``cold``: forget the warm start before each frame.
+    """
     rmses, length_errors, times = [], [], []
-    for ranges, truth in zip(frames, truths):
+    for frame, truth in zip(frames, truths):
+        frame = method_inputs(estimator.method, frame, fused)
+        if cold:
+            estimator.reset()
         start = time.perf_counter()
-        estimate = estimator.update(ranges)
+        estimate = estimator.update(**frame)
         times.append(time.perf_counter() - start)
         rmses.append(float(frame_rmse(estimate, truth)))
         length_errors.append(estimator.last_diagnostics['arm_length_error'])
@@ -79,12 +112,9 @@ def xie3dim_suite(methods, trials, seed, options):
     frames = [RangeNoise(sigma=1.0).apply(model.ranges(truth), rng)[0] for _ in range(trials)]
     rows = []
     for method in methods:
-        results = [run_frames(PostureEstimator(model, method,
-                                               **method_options(method, options, 1.0)),
-                              [f], [truth]) for f in frames]
-        rmses = np.concatenate([r[0] for r in results])
-        lengths = np.concatenate([r[1] for r in results])
-        times = np.concatenate([r[2] for r in results])
+        rmses, lengths, times = run_frames(
+            PostureEstimator(model, method, **method_options(method, options, 1.0)), frames,
+            [truth] * len(frames), cold=True)
         label, published = PUBLISHED_XIE3DIM.get(method, ('', None))
         rows.append({'method': method, 'rmse_m': pooled_rmse(rmses),
                      'arm_length_error_m': lengths.mean(axis=0).tolist(),
@@ -99,25 +129,39 @@ def xie3dim_suite(methods, trials, seed, options):
 
 
 def tracking_suite(methods, seconds, seed, options):
+    """A working cycle at 10 Hz, warm-started; with tpsm asked for, also chain+angles.
+
+    The inclinometers and the slew encoder are simulated as TPSM's (``AngleNoise``); the
+    range methods get the ranges alone, tpsm the angles alone, and ``chain+angles`` both,
+    scored against the bound of everything it fuses (the uniform slew error taken as
+    Gaussian of the same variance).
+    """
     model = truck_pump()
     trajectory = working_cycle(model, seconds, 10.0, rng=np.random.default_rng(seed))
     rng = np.random.default_rng(seed + 1)
-    noise = RangeNoise(sigma=0.1, dropout=0.05)
-    frames = [noise.apply(model.ranges(j), rng)[0] for j in trajectory.joints]
+    noise, angle_noise = RangeNoise(sigma=0.1, dropout=0.05), AngleNoise()
+    frames = [observe(model, slew, pitches, rng, noise, angle_noise=angle_noise)[0]
+              for slew, pitches in zip(trajectory.slew, trajectory.pitches)]
+    angles = {'pitch_sigma': angle_noise.pitch_sigma, 'slew_sigma': angle_noise.slew_sigma}
+    variants = [(method, method, False, {}) for method in methods]
+    if 'chain' in methods and 'tpsm' in methods:
+        variants.append(('chain+angles', 'chain', True, angles))
+    fused_noise = SensorNoise(0.1, 0.1, **angles)
+    bounds = {False: [], True: []}
+    for slew, pitches, frame in zip(trajectory.slew, trajectory.pitches, frames):
+        bounds[False].append(crlb(model, slew, pitches, 0.1, np.isfinite(frame['ranges'])).rmse)
+        bounds[True].append(crlb(model, slew, pitches, fused_noise,
+                                 Measurements.clean(model, **frame)[0]).rmse)
     rows = []
-    for method in methods:
-        rmses, lengths, times = run_frames(
-            PostureEstimator(model, method, **method_options(method, options, 0.1)), frames,
-            trajectory.joints)
-        rows.append({'method': method, 'rmse_m': pooled_rmse(rmses),
+    for label, method, fused, extra in variants:
+        estimator = PostureEstimator(model, method,
+                                     **method_options(method, dict(options, **extra), 0.1))
+        rmses, lengths, times = run_frames(estimator, frames, trajectory.joints, fused=fused)
+        rows.append({'method': label, 'rmse_m': pooled_rmse(rmses),
                      'arm_length_error_m': lengths.mean(axis=0).tolist(),
                      'ms_median': 1e3 * float(np.median(times)),
-                     'ms_p99': 1e3 * float(np.percentile(times, 99)), 'published': None})
-    bounds = [crlb(model, slew, pitches, 0.1, np.isfinite(f)).rmse
-              for slew, pitches, f in zip(trajectory.slew, trajectory.pitches, frames)]
-    bound = pooled_rmse(bounds)
-    for row in rows:
-        row['crlb_m'] = bound
+                     'ms_p99': 1e3 * float(np.percentile(times, 99)), 'published': None,
+                     'crlb_m': pooled_rmse(bounds[fused])})
     return {'suite': 'tracking', 'frames': len(frames), 'sigma_m': 0.1, 'dropout': 0.05,
             'rows': rows}
 
@@ -199,7 +243,12 @@ def markdown(report):
                      f'{row["rmse_m"] / row["crlb_m"]:.2f} | '
                      f'{max(row["arm_length_error_m"]):.1e} | {row["ms_median"]:.2f} | '
                      f'{row["ms_p99"]:.2f} | {row["published"] or "-"} |')
-    lines += ['', f'Cramér–Rao bound of the chain model (RMSE): {report["rows"][0]["crlb_m"]:.3f} m.']
+    lines += ['', 'Cramér–Rao bound of the chain model from the ranges (RMSE): '
+              f'{report["rows"][0]["crlb_m"]:.3f} m.']
+    fused = [row for row in report['rows'] if row['method'] == 'chain+angles']
+    if fused:
+        lines += [f'chain+angles also fuses the inclinometers and slew encoder that tpsm uses '
+                  f'alone; its bound: {fused[0]["crlb_m"]:.3f} m.']
     if report['suite'] == 'xie3dim':
         published = ', '.join(f'{name} {value}' for name, value
                               in XIE3DIM['published_rmse_m'].items())
@@ -212,8 +261,10 @@ def main(argv=None):
                                      epilog=__doc__.split('\n', 1)[1],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('suites', nargs='*', metavar='suite',
-                        help='xie3dim, tracking, latency, bags (default: all)')
-    parser.add_argument('--methods', nargs='+', choices=list(METHODS), default=list(METHODS))
+                        help='xie3dim, tracking, latency, bags (default: these four), '
+                             'paper')
+    parser.add_argument('--methods', nargs='+', choices=list(METHODS), default=DEFAULT_METHODS,
+                        help=f'default: {" ".join(DEFAULT_METHODS)} (paper: all)')
     parser.add_argument('--trials', type=int, default=200, help='xie3dim trials')
     parser.add_argument('--seconds', type=float, default=60.0, help='tracking duration')
     parser.add_argument('--latency-seconds', type=float, default=5.0,
@@ -222,9 +273,14 @@ def main(argv=None):
     parser.add_argument('--option', type=parse_option, action='append', default=[],
                         metavar='KEY=VALUE', help='estimator option, repeatable')
     parser.add_argument('--json', action='store_true', help='also print the reports as JSON')
+    parser.add_argument('--runs', type=int, default=3000,
+                        help='paper: Monte-Carlo runs per point (default 3000, as the paper)')
+    parser.add_argument('--out', type=Path, default=Path('epp_bench_paper'),
+                        help='paper: folder for paper.md, paper.json and the plots')
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
-    known = ['xie3dim', 'tracking', 'latency', 'bags']
-    suites = args.suites or known
+    default = ['xie3dim', 'tracking', 'latency', 'bags']
+    known = default + ['paper']
+    suites = args.suites or default
     unknown = sorted(set(suites) - set(known))
     if unknown:
         parser.error(f'unknown suite(s) {unknown}; choose from {", ".join(known)}')
@@ -232,8 +288,19 @@ def main(argv=None):
     if options and {'latency', 'bags'} & set(suites):
         parser.error('--option applies to the in-process suites (xie3dim, tracking); the '
                      'node suites run posture_estimator with its parameters')
+    if 'tpsm' in args.methods and set(suites) - {'tracking', 'paper'}:
+        parser.error('tpsm needs angle sensors, which only the tracking and paper suites '
+                     'simulate')
+    if args.runs < 1:
+        parser.error('--runs must be >= 1')
     reports = []
     for suite in suites:
+        if suite == 'paper':
+            from epp_ros.tools import paper
+            methods = args.methods if '--methods' in (argv or sys.argv) else None
+            print(paper.run(args.out, args.runs, args.seed, methods, args.seconds), flush=True)
+            print(f'written to {args.out}/')
+            continue
         if suite == 'xie3dim':
             reports.append(xie3dim_suite(args.methods, args.trials, args.seed, options))
         elif suite == 'tracking':

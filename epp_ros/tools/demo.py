@@ -24,7 +24,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from epp_ros.config import ConfigError, default_config_path, load_pump_config
-from epp_ros.core import METHODS
+from epp_ros.core import RANGE_METHODS
 from epp_ros.core.metrics import frame_rmse, joint_errors, pooled_rmse
 from epp_ros.nodes.common import POSTURE_QOS, RANGES_QOS, to_seconds
 
@@ -33,7 +33,7 @@ LEVEL_NAMES = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}
 
 def parse_args(argv):
     parser = argparse.ArgumentParser(prog='epp_demo', description=__doc__.splitlines()[0])
-    parser.add_argument('--method', choices=list(METHODS), default='cepp')
+    parser.add_argument('--method', choices=RANGE_METHODS, default='cepp')
     parser.add_argument('--duration', type=float, default=None,
                         help='seconds to run (default: until Ctrl-C)')
     parser.add_argument('--rate', type=float, default=10.0, help='ranging cycles per second')

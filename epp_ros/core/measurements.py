@@ -1,0 +1,222 @@
+"""One frame of what is measured about the boom, and how each measurement depends on the posture.
+
+A frame holds the tag-anchor ranges (p, m) and, optionally, tag-tag ranges (p, p),
+inclinometer pitches (p,) and a slew encoder reading, each with its own standard deviation
+(:class:`SensorNoise`). :class:`Residuals` stacks them, scaled by their sigmas, with the
+analytic Jacobian with respect to ``psi = (slew, pitch_1..pitch_p)``: the chain estimator's
+least squares and the Cramér–Rao bound (``core.bounds``) share it.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ['SensorNoise', 'Measurements', 'Residuals', 'wrap_angle']
+
+INPUTS = ('ranges', 'tag_ranges', 'pitches', 'slew')
+
+
+def wrap_angle(angle):
+    """Angles (radians, any shape) wrapped into [-pi, pi)."""
+    return np.mod(np.asarray(angle, dtype=float) + np.pi, 2 * np.pi) - np.pi
+
+
+@dataclass(frozen=True)
+class SensorNoise:
+    """Standard deviations of the measurements (Gaussian, independent)."""
+
+    range_sigma: float = 0.1                #: m, tag-anchor ranges; a scalar or (p, m)
+    tag_sigma: float = 0.1                  #: m, tag-tag ranges
+    pitch_sigma: float = np.radians(0.5)    #: rad, inclinometers
+    slew_sigma: float = np.radians(0.5)     #: rad, slew encoder
+
+    def __post_init__(self):
+        for name in ('range_sigma', 'tag_sigma', 'pitch_sigma', 'slew_sigma'):
+            value = np.asarray(getattr(self, name), dtype=float)
+            if not np.all(np.isfinite(value)) or np.any(value <= 0):
+                raise ValueError(f'{name} must be finite and > 0, got {getattr(self, name)!r}')
+
+
+def _clean(values, shape, field, limit=None):
+    """Float array of ``shape``; non-finite or negative (when ``limit``) entries -> NaN."""
+    try:
+        array = np.array(values, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'{field} must be a numeric array of shape {shape}') from exc
+    if array.shape != shape:
+        raise ValueError(f'{field} must have shape {shape}, got {array.shape}')
+    array[~np.isfinite(array)] = np.nan
+    too_long = np.zeros(shape, bool)
+    if limit is not None:
+        with np.errstate(invalid='ignore'):
+            array[array < 0] = np.nan
+            too_long = array > limit
+        array[too_long] = np.nan
+    return array, int(too_long.sum())
+
+
+@dataclass(frozen=True)
+class Measurements:
+    """One frame of measurements; NaN marks what was not measured.
+
+    Attributes
+    ----------
+    ranges : ndarray, shape (p, m)
+        Tag-anchor distances, metres; row k the tag on joint k+1, column j anchor j.
+    tag_ranges : ndarray, shape (p, p)
+        Tag-tag distances, metres; every finite off-diagonal entry is one measurement
+        (both ``[k, l]`` and ``[l, k]`` when both directions were ranged).
+    pitches : ndarray, shape (p,)
+        Inclinometer pitch of each section above the horizontal, radians.
+    slew : float
+        Slew encoder angle about z from the world x-axis, radians.
+    """
+
+    ranges: np.ndarray
+    tag_ranges: np.ndarray
+    pitches: np.ndarray
+    slew: float
+
+    @classmethod
+    def clean(cls, model, ranges, tag_ranges=None, pitches=None, slew=None):
+        """Validate one frame for ``model``; unusable entries become NaN.
+
+        NaN, inf and negative distances count as missing, and so do distances longer than
+        twice the longest the geometry allows plus 10 m: no noise or NLOS excess explains
+        them.
+
+        Returns
+        -------
+        measurements : Measurements
+        implausible : int
+            How many finite, non-negative distances were dropped as too long.
+
+        Raises
+        ------
+        ValueError
+            On a wrong shape or a non-numeric value, naming the input.
+        """
+        p, m = model.n_sections, model.n_anchors
+        ranges, too_long = _clean(ranges, (p, m), 'ranges', 2.0 * model.max_ranges() + 10.0)
+        if tag_ranges is None:
+            tag_ranges = np.full((p, p), np.nan)
+        else:
+            reach = np.cumsum(model.arm_lengths)
+            limit = 2.0 * np.abs(reach[:, None] - reach[None, :]) + 10.0
+            tag_ranges, tag_too_long = _clean(tag_ranges, (p, p), 'tag_ranges', limit)
+            tag_ranges[np.diag_indices(p)] = np.nan
+            too_long += tag_too_long
+        pitches = np.full(p, np.nan) if pitches is None else \
+            _clean(pitches, (p,), 'pitches')[0]
+        slew = np.nan if slew is None else float(_clean(slew, (), 'slew')[0])
+        return cls(ranges, tag_ranges, pitches, slew), too_long
+
+    @classmethod
+    def ranges_only(cls, ranges):
+        """A frame of tag-anchor ranges (p, m) alone (taken as they are)."""
+        ranges = np.asarray(ranges, dtype=float)
+        p = ranges.shape[0]
+        return cls(ranges, np.full((p, p), np.nan), np.full(p, np.nan), np.nan)
+
+    def present(self):
+        """Names of the inputs (``INPUTS``) with at least one measured value."""
+        return [name for name in INPUTS if np.isfinite(getattr(self, name)).any()]
+
+    def count(self):
+        """Number of scalar measurements in the frame."""
+        return int(sum(np.isfinite(getattr(self, name)).sum() for name in INPUTS))
+
+    def with_ranges(self, ranges, tag_ranges=None):
+        """The same frame with other ranges (e.g. with links removed)."""
+        return Measurements(ranges, self.tag_ranges if tag_ranges is None else tag_ranges,
+                            self.pitches, self.slew)
+
+
+class Residuals:
+    """Scaled residuals ``(predicted - measured) / sigma`` of a frame and their Jacobian.
+
+    Rows are stacked as: tag-anchor links (row-major over the measured (k, j)), tag-tag
+    links, inclinometers, the slew encoder. Angle residuals are wrapped into [-pi, pi).
+
+    Parameters
+    ----------
+    model : BoomModel
+    measurements : Measurements
+    noise : SensorNoise
+    """
+
+    def __init__(self, model, measurements, noise):
+        self.model = model
+        self.noise = noise
+        p = model.n_sections
+        self.link_mask = np.isfinite(measurements.ranges)
+        self.tag_mask = np.isfinite(measurements.tag_ranges)
+        self.pitch_mask = np.isfinite(measurements.pitches)
+        self.slew_measured = bool(np.isfinite(measurements.slew))
+        self._tag, self._anchor = np.nonzero(self.link_mask)
+        self._near, self._far = np.nonzero(self.tag_mask)
+        self._pitch = np.flatnonzero(self.pitch_mask)
+        self.n_ranged = self._tag.size + self._near.size
+        self.measured = np.concatenate([
+            measurements.ranges[self.link_mask], measurements.tag_ranges[self.tag_mask],
+            measurements.pitches[self.pitch_mask],
+            [measurements.slew] if self.slew_measured else []])
+        range_sigma = np.broadcast_to(np.asarray(noise.range_sigma, dtype=float),
+                                      self.link_mask.shape)
+        self.sigma = np.concatenate([
+            range_sigma[self.link_mask],
+            np.full(self._near.size, float(noise.tag_sigma)),
+            np.full(self._pitch.size, float(noise.pitch_sigma)),
+            [float(noise.slew_sigma)] if self.slew_measured else []])
+        n_angles = self._pitch.size + int(self.slew_measured)
+        self._angle_rows = np.zeros((n_angles, p + 1))
+        self._angle_rows[np.arange(self._pitch.size), 1 + self._pitch] = 1.0
+        if self.slew_measured:
+            self._angle_rows[-1, 0] = 1.0
+        self._angle_index = np.r_[1 + self._pitch, [0] if self.slew_measured else []]
+        self._angle_index = self._angle_index.astype(int)
+
+    @property
+    def size(self):
+        """Number of residuals."""
+        return self.measured.size
+
+    def ranged(self):
+        """Boolean (size,): which rows are ranges (the ones NLOS can lengthen)."""
+        return np.arange(self.size) < self.n_ranged
+
+    def predict(self, psi):
+        """Predicted measurements (size,) and the geometry the Jacobian needs."""
+        joints = self.model.forward_kinematics(psi[0], psi[1:])
+        offsets = np.concatenate([joints[self._tag] - self.model.anchors[self._anchor],
+                                  joints[self._near] - joints[self._far]])
+        distances = np.linalg.norm(offsets, axis=1)
+        predicted = np.concatenate([distances, psi[self._angle_index]])
+        return predicted, (offsets, distances)
+
+    def residuals(self, psi):
+        """Scaled residuals (size,) at ``psi`` (p + 1,), and the geometry for :meth:`jacobian`."""
+        predicted, geometry = self.predict(psi)
+        difference = predicted - self.measured
+        n = self.n_ranged
+        difference[n:] = wrap_angle(difference[n:])
+        return difference / self.sigma, geometry
+
+    def jacobian(self, psi, geometry=None):
+        """Jacobian of the scaled residuals, shape (size, p + 1)."""
+        if geometry is None:
+            geometry = self.predict(psi)[1]
+        offsets, distances = geometry
+        units = offsets / np.maximum(distances, 1e-12)[:, None]
+        joint_jacobian = self.model.joint_jacobian(psi[0], psi[1:])
+        moved = np.concatenate([joint_jacobian[self._tag],
+                                joint_jacobian[self._near] - joint_jacobian[self._far]])
+        rows = np.concatenate([np.einsum('nc,ncq->nq', units, moved), self._angle_rows])
+        return rows / self.sigma[:, None]
+
+    def link_flags(self, rows):
+        """Split a boolean over the ranged rows into (p, m) links and (p, p) tag links."""
+        links = np.zeros_like(self.link_mask)
+        tag_links = np.zeros_like(self.tag_mask)
+        links[self._tag, self._anchor] = rows[:self._tag.size]
+        tag_links[self._near, self._far] = rows[self._tag.size:self.n_ranged]
+        return links, tag_links
