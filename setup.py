@@ -15,6 +15,8 @@ setup(
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'pyserial', 'PyYAML'],
+    # epp_bench paper: the SDP baseline and the plots; never needed at runtime.
+    extras_require={'bench': ['cvxpy', 'matplotlib']},
     zip_safe=True,
     maintainer='epp_ros developers',
     maintainer_email='dev@epp-ros.invalid',

@@ -49,3 +49,30 @@ def test_bench_option_parsing():
     assert bench.parse_option('tol=1e-9') == ('tol', 1e-9)
     with pytest.raises(argparse.ArgumentTypeError):
         bench.parse_option('novalue')
+
+
+def test_bench_paper_writes_tables_json_and_plots(tmp_path, capsys):
+    out = tmp_path / 'paper'
+    assert bench.main(['paper', '--runs', '2', '--seconds', '3', '--out', str(out)]) == 0
+    text = (out / 'paper.md').read_text()
+    assert text == capsys.readouterr().out.split('written to')[0].rstrip('\n') + '\n'
+    # The paper's published figures stand next to ours, and the commit is named.
+    for published in ('(0.286)', '(1.639)', '(2.533)', '(4.765)', '0.947 (EMBED/CEPP)'):
+        assert published in text
+    assert 'commit ' in text and 'chain+angles' in text
+    report = json.loads((out / 'paper.json').read_text())
+    assert set(report['reports']) == {'sweep_eta', 'sweep_sigma', 'nlos', 'xie3dim',
+                                      'tracking', 'targets'}
+    sweep = report['reports']['sweep_sigma']
+    assert [row['sigma'] for row in sweep['rows']] == [0.1, 0.2, 0.5, 1.0, 2.0]
+    assert set(sweep['rows'][0]['methods']) == {'sdp', 'srls', 'epp1', 'epp2', 'cepp', 'chain'}
+    assert set(report['reports']['nlos']['methods']) == {'sdp', 'srls', 'tpsm', 'epp2', 'cepp',
+                                                         'chain'}
+    assert len(report['reports']['targets']['rows']) == 18
+    for name in ('rmse_vs_eta.png', 'rmse_vs_sigma.png'):
+        assert (out / name).read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+
+
+def test_bench_refuses_tpsm_where_no_angles_are_simulated():
+    with pytest.raises(SystemExit):
+        bench.main(['xie3dim', '--methods', 'tpsm'])
