@@ -156,6 +156,11 @@ def run_play(args):
         while time.monotonic() < deadline and not all(
                 p.get_subscription_count() >= wanted for p in publishers.values()):
             rclpy.spin_once(node, timeout_sec=0.05)
+        # Our side has matched; give the subscribers' side a moment to match us too, or the
+        # first messages can miss a reader that has not yet discovered this writer.
+        settle = time.monotonic() + 0.5
+        while time.monotonic() < settle:
+            rclpy.spin_once(node, timeout_sec=0.05)
         while True:
             start, first = time.monotonic(), messages[0][2]
             for topic, _, t_ns, raw, _ in messages:
