@@ -14,15 +14,7 @@ import numpy as np
 
 from .measurements import Measurements, Residuals, SensorNoise
 
-__all__ = ['range_jacobian', 'fisher_information', 'Bound', 'crlb']
-
-
-def range_jacobian(model, slew, pitches):
-    """Derivatives of every tag-anchor range with respect to psi, shape (p, m, p + 1)."""
-    joints = model.forward_kinematics(slew, pitches)
-    offset = joints[:, None, :] - model.anchors[None, :, :]
-    unit = offset / np.linalg.norm(offset, axis=-1, keepdims=True)
-    return np.einsum('kjc,kcq->kjq', unit, model.joint_jacobian(slew, pitches))
+__all__ = ['fisher_information', 'Bound', 'crlb', 'bound_from_information']
 
 
 def fisher_information(model, slew, pitches, sigma, measured=None):
@@ -70,7 +62,12 @@ def crlb(model, slew, pitches, sigma, measured=None):
     Bound
         Infinite entries when the links do not determine the posture.
     """
-    information = fisher_information(model, slew, pitches, sigma, measured)
+    return bound_from_information(model, slew, pitches,
+                                  fisher_information(model, slew, pitches, sigma, measured))
+
+
+def bound_from_information(model, slew, pitches, information):
+    """The :class:`Bound` at a posture from the Fisher information (p + 1, p + 1) of psi."""
     try:
         covariance = np.linalg.inv(information)
         if not np.all(np.isfinite(covariance)) or np.linalg.cond(information) > 1e14:

@@ -22,7 +22,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .bounds import crlb
+from .bounds import bound_from_information
 from .measurements import Residuals, SensorNoise, wrap_angle
 from .plane import fit_slew, to_plane
 
@@ -166,8 +166,10 @@ class ChainMethod:
         flagged = self._flag(psi, residuals)
         iterations = 0
         for _ in range(rounds):
+            if not flagged.any():
+                break
             kept = self._without(measurements, residuals, flagged)
-            if not flagged.any() or not self.enough_information(kept):
+            if not self.enough_information(kept):
                 break
             psi, _, used = self.fit(psi, Residuals(self.model, kept, residuals.noise))
             iterations += used
@@ -248,8 +250,8 @@ class ChainMethod:
         self._angles = psi
         joints = self.model.forward_kinematics(psi[0], psi[1:])
         nlos, nlos_tags = residuals.link_flags(flagged)
-        bound = crlb(self.model, psi[0], psi[1:], noise,
-                     self._without(measurements, residuals, flagged))
+        kept_rows = residuals.jacobian(psi)[~flagged]       # the links that determine psi
+        bound = bound_from_information(self.model, psi[0], psi[1:], kept_rows.T @ kept_rows)
         info = {'iterations': total_iterations, 'converged': True, 'slew': float(psi[0]),
                 'pitches': psi[1:].copy(), 'nlos_links': nlos, 'nlos_tag_links': nlos_tags,
                 'predicted_rmse': bound.rmse, 'joint_std': bound.joint_std}

@@ -18,8 +18,8 @@ import numpy as np
 
 from .baselines import SDPMethod, SRLSMethod, TPSMMethod
 from .chain import ChainMethod
-from .measurements import Measurements
 from .edm import align_to_known, squared_distances
+from .measurements import Measurements, plausible_limits
 from .multilateration import intersect_spheres, srls
 from .nedm import nearest_edm
 from .plane import fit_slew, from_plane, project_ranges, to_plane
@@ -324,6 +324,7 @@ class PostureEstimator:
         self.model = model
         self.method = method
         self._solver = METHODS[method](model, **options)
+        self._limits = plausible_limits(model)
         self._previous = None
         self.last_diagnostics = {}
 
@@ -369,7 +370,7 @@ class PostureEstimator:
         start = time.perf_counter()
         p, m = self.model.n_sections, self.model.n_anchors
         measurements, implausible = Measurements.clean(self.model, ranges, tag_ranges,
-                                                       pitches, slew)
+                                                       pitches, slew, self._limits)
         valid = np.isfinite(measurements.ranges)
         diagnostics = {'method': self.method, 'missing_links': int(p * m - valid.sum()),
                        'implausible_links': implausible, 'cold_start': self._previous is None,

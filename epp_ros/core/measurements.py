@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ['SensorNoise', 'Measurements', 'Residuals', 'wrap_angle']
+__all__ = ['SensorNoise', 'Measurements', 'Residuals', 'plausible_limits', 'wrap_angle']
 
 INPUTS = ('ranges', 'tag_ranges', 'pitches', 'slew')
 
@@ -54,6 +54,16 @@ def _clean(values, shape, field, limit=None):
     return array, int(too_long.sum())
 
 
+def plausible_limits(model):
+    """Longest believable tag-anchor (p, m) and tag-tag (p, p) distances, metres.
+
+    Twice the longest the geometry allows plus 10 m: no noise or NLOS excess explains more.
+    """
+    reach = np.cumsum(model.arm_lengths)
+    return (2.0 * model.max_ranges() + 10.0,
+            2.0 * np.abs(reach[:, None] - reach[None, :]) + 10.0)
+
+
 @dataclass(frozen=True)
 class Measurements:
     """One frame of measurements; NaN marks what was not measured.
@@ -77,12 +87,11 @@ class Measurements:
     slew: float
 
     @classmethod
-    def clean(cls, model, ranges, tag_ranges=None, pitches=None, slew=None):
+    def clean(cls, model, ranges, tag_ranges=None, pitches=None, slew=None, limits=None):
         """Validate one frame for ``model``; unusable entries become NaN.
 
-        NaN, inf and negative distances count as missing, and so do distances longer than
-        twice the longest the geometry allows plus 10 m: no noise or NLOS excess explains
-        them.
+        NaN, inf and negative distances count as missing, and so do distances beyond
+        ``limits`` (default :func:`plausible_limits`; pass them precomputed per frame).
 
         Returns
         -------
@@ -96,13 +105,12 @@ class Measurements:
             On a wrong shape or a non-numeric value, naming the input.
         """
         p, m = model.n_sections, model.n_anchors
-        ranges, too_long = _clean(ranges, (p, m), 'ranges', 2.0 * model.max_ranges() + 10.0)
+        range_limit, tag_limit = plausible_limits(model) if limits is None else limits
+        ranges, too_long = _clean(ranges, (p, m), 'ranges', range_limit)
         if tag_ranges is None:
             tag_ranges = np.full((p, p), np.nan)
         else:
-            reach = np.cumsum(model.arm_lengths)
-            limit = 2.0 * np.abs(reach[:, None] - reach[None, :]) + 10.0
-            tag_ranges, tag_too_long = _clean(tag_ranges, (p, p), 'tag_ranges', limit)
+            tag_ranges, tag_too_long = _clean(tag_ranges, (p, p), 'tag_ranges', tag_limit)
             tag_ranges[np.diag_indices(p)] = np.nan
             too_long += tag_too_long
         pitches = np.full(p, np.nan) if pitches is None else \

@@ -99,6 +99,13 @@ def run_frames(estimator, frames, truths, cold=False, fused=False):
     return np.array(rmses), np.array(length_errors), np.array(times)
 
 
+def summarize(rmses, lengths, times):
+    """Pooled RMSE, mean arm-length error per section and per-frame milliseconds."""
+    return {'rmse_m': pooled_rmse(rmses), 'arm_length_error_m': lengths.mean(axis=0).tolist(),
+            'ms_median': 1e3 * float(np.median(times)),
+            'ms_p99': 1e3 * float(np.percentile(times, 99))}
+
+
 def method_options(method, options, sigma):
     """The user's options, plus the suite's range noise for methods that model it."""
     if 'sigma' in accepted_options(method) and 'sigma' not in options:
@@ -116,10 +123,7 @@ def xie3dim_suite(methods, trials, seed, options):
             PostureEstimator(model, method, **method_options(method, options, 1.0)), frames,
             [truth] * len(frames), cold=True)
         label, published = PUBLISHED_XIE3DIM.get(method, ('', None))
-        rows.append({'method': method, 'rmse_m': pooled_rmse(rmses),
-                     'arm_length_error_m': lengths.mean(axis=0).tolist(),
-                     'ms_median': 1e3 * float(np.median(times)),
-                     'ms_p99': 1e3 * float(np.percentile(times, 99)),
+        rows.append({'method': method, **summarize(rmses, lengths, times),
                      'published': None if published is None else f'{published} ({label})'})
     slew, pitches = angles_from_joints(model, truth)
     bound = crlb(model, slew, pitches, 1.0).rmse
@@ -157,10 +161,7 @@ def tracking_suite(methods, seconds, seed, options):
         estimator = PostureEstimator(model, method,
                                      **method_options(method, dict(options, **extra), 0.1))
         rmses, lengths, times = run_frames(estimator, frames, trajectory.joints, fused=fused)
-        rows.append({'method': label, 'rmse_m': pooled_rmse(rmses),
-                     'arm_length_error_m': lengths.mean(axis=0).tolist(),
-                     'ms_median': 1e3 * float(np.median(times)),
-                     'ms_p99': 1e3 * float(np.percentile(times, 99)), 'published': None,
+        rows.append({'method': label, **summarize(rmses, lengths, times), 'published': None,
                      'crlb_m': pooled_rmse(bounds[fused])})
     return {'suite': 'tracking', 'frames': len(frames), 'sigma_m': 0.1, 'dropout': 0.05,
             'rows': rows}
@@ -263,7 +264,7 @@ def main(argv=None):
     parser.add_argument('suites', nargs='*', metavar='suite',
                         help='xie3dim, tracking, latency, bags (default: these four), '
                              'paper')
-    parser.add_argument('--methods', nargs='+', choices=list(METHODS), default=DEFAULT_METHODS,
+    parser.add_argument('--methods', nargs='+', choices=list(METHODS),
                         help=f'default: {" ".join(DEFAULT_METHODS)} (paper: all)')
     parser.add_argument('--trials', type=int, default=200, help='xie3dim trials')
     parser.add_argument('--seconds', type=float, default=60.0, help='tracking duration')
@@ -288,7 +289,8 @@ def main(argv=None):
     if options and {'latency', 'bags'} & set(suites):
         parser.error('--option applies to the in-process suites (xie3dim, tracking); the '
                      'node suites run posture_estimator with its parameters')
-    if 'tpsm' in args.methods and set(suites) - {'tracking', 'paper'}:
+    methods = args.methods or DEFAULT_METHODS
+    if 'tpsm' in methods and set(suites) - {'tracking', 'paper'}:
         parser.error('tpsm needs angle sensors, which only the tracking and paper suites '
                      'simulate')
     if args.runs < 1:
@@ -297,18 +299,18 @@ def main(argv=None):
     for suite in suites:
         if suite == 'paper':
             from epp_ros.tools import paper
-            methods = args.methods if '--methods' in (argv or sys.argv) else None
-            print(paper.run(args.out, args.runs, args.seed, methods, args.seconds), flush=True)
+            print(paper.run(args.out, args.runs, args.seed, args.methods, args.seconds),
+                  flush=True)
             print(f'written to {args.out}/')
             continue
         if suite == 'xie3dim':
-            reports.append(xie3dim_suite(args.methods, args.trials, args.seed, options))
+            reports.append(xie3dim_suite(methods, args.trials, args.seed, options))
         elif suite == 'tracking':
-            reports.append(tracking_suite(args.methods, args.seconds, args.seed, options))
+            reports.append(tracking_suite(methods, args.seconds, args.seed, options))
         elif suite == 'latency':
-            reports.append(latency_suite(args.methods, args.latency_seconds, args.seed))
+            reports.append(latency_suite(methods, args.latency_seconds, args.seed))
         else:
-            reports.append(bags_suite(args.methods, args.seed))
+            reports.append(bags_suite(methods, args.seed))
         print(markdown(reports[-1]) + '\n', flush=True)
     print(f'commit {commit()}, Python {sys.version.split()[0]}, numpy {np.__version__}'
           + (f', options {options}' if options else ''))

@@ -27,7 +27,7 @@ from epp_ros.core.metrics import pooled_rmse
 from epp_ros.core.simulate import (AngleNoise, RangeNoise, observe, random_posture,
                                    truck_pump, xie3dim)
 
-from .bench import commit, run_frames, tracking_suite, xie3dim_suite
+from .bench import commit, markdown, run_frames, summarize, tracking_suite, xie3dim_suite
 
 #: Table 1 of the paper: absolute arm-length error per segment (as printed, its segment 1
 #: may be the tip: it numbers points from the tip) and CPU seconds (MATLAB).
@@ -64,12 +64,6 @@ def _estimators(model, methods, options):
     return {m: PostureEstimator(model, m, **options.get(m, {})) for m in methods}
 
 
-def _summary(rmses, lengths, times):
-    return {'rmse_m': pooled_rmse(rmses), 'arm_length_error_m': lengths.mean(axis=0).tolist(),
-            'ms_median': 1e3 * float(np.median(times)),
-            'ms_p99': 1e3 * float(np.percentile(times, 99))}
-
-
 def noise_sweep(kind, levels, runs, methods, seed):
     """RMSE of each method at each noise level, cold start per run, and the CRLB.
 
@@ -88,7 +82,7 @@ def noise_sweep(kind, levels, runs, methods, seed):
         sigma = level * truth if kind == 'eta' else level
         row = {kind: level, 'crlb_m': crlb(model, slew, pitches, sigma).rmse, 'methods': {}}
         for method, estimator in estimators.items():
-            row['methods'][method] = _summary(*run_frames(estimator, frames,
+            row['methods'][method] = summarize(*run_frames(estimator, frames,
                                                           [joints] * runs, cold=True))
         rows.append(row)
     return {'part': f'sweep_{kind}', 'runs': runs, 'rows': rows}
@@ -107,7 +101,7 @@ def nlos_table(runs, methods, seed, fraction=0.2, gamma=2.0, sigma=0.2):
         frames.append(frame)
         bounds.append(crlb(model, slew, pitches, sigma, ~nlos).rmse)
     estimators = _estimators(model, methods, {'chain': {'sigma': sigma}})
-    rows = {method: _summary(*run_frames(estimator, frames, postures, cold=True))
+    rows = {method: summarize(*run_frames(estimator, frames, postures, cold=True))
             for method, estimator in estimators.items()}
     return {'part': 'nlos', 'runs': runs, 'sigma_m': sigma, 'nlos_fraction': fraction,
             'gamma_m': gamma, 'los_crlb_m': pooled_rmse(bounds), 'methods': rows}
@@ -252,7 +246,6 @@ def run(out, runs, seed, methods=None, tracking_seconds=60.0, target_runs=None):
                'xie3dim': xie3dim_suite([m for m in methods if m != 'tpsm'], runs, seed, {}),
                'tracking': tracking_suite(methods, tracking_seconds, seed, {}),
                'targets': target_cases(target_runs or min(runs, 300), seed)}
-    from .bench import markdown
     parts = [sweep_markdown(reports['sweep_eta']), '![RMSE vs eta](rmse_vs_eta.png)',
              sweep_markdown(reports['sweep_sigma']), '![RMSE vs sigma](rmse_vs_sigma.png)',
              table1_markdown(reports['sweep_eta']), nlos_markdown(reports['nlos']),
