@@ -96,7 +96,7 @@ def test_nlos_links_are_flagged_and_do_not_pull_the_estimate():
     for k, j in blocked:
         ranges[k, j] += 3.0                                      # a detour around the boom
     robust = PostureEstimator(model, 'chain', sigma=0.05)
-    plain = PostureEstimator(model, 'chain', sigma=0.05, nlos_threshold=None)
+    plain = PostureEstimator(model, 'chain', sigma=0.05, nlos_fraction=0.0)
     estimate, naive = robust.update(ranges), plain.update(ranges)
     flagged = robust.last_diagnostics['nlos_links']
     assert {tuple(i) for i in np.argwhere(flagged)} == set(blocked)

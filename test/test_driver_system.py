@@ -83,7 +83,7 @@ def test_unplugged_pty_is_reconnected(listener, processes, tmp_path):
         s.level for s in listener.statuses('uwb_driver')], 5)
     count = len(listener.ranges)
     start_emulator(processes, 'json', ['--pty', '--link', link])          # plug back in
-    assert listener.spin_until(lambda: len(listener.ranges) >= count + 5, 15)
+    assert listener.spin_until(lambda: len(listener.ranges) >= count + 8, 15)
     assert driver.poll() is None
     check_ranges_against_truth(listener, load_pump_config(PUMP_YAML), count + 2, 2e-3)
 

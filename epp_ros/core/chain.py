@@ -5,18 +5,20 @@ lengths, one vertical plane) hold by construction. Levenberg–Marquardt with th
 Jacobian fits the ranges, warm-started from the previous frame; it is the maximum-likelihood
 estimate under Gaussian range noise and attains the Cramér–Rao bound (``core.bounds``).
 
-NLOS ranges are always too long. The loss is one-sided Huber: a range longer than predicted
-by more than ``nlos_threshold`` sigma counts linearly, a shorter one quadratically. Links
-still that long after the fit are reported per frame as NLOS and the posture is refit
-without them, while the remaining links determine it.
+NLOS ranges are always too long. Ranges are fitted under a Gaussian plus exponential-excess
+mixture (``core.nlos``): the maximum-likelihood estimate when some links are blocked, where
+a blocked link pulls the fit with a bounded force and is reported per frame as NLOS when it
+is more likely blocked than not.
 
 Tag-tag ranges, inclinometers and a slew encoder, when given, enter the same least squares
 with their own sigmas (``core.measurements``), so the paper's TPSM angles add information
 instead of being discarded.
 
-Without a previous pose the global solution is found from several starts: the SR-LS per-tag
-guess, and a grid of slews with the pitches chosen section by section; the best fit whose
-joints are above the ground wins.
+Joints stay above ``lowest_joint`` through a stiff penalty (the boom is above the ground).
+Without a previous pose the global solution is searched for: a beam search grows chains
+section by section over a grid of slews, every candidate gets a few iterations, the best are
+fitted to the end, and from the best fit each joint is folded the other way and the tip
+tried at its other well-fitting pitches until nothing fits better.
 """
 from dataclasses import replace
 
@@ -24,6 +26,7 @@ import numpy as np
 
 from .bounds import bound_from_information
 from .measurements import Residuals, SensorNoise, wrap_angle
+from .nlos import NlosMixture
 from .plane import fit_slew, to_plane
 
 __all__ = ['ChainMethod', 'angles_from_joints', 'canonical_angles']
@@ -66,30 +69,40 @@ class ChainMethod:
         Tag-tag range standard deviation, metres (None: ``sigma``).
     pitch_sigma, slew_sigma : float
         Inclinometer and slew encoder standard deviations, radians.
-    nlos_threshold : float or None
-        Excess, in sigmas, beyond which a too-long range counts linearly and is flagged;
-        None for plain least squares.
+    nlos_fraction : float
+        Prior probability that a range is NLOS; 0 for plain least squares.
+    nlos_gamma : float
+        Mean NLOS excess, metres.
     tol : float
         Stop when the step is below ``tol`` radians.
     max_iter : int
     slew_starts : int
         Slews tried by the cold start.
+    screen_iterations : int
+        Iterations given to every cold start before only the best are fitted to the end.
+    lowest_joint : float
+        No joint is below this height, metres (world z = 0 is the ground; the default
+        leaves room for noise). Lower it for a boom that reaches below grade.
     """
 
     prior = 'optional'          # one more start; the cold start finds the global solution
+    #: How far, metres, a joint may sink below ``lowest_joint`` per unit of cost.
+    GROUND_SIGMA = 0.05
     inputs = ('ranges', 'tag_ranges', 'pitches', 'slew')
 
     def __init__(self, model, sigma=0.1, eta=0.0, tag_sigma=None, pitch_sigma=np.radians(0.5),
-                 slew_sigma=np.radians(0.5), nlos_threshold=3.0, tol=1e-10, max_iter=50,
-                 slew_starts=16):
+                 slew_sigma=np.radians(0.5), nlos_fraction=0.1, nlos_gamma=1.0, tol=1e-10,
+                 max_iter=50, slew_starts=16, screen_iterations=4, lowest_joint=-0.5):
         self.model = model
         self.eta = float(eta)
         self.noise = SensorNoise(float(sigma), float(sigma if tag_sigma is None else tag_sigma),
                                  float(pitch_sigma), float(slew_sigma))
-        self.nlos_threshold = None if nlos_threshold is None else float(nlos_threshold)
+        self.nlos = NlosMixture(float(nlos_fraction), float(nlos_gamma))
         self.tol = float(tol)
         self.max_iter = int(max_iter)
         self.slew_starts = int(slew_starts)
+        self.screen_iterations = int(screen_iterations)
+        self.lowest_joint = float(lowest_joint)
         self._angles = None
 
     def enough_information(self, measurements):
@@ -104,110 +117,134 @@ class ChainMethod:
         self._angles = None
 
     # -- the least-squares problem --------------------------------------------------------
-    def _loss(self, scaled, ranged):
-        """IRLS weights and robust cost of scaled residuals (one-sided Huber on ranges)."""
-        if self.nlos_threshold is None:
-            return np.ones_like(scaled), 0.5 * float(scaled @ scaled)
-        k = self.nlos_threshold
-        long = ranged & (scaled > k)            # measured shorter than predicted: no
-        weights = np.where(long, k / np.maximum(scaled, k), 1.0)
-        cost = np.where(long, k * scaled - 0.5 * k ** 2, 0.5 * scaled ** 2)
-        return weights, float(np.sum(cost))
+    def _loss(self, scaled, residuals):
+        """Cost, its slope in the scaled residuals, Gauss-Newton weights, NLOS probabilities.
 
-    def fit(self, psi, residuals):
-        """Levenberg–Marquardt from ``psi`` on a :class:`Residuals`; (psi, cost, iterations)."""
-        ranged = residuals.ranged()
+        Ranges follow the NLOS mixture (on their excess, ``-scaled``); angles are Gaussian.
+        """
+        n = residuals.n_ranged                   # ranges come first
+        cost, slope = 0.5 * scaled ** 2, scaled.copy()
+        nlos = np.zeros_like(scaled)
+        cost[:n], excess_slope, nlos[:n] = self.nlos.loss(-scaled[:n], residuals.sigma[:n])
+        slope[:n] = -excess_slope
+        # IRLS curvature slope / residual: 1 for Gaussian rows, small on a blocked link.
+        large = np.abs(scaled) > 1.0
+        weights = np.ones_like(scaled)
+        weights[large] = np.clip(slope[large] / scaled[large], 1e-3, 1.0)
+        return float(np.sum(cost)), slope, weights, nlos
+
+    def _evaluate(self, psi, residuals):
+        """Cost at ``psi`` and what a step needs: (cost, slope, weights, state).
+
+        A joint below ``lowest_joint`` adds a stiff quadratic penalty: the boom is above
+        the ground, which a fit must respect rather than be discarded for.
+        """
         scaled, geometry = residuals.residuals(psi)
-        weights, cost = self._loss(-scaled, ranged)
+        cost, slope, weights, _ = self._loss(scaled, residuals)
+        heights = geometry[2][:, 2]
+        depth = np.maximum(self.lowest_joint - heights, 0.0) / self.GROUND_SIGMA
+        return cost + 0.5 * float(depth @ depth), slope, weights, (geometry, depth)
+
+    def _normal_equations(self, psi, residuals, slope, weights, state):
+        """Gauss-Newton (IRLS) normal matrix and gradient at ``psi``."""
+        geometry, depth = state
+        jacobian = residuals.jacobian(psi, geometry)
+        normal = (jacobian * weights[:, None]).T @ jacobian
+        gradient = jacobian.T @ slope
+        if depth.any():
+            sinking = -self.model.joint_jacobian(psi[0], psi[1:])[depth > 0, 2, :]
+            sinking /= self.GROUND_SIGMA
+            normal += sinking.T @ sinking
+            gradient += sinking.T @ depth[depth > 0]
+        return normal, gradient
+
+    def fit(self, psi, residuals, max_iter=None):
+        """Levenberg–Marquardt from ``psi`` on a :class:`Residuals`; (psi, cost, iterations)."""
+        max_iter = self.max_iter if max_iter is None else max_iter
+        cost, slope, weights, state = self._evaluate(psi, residuals)
         damping = 1e-6
-        for iteration in range(1, self.max_iter + 1):
-            jacobian = residuals.jacobian(psi, geometry)
-            weighted = jacobian * weights[:, None]
-            normal = weighted.T @ jacobian
-            gradient = weighted.T @ scaled
+        for iteration in range(1, max_iter + 1):
+            normal, gradient = self._normal_equations(psi, residuals, slope, weights, state)
             while True:
                 step = -np.linalg.solve(normal + damping * np.diag(np.diag(normal) + 1e-9),
                                         gradient)
                 trial = psi + step
-                trial_scaled, trial_geometry = residuals.residuals(trial)
-                trial_weights, trial_cost = self._loss(-trial_scaled, ranged)
+                trial_cost, trial_slope, trial_weights, trial_state = self._evaluate(trial,
+                                                                                     residuals)
                 if trial_cost <= cost or damping > 1e10:
                     break
                 damping *= 4.0
             if trial_cost > cost:
                 return psi, cost, iteration
-            stalled = cost - trial_cost <= 1e-12 * (1.0 + cost)
-            psi, cost = trial, trial_cost
-            scaled, geometry, weights = trial_scaled, trial_geometry, trial_weights
+            stalled = cost - trial_cost <= 1e-6 * abs(trial_cost)     # of a chi-square ~ n
+            psi, cost, slope, weights = trial, trial_cost, trial_slope, trial_weights
+            state = trial_state
             damping = max(damping / 3.0, 1e-9)
             if stalled or np.max(np.abs(step)) <= self.tol:
                 return psi, cost, iteration
-        return psi, cost, self.max_iter
+        return psi, cost, max_iter
 
     def _flag(self, psi, residuals):
-        """Ranges measured longer than predicted by more than the NLOS threshold (rows)."""
-        if self.nlos_threshold is None:
-            return np.zeros(residuals.size, bool)
+        """Ranges more likely NLOS than not at ``psi`` (boolean over the rows)."""
         scaled, _ = residuals.residuals(psi)
-        return residuals.ranged() & (-scaled > self.nlos_threshold)
-
-    def _without(self, measurements, residuals, rows):
-        links, tag_links = residuals.link_flags(rows)
-        return measurements.with_ranges(np.where(links, np.nan, measurements.ranges),
-                                        np.where(tag_links, np.nan, measurements.tag_ranges))
-
-    def _reject_nlos(self, psi, measurements, residuals, rounds=3):
-        """Refit without the flagged ranges until the flags settle.
-
-        The Huber loss bounds an NLOS range's pull but does not remove it; a gross one can
-        still push good links over the threshold. Links stay in the fit when removing them
-        would leave the posture undetermined.
-        """
-        flagged = self._flag(psi, residuals)
-        iterations = 0
-        for _ in range(rounds):
-            if not flagged.any():
-                break
-            kept = self._without(measurements, residuals, flagged)
-            if not self.enough_information(kept):
-                break
-            psi, _, used = self.fit(psi, Residuals(self.model, kept, residuals.noise))
-            iterations += used
-            again = self._flag(psi, residuals)
-            if np.array_equal(again, flagged):
-                break
-            flagged = again
-        return psi, flagged, iterations
+        return self._loss(scaled, residuals)[3] > 0.5
 
     # -- starts ---------------------------------------------------------------------------
-    def _greedy_pitches(self, slew, measurements, candidates=72):
-        """Pitches chosen section by section to fit each tag's ranges, for a given slew.
+    def _beam_starts(self, slews, measurements, range_sigma, width=8, candidates=72):
+        """Chains grown section by section for each slew, keeping the ``width`` best so far.
 
-        A section with an inclinometer reading takes it.
+        Each section's pitch is taken from a grid (or its inclinometer), scored by the NLOS
+        loss of its tag's ranges, with joints below the ground excluded. Keeping several
+        partial chains, not the single best, recovers folds that only later tags reveal
+        and tags whose best-looking pitch is pulled by a blocked link.
+
+        Parameters
+        ----------
+        slews : ndarray, shape (s,)
+        measurements : Measurements
+        range_sigma : ndarray, shape (p, m)
+            Each tag-anchor range's standard deviation, metres.
+
+        Returns
+        -------
+        pitches : ndarray, shape (s, width, p)
+            Candidate pitches per slew, best first.
+        cost : ndarray, shape (s, width)
+            Their loss over the ranges (inf for chains that could not stay above ground).
         """
-        ranges = measurements.ranges
-        valid = np.isfinite(ranges)
         grid = np.linspace(-np.pi, np.pi, candidates, endpoint=False)
-        along = np.array([np.cos(slew), np.sin(slew), 0.0])
-        joint = self.model.pivot(slew)
-        pitches = np.zeros(self.model.n_sections)
+        along = np.stack([np.cos(slews), np.sin(slews), np.zeros_like(slews)], axis=-1)
+        up = np.array([0.0, 0.0, 1.0])
+        joints = np.broadcast_to(self.model.pivot(slews)[:, None, :], (slews.size, 1, 3))
+        pitches = np.zeros((slews.size, 1, 0))
+        cost = np.zeros((slews.size, 1))
         for k, length in enumerate(self.model.arm_lengths):
-            options = grid
-            if np.isfinite(measurements.pitches[k]):
-                options = measurements.pitches[k:k + 1]
-            ends = joint + length * (np.cos(options)[:, None] * along
-                                     + np.sin(options)[:, None] * [0.0, 0.0, 1.0])
-            if valid[k].any() and options.size > 1:
-                distance = np.linalg.norm(ends[:, None, :] - self.model.anchors[valid[k]],
-                                          axis=-1)
-                choice = np.argmin(np.sum((distance - ranges[k, valid[k]]) ** 2, axis=1))
-            else:
-                choice = np.argmin(np.abs(options))   # unseen section: level
-            pitches[k] = options[choice]
-            joint = ends[choice]
-        return pitches
+            options = grid if np.isnan(measurements.pitches[k]) else measurements.pitches[k:k + 1]
+            step = length * (np.cos(options)[None, :, None] * along[:, None, :]
+                             + np.sin(options)[:, None] * up)                 # (s, c, 3)
+            ends = joints[:, :, None, :] + step[:, None, :, :]                # (s, w, c, 3)
+            added = np.where(ends[..., 2] < self.lowest_joint, np.inf, 0.0)
+            valid = np.isfinite(measurements.ranges[k])
+            if valid.any():
+                distance = np.linalg.norm(ends[..., None, :] - self.model.anchors[valid], axis=-1)
+                sigma = range_sigma[k, valid]
+                excess = (measurements.ranges[k, valid] - distance) / sigma
+                added = added + self.nlos.approximate_loss(excess, sigma).sum(axis=-1)
+            elif options.size > 1:
+                added = added + np.abs(options)     # unseen section: prefer level
+            total = (cost[:, :, None] + added).reshape(slews.size, -1)
+            keep = np.argsort(total, axis=1)[:, :width]                       # (s, w)
+            rows = np.arange(slews.size)[:, None]
+            parent, choice = np.divmod(keep, options.size)
+            joints = ends.reshape(slews.size, -1, 3)[rows, keep]
+            pitches = np.concatenate([pitches[rows, parent],
+                                      np.broadcast_to(options, (slews.size, options.size))[
+                                          rows, choice][..., None]], axis=-1)
+            cost = total[rows, keep]
+        return pitches, cost
 
-    def _cold_starts(self, measurements, guess):
+    def _cold_starts(self, measurements, guess, range_sigma, extra=16):
+        """Starting angles: the prior's, each slew's best chain, and the next best overall."""
         starts = []
         if guess is not None:
             slew, pitches = angles_from_joints(self.model, guess)
@@ -215,9 +252,91 @@ class ChainMethod:
         slews = np.linspace(-np.pi, np.pi, self.slew_starts, endpoint=False)
         if np.isfinite(measurements.slew):
             slews = np.r_[measurements.slew, slews]
-        for slew in slews:
-            starts.append(np.r_[slew, self._greedy_pitches(slew, measurements)])
+        pitches, cost = self._beam_starts(slews, measurements, range_sigma)
+        chosen = np.zeros(cost.shape, bool)
+        chosen[:, 0] = True
+        runners_up = np.argsort(np.where(chosen, np.inf, cost), axis=None)[:extra]
+        chosen.flat[runners_up] = True
+        chosen &= np.isfinite(cost)
+        chosen[:, 0] = True
+        slew_index, beam_index = np.nonzero(chosen)
+        starts.extend(np.c_[slews[slew_index], pitches[slew_index, beam_index]])
         return starts
+
+    def _tip_alternatives(self, psi, measurements, range_sigma, candidates=72, most=2):
+        """The same posture with the tip section at its other well-fitting pitches.
+
+        The tip hangs from one joint: its ranges alone place it, and with few of them two
+        pitches can fit. Returns the local minima of the tip's loss over a pitch grid, best
+        first, other than the current pitch.
+        """
+        valid = np.isfinite(measurements.ranges[-1])
+        if not valid.any() or np.isfinite(measurements.pitches[-1]):
+            return []
+        grid = np.linspace(-np.pi, np.pi, candidates, endpoint=False)
+        slew = psi[0]
+        hinge = self.model.forward_kinematics(slew, psi[1:])[-2] if psi.size > 2 \
+            else self.model.pivot(slew)
+        ends = hinge + self.model.arm_lengths[-1] * (
+            np.cos(grid)[:, None] * [np.cos(slew), np.sin(slew), 0.0]
+            + np.sin(grid)[:, None] * [0.0, 0.0, 1.0])
+        distance = np.linalg.norm(ends[:, None, :] - self.model.anchors[valid], axis=-1)
+        sigma = range_sigma[-1, valid]
+        cost = self.nlos.approximate_loss((measurements.ranges[-1, valid] - distance) / sigma,
+                                          sigma).sum(axis=1)
+        minima = np.flatnonzero((cost <= np.roll(cost, 1)) & (cost <= np.roll(cost, -1)))
+        far = np.abs(wrap_angle(grid[minima] - psi[-1])) > 3 * (2 * np.pi / candidates)
+        minima = minima[far][np.argsort(cost[minima[far]])][:most]
+        return [np.r_[psi[:-1], grid[i]] for i in minima]
+
+    def _folds(self, psi):
+        """The same posture with one joint folded the other way.
+
+        Reflecting joint k across the line through its neighbours, in the boom's plane,
+        keeps every other joint and all section lengths: a common second fit when joint k
+        has few ranges.
+        """
+        pitches = psi[1:]
+        steps = self.model.arm_lengths[:, None] * np.c_[np.cos(pitches), np.sin(pitches)]
+        chords = steps[:-1] + steps[1:]            # joint k - 1 to joint k + 1, k = 1..p-1
+        axes = np.arctan2(chords[:, 1], chords[:, 0])
+        folded = []
+        for k, axis in enumerate(axes):
+            turned = psi.copy()
+            turned[1 + k:3 + k] = 2 * axis - pitches[k:k + 2]
+            folded.append(wrap_angle(turned))
+        return folded
+
+    def _search(self, measurements, residuals, guess, range_sigma, finish=3, rounds=3):
+        """Global fit from scratch: (psi, cost, iterations).
+
+        Every start takes a few iterations; the best ``finish`` are fitted to convergence.
+        From the best, single-joint folds and the tip's other fits are tried until none
+        lowers the cost.
+        """
+        iterations = 0
+        screened = []
+        for start in self._cold_starts(measurements, guess, range_sigma):
+            psi, cost, used = self.fit(start, residuals, max_iter=self.screen_iterations)
+            screened.append((cost, psi))
+            iterations += used
+        finished = []
+        for _, start in sorted(screened, key=lambda t: t[0])[:finish]:
+            psi, cost, used = self.fit(start, residuals)
+            finished.append((cost, psi))
+            iterations += used
+        cost, psi = min(finished, key=lambda t: t[0])
+        for _ in range(rounds):
+            improved = False
+            for start in self._folds(psi) + self._tip_alternatives(psi, measurements,
+                                                                    range_sigma):
+                trial, trial_cost, used = self.fit(start, residuals)
+                iterations += used
+                if trial_cost < cost - 1e-9:
+                    psi, cost, improved = trial, trial_cost, True
+            if not improved:
+                break
+        return psi, cost, iterations
 
     def solve(self, measurements, prior):
         """Fit one frame. ``prior`` (p, 3) is used only when there is no previous fit."""
@@ -226,26 +345,19 @@ class ChainMethod:
             distances = np.nan_to_num(measurements.ranges)
             noise = replace(noise, range_sigma=np.hypot(noise.range_sigma, self.eta * distances))
         residuals = Residuals(self.model, measurements, noise)
-        fits = []
         total_iterations = 0
+        lost = True
         if self._angles is not None:
-            psi, cost, iterations = self.fit(self._angles, residuals)
-            fits.append((cost, psi))
+            psi, cost, total_iterations = self.fit(self._angles, residuals)
+            lost = cost > 12.5 * residuals.size       # worse than 5 sigma RMS per residual
+        if lost:
+            range_sigma = np.broadcast_to(noise.range_sigma, measurements.ranges.shape)
+            found, found_cost, iterations = self._search(
+                measurements, residuals, prior if self._angles is None else None, range_sigma)
             total_iterations += iterations
-        # Cold start, or a warm start that lost track (worse than 5 sigma RMS per residual).
-        if self._angles is None or cost > 12.5 * residuals.size:
-            # Every start is refined: with NLOS links the best-looking starts can all lie in
-            # one wrong basin.
-            for start in self._cold_starts(measurements,
-                                           prior if self._angles is None else None):
-                psi, cost, iterations = self.fit(start, residuals)
-                fits.append((cost, psi))
-                total_iterations += iterations
-        above = [(c, psi) for c, psi in fits
-                 if self.model.forward_kinematics(psi[0], psi[1:])[:, 2].min() >= -0.5]
-        cost, psi = min(above or fits, key=lambda t: t[0])
-        psi, flagged, iterations = self._reject_nlos(psi, measurements, residuals)
-        total_iterations += iterations
+            if self._angles is None or found_cost < cost:
+                psi, cost = found, found_cost
+        flagged = self._flag(psi, residuals)
         psi = canonical_angles(psi, self.model.pivot_offset)
         self._angles = psi
         joints = self.model.forward_kinematics(psi[0], psi[1:])

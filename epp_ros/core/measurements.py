@@ -193,13 +193,16 @@ class Residuals:
         return np.arange(self.size) < self.n_ranged
 
     def predict(self, psi):
-        """Predicted measurements (size,) and the geometry the Jacobian needs."""
+        """Predicted measurements (size,) and the geometry the Jacobian needs.
+
+        The geometry is ``(offsets, distances, joints)``; ``joints`` (p, 3) at ``psi``.
+        """
         joints = self.model.forward_kinematics(psi[0], psi[1:])
         offsets = np.concatenate([joints[self._tag] - self.model.anchors[self._anchor],
                                   joints[self._near] - joints[self._far]])
         distances = np.linalg.norm(offsets, axis=1)
         predicted = np.concatenate([distances, psi[self._angle_index]])
-        return predicted, (offsets, distances)
+        return predicted, (offsets, distances, joints)
 
     def residuals(self, psi):
         """Scaled residuals (size,) at ``psi`` (p + 1,), and the geometry for :meth:`jacobian`."""
@@ -213,7 +216,7 @@ class Residuals:
         """Jacobian of the scaled residuals, shape (size, p + 1)."""
         if geometry is None:
             geometry = self.predict(psi)[1]
-        offsets, distances = geometry
+        offsets, distances, _ = geometry
         units = offsets / np.maximum(distances, 1e-12)[:, None]
         joint_jacobian = self.model.joint_jacobian(psi[0], psi[1:])
         moved = np.concatenate([joint_jacobian[self._tag],
