@@ -100,7 +100,9 @@ def nlos_table(runs, methods, seed, fraction=0.2, gamma=2.0, sigma=0.2):
         postures.append(joints)
         frames.append(frame)
         bounds.append(crlb(model, slew, pitches, sigma, ~nlos).rmse)
-    estimators = _estimators(model, methods, {'chain': {'sigma': sigma}})
+    # The chain is told the simulated error model, as every method is told sigma.
+    chain = {'sigma': sigma, 'nlos_fraction': fraction, 'nlos_gamma': gamma}
+    estimators = _estimators(model, methods, {'chain': chain})
     rows = {method: summarize(*run_frames(estimator, frames, postures, cold=True))
             for method, estimator in estimators.items()}
     return {'part': 'nlos', 'runs': runs, 'sigma_m': sigma, 'nlos_fraction': fraction,
