@@ -154,7 +154,10 @@ def test_trek_with_more_than_four_anchors_is_refused_at_start():
                                                      ('posture_estimator', 'residual_warn',
                                                       [1.0]),
                                                      ('posture_estimator', 'method', 'magic'),
-                                                     ('posture_estimator', 'method', 'tpsm')])
+                                                     ('posture_estimator', 'method', 'tpsm'),
+                                                     ('posture_estimator', 'nlos_fraction',
+                                                      1.5),
+                                                     ('posture_estimator', 'range_sigma', 0.0)])
 def test_bad_settings_stop_a_node_with_one_line(executable, name, value, tmp_path):
     document = yaml.safe_load(PUMP_YAML.read_text())
     document['/**']['ros__parameters'][name] = value

@@ -68,7 +68,9 @@ def test_bench_paper_writes_tables_json_and_plots(tmp_path, capsys):
     assert set(sweep['rows'][0]['methods']) == {'sdp', 'srls', 'epp1', 'epp2', 'cepp', 'chain'}
     assert set(report['reports']['nlos']['methods']) == {'sdp', 'srls', 'tpsm', 'epp2', 'cepp',
                                                          'chain'}
-    assert len(report['reports']['targets']['rows']) == 18
+    targets = report['reports']['targets']['rows']
+    assert len(targets) == 18
+    assert all(row['search_misses'] >= 0 and row['local_fit_rmse_m'] > 0 for row in targets)
     for name in ('rmse_vs_eta.png', 'rmse_vs_sigma.png'):
         assert (out / name).read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 

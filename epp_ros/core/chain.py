@@ -184,6 +184,10 @@ class ChainMethod:
                 return psi, cost, iteration
         return psi, cost, max_iter
 
+    def cost(self, psi, residuals):
+        """The fitted loss at angles ``psi`` (p + 1,) on a :class:`Residuals`."""
+        return self._evaluate(np.asarray(psi, dtype=float), residuals)[0]
+
     def _flag(self, psi, residuals):
         """Ranges more likely NLOS than not at ``psi`` (boolean over the rows)."""
         scaled, _ = residuals.residuals(psi)

@@ -29,6 +29,7 @@ from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
 from epp_ros.core import RANGE_METHODS, PostureEstimator
+from epp_ros.core.nlos import NlosMixture
 from epp_ros.health import Thresholds, assess, grade
 from epp_ros.nodes.common import (POSTURE_QOS, RANGES_INPUT_QOS, StartupError, declare,
                                   declare_pump_parameters, posture_message, posture_markers,
@@ -61,9 +62,21 @@ class PostureEstimatorNode(Node):
                                        'Also publish arm_posture/markers for RViz.')
         if self.reset_after < 1:
             raise StartupError('reset_after_failures: must be >= 1')
+        noise = {'sigma': declare(self, 'range_sigma', 0.1,
+                                  'UWB range standard deviation, m (chain).'),
+                 'nlos_fraction': declare(self, 'nlos_fraction', 0.1,
+                                          'Prior probability that a range is NLOS (chain).'),
+                 'nlos_gamma': declare(self, 'nlos_gamma', 1.0, 'Mean NLOS excess, m (chain).')}
+        if not noise['sigma'] > 0:
+            raise StartupError(f'range_sigma: must be > 0 m, got {noise["sigma"]}')
+        try:
+            NlosMixture(noise['nlos_fraction'], noise['nlos_gamma'])   # checked for every method
+        except ValueError as exc:
+            raise StartupError(str(exc)) from None
         self.model = self.config.model()
         try:
-            self.estimator = PostureEstimator(self.model, method)
+            self.estimator = PostureEstimator(self.model, method,
+                                              **(noise if method == 'chain' else {}))
         except ImportError as exc:
             raise StartupError(f'method: {exc}') from None
         self.lengths = self.model.arm_lengths

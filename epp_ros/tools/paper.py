@@ -22,7 +22,8 @@ import numpy as np
 
 from epp_ros.core import METHODS, BoomModel, PostureEstimator
 from epp_ros.core.bounds import crlb
-from epp_ros.core.chain import angles_from_joints
+from epp_ros.core.chain import ChainMethod, angles_from_joints
+from epp_ros.core.measurements import Measurements, Residuals
 from epp_ros.core.metrics import pooled_rmse
 from epp_ros.core.simulate import (AngleNoise, RangeNoise, observe, random_posture,
                                    truck_pump, xie3dim)
@@ -110,7 +111,13 @@ def nlos_table(runs, methods, seed, fraction=0.2, gamma=2.0, sigma=0.2):
 
 
 def target_cases(runs, seed, sigma=0.1):
-    """Chain RMSE / CRLB on truck pumps of 4-6 sections and 4-6 anchors, 0 or 15 % missing."""
+    """Chain RMSE / CRLB on truck pumps of 4-6 sections and 4-6 anchors, 0 or 15 % missing.
+
+    Each frame is also fitted from the true angles: that local fit is what the (local) CRLB
+    describes, and a cold start that ends with a higher cost than it is a search miss.
+    Where the cold start ends lower, another posture explains the ranges better than the
+    one nearest the truth, and no estimator can tell them apart.
+    """
     lengths = {4: (10.0, 8.0, 9.0, 9.0), 5: (9.0, 7.0, 7.0, 9.0, 9.0),
                6: (8.0, 7.0, 6.0, 7.0, 6.0, 6.0)}
     rows = []
@@ -120,7 +127,9 @@ def target_cases(runs, seed, sigma=0.1):
             for dropout in (0.0, 0.15):
                 rng = np.random.default_rng([seed, p, m, int(dropout * 100)])
                 estimator = PostureEstimator(model, 'chain', sigma=sigma)
-                squared, bounds, times = [], [], []
+                reference = ChainMethod(model, sigma=sigma)
+                squared, local, bounds, times = [], [], [], []
+                misses = 0
                 for _ in range(runs):
                     slew, pitches, joints = random_posture(model, rng)
                     frame, _ = observe(model, slew, pitches, rng,
@@ -133,11 +142,20 @@ def target_cases(runs, seed, sigma=0.1):
                     start = time.perf_counter()
                     estimate = estimator.update(**frame)
                     times.append(time.perf_counter() - start)
+                    residuals = Residuals(model, Measurements.ranges_only(frame['ranges']),
+                                          reference.noise)
+                    near, near_cost, _ = reference.fit(np.r_[slew, pitches], residuals)
+                    found = np.r_[estimator.last_diagnostics['slew'],
+                                  estimator.last_diagnostics['pitches']]
+                    misses += near_cost < reference.cost(found, residuals) - 1e-6
                     squared.append(np.mean(np.sum((estimate - joints) ** 2, axis=1)))
+                    local.append(np.mean(np.sum(
+                        (model.forward_kinematics(near[0], near[1:]) - joints) ** 2, axis=1)))
                     bounds.append(bound)
                 rows.append({'sections': p, 'anchors': m, 'missing': dropout,
                              'runs': len(squared), 'rmse_m': float(np.sqrt(np.mean(squared))),
-                             'crlb_m': pooled_rmse(bounds),
+                             'local_fit_rmse_m': float(np.sqrt(np.mean(local))),
+                             'search_misses': int(misses), 'crlb_m': pooled_rmse(bounds),
                              'ms_median': 1e3 * float(np.median(times))})
     return {'part': 'targets', 'sigma_m': sigma, 'rows': rows}
 
@@ -203,12 +221,17 @@ def nlos_markdown(report):
 def targets_markdown(report):
     lines = [f'### 6. chain on truck pumps, sigma = {report["sigma_m"]} m, random postures, '
              'cold start (target: RMSE <= 1.05 CRLB)', '',
-             '| sections | anchors | missing | runs | RMSE [m] | CRLB [m] | RMSE / CRLB | '
-             'ms p50 |', '|---|---|---|---|---|---|---|---|']
+             '"fit from the truth": the same least squares started at the true angles, the '
+             'fit the local CRLB describes; "misses": frames where it ends with a lower cost '
+             'than the cold start.', '',
+             '| sections | anchors | missing | runs | RMSE [m] | fit from the truth [m] | '
+             'CRLB [m] | RMSE / CRLB | misses | ms p50 |',
+             '|---|---|---|---|---|---|---|---|---|---|']
     for row in report['rows']:
         lines.append(f'| {row["sections"]} | {row["anchors"]} | {row["missing"]:.0%} | '
-                     f'{row["runs"]} | {row["rmse_m"]:.3f} | {row["crlb_m"]:.3f} | '
-                     f'{_ratio(row["rmse_m"], row["crlb_m"])} | {row["ms_median"]:.2f} |')
+                     f'{row["runs"]} | {row["rmse_m"]:.3f} | {row["local_fit_rmse_m"]:.3f} | '
+                     f'{row["crlb_m"]:.3f} | {_ratio(row["rmse_m"], row["crlb_m"])} | '
+                     f'{row["search_misses"]} | {row["ms_median"]:.2f} |')
     return '\n'.join(lines)
 
 
