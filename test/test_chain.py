@@ -123,3 +123,19 @@ def test_needs_the_tip_and_enough_links():
     assert estimator.last_diagnostics['status'] == 'ok'
     assert estimator.last_diagnostics['range_residual_rms'] < 1e-6
     np.testing.assert_allclose(model.section_lengths(estimate), model.arm_lengths)
+
+
+def test_joints_are_held_above_lowest_joint():
+    model = truck_pump()
+    rng = np.random.default_rng(12)
+    while True:
+        slew, pitches, joints = random_posture(model, rng)
+        if joints[:, 2].min() < 2.0:
+            break
+    ranges = model.ranges(joints)
+    free = PostureEstimator(model, 'chain', lowest_joint=-100.0)
+    np.testing.assert_allclose(free.update(ranges), joints, atol=1e-8)
+    floor = joints[:, 2].min() + 1.0                 # the true posture dips below it
+    held = PostureEstimator(model, 'chain', lowest_joint=floor).update(ranges)
+    assert held[:, 2].min() > floor - 0.2
+    np.testing.assert_allclose(model.section_lengths(held), model.arm_lengths)

@@ -259,10 +259,9 @@ class ChainMethod:
         pitches, cost = self._beam_starts(slews, measurements, range_sigma)
         chosen = np.zeros(cost.shape, bool)
         chosen[:, 0] = True
-        runners_up = np.argsort(np.where(chosen, np.inf, cost), axis=None)[:extra]
-        chosen.flat[runners_up] = True
-        chosen &= np.isfinite(cost)
-        chosen[:, 0] = True
+        others = np.where(chosen, np.inf, cost).ravel()
+        runners_up = np.argsort(others)[:extra]
+        chosen.flat[runners_up[np.isfinite(others[runners_up])]] = True
         slew_index, beam_index = np.nonzero(chosen)
         starts.extend(np.c_[slews[slew_index], pitches[slew_index, beam_index]])
         return starts
@@ -311,12 +310,22 @@ class ChainMethod:
             folded.append(wrap_angle(turned))
         return folded
 
+    @staticmethod
+    def _reversals(psi):
+        """The same posture with one section pointing the other way (its pitch + pi).
+
+        Its outer joints all move, and the fit re-bends the neighbours: the second fit of a
+        section whose two ends have few ranges.
+        """
+        return [wrap_angle(psi + np.pi * (np.arange(psi.size) == k))
+                for k in range(1, psi.size)]
+
     def _search(self, measurements, residuals, guess, range_sigma, finish=3, rounds=3):
         """Global fit from scratch: (psi, cost, iterations).
 
         Every start takes a few iterations; the best ``finish`` are fitted to convergence.
-        From the best, single-joint folds and the tip's other fits are tried until none
-        lowers the cost.
+        From the best, single-joint folds, single-section reversals and the tip's other fits
+        are tried until none lowers the cost.
         """
         iterations = 0
         screened = []
@@ -332,11 +341,15 @@ class ChainMethod:
         cost, psi = min(finished, key=lambda t: t[0])
         for _ in range(rounds):
             improved = False
-            for start in self._folds(psi) + self._tip_alternatives(psi, measurements,
-                                                                    range_sigma):
-                trial, trial_cost, used = self.fit(start, residuals)
+            for start in (self._folds(psi) + self._reversals(psi)
+                          + self._tip_alternatives(psi, measurements, range_sigma)):
+                # Screened like the starts: only a move already fitting better is finished.
+                trial, trial_cost, used = self.fit(start, residuals,
+                                                   max_iter=2 * self.screen_iterations)
                 iterations += used
                 if trial_cost < cost - 1e-9:
+                    trial, trial_cost, used = self.fit(trial, residuals)
+                    iterations += used
                     psi, cost, improved = trial, trial_cost, True
             if not improved:
                 break

@@ -300,8 +300,9 @@ class PostureEstimator:
         previous pose, default 0; the paper uses 1), ``anchor_weight`` (inf: anchor-anchor
         distances fixed, the default; a number: weighted), ``tol``, ``max_iter``; CEPP also
         ``slew_iterations`` (default 1) and ``clip_weight``; chain: ``sigma`` (range noise,
-        0.1 m), ``tag_sigma``, ``pitch_sigma``, ``slew_sigma``, ``nlos_threshold`` (3
-        sigma), ``tol``, ``max_iter``, ``slew_starts``; sdp: ``solver``.
+        0.1 m), ``eta``, ``tag_sigma``, ``pitch_sigma``, ``slew_sigma``, ``nlos_fraction``
+        (0.1) and ``nlos_gamma`` (1 m), ``lowest_joint`` (-0.5 m), ``tol``, ``max_iter``,
+        ``slew_starts``, ``screen_iterations``; sdp: ``solver``.
 
     Attributes
     ----------

@@ -114,7 +114,8 @@ def target_cases(runs, seed, sigma=0.1):
     """Chain RMSE / CRLB on truck pumps of 4-6 sections and 4-6 anchors, 0 or 15 % missing.
 
     Each frame is also fitted from the true angles: that local fit is what the (local) CRLB
-    describes, and a cold start that ends with a higher cost than it is a search miss.
+    describes, and a cold start that ends with a higher cost than it (by more than 0.001 in
+    the loss, half a chi-square) is a search miss.
     Where the cold start ends lower, another posture explains the ranges better than the
     one nearest the truth, and no estimator can tell them apart.
     """
@@ -147,7 +148,7 @@ def target_cases(runs, seed, sigma=0.1):
                     near, near_cost, _ = reference.fit(np.r_[slew, pitches], residuals)
                     found = np.r_[estimator.last_diagnostics['slew'],
                                   estimator.last_diagnostics['pitches']]
-                    misses += near_cost < reference.cost(found, residuals) - 1e-6
+                    misses += near_cost < reference.cost(found, residuals) - 1e-3
                     squared.append(np.mean(np.sum((estimate - joints) ** 2, axis=1)))
                     local.append(np.mean(np.sum(
                         (model.forward_kinematics(near[0], near[1:]) - joints) ** 2, axis=1)))
@@ -223,7 +224,7 @@ def targets_markdown(report):
              'cold start (target: RMSE <= 1.05 CRLB)', '',
              '"fit from the truth": the same least squares started at the true angles, the '
              'fit the local CRLB describes; "misses": frames where it ends with a lower cost '
-             'than the cold start.', '',
+             '(by more than 0.001; the loss is half a chi-square) than the cold start.', '',
              '| sections | anchors | missing | runs | RMSE [m] | fit from the truth [m] | '
              'CRLB [m] | RMSE / CRLB | misses | ms p50 |',
              '|---|---|---|---|---|---|---|---|---|---|']
