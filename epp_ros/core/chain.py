@@ -104,6 +104,7 @@ class ChainMethod:
         self.screen_iterations = int(screen_iterations)
         self.lowest_joint = float(lowest_joint)
         self._angles = None
+        self._link_loss = (None, None)      # (Residuals, its ranges' bound NLOS loss)
 
     def enough_information(self, measurements):
         """p + 1 unknowns; the tip's pitch is seen only by the tip's ranges or inclinometer."""
@@ -123,9 +124,11 @@ class ChainMethod:
         Ranges follow the NLOS mixture (on their excess, ``-scaled``); angles are Gaussian.
         """
         n = residuals.n_ranged                   # ranges come first
+        if self._link_loss[0] is not residuals:
+            self._link_loss = (residuals, self.nlos.bind(residuals.sigma[:n]))
         cost, slope = 0.5 * scaled ** 2, scaled.copy()
         nlos = np.zeros_like(scaled)
-        cost[:n], excess_slope, nlos[:n] = self.nlos.loss(-scaled[:n], residuals.sigma[:n])
+        cost[:n], excess_slope, nlos[:n] = self._link_loss[1](-scaled[:n])
         slope[:n] = -excess_slope
         # IRLS curvature slope / residual: 1 for Gaussian rows, small on a blocked link.
         large = np.abs(scaled) > 1.0

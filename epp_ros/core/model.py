@@ -71,6 +71,7 @@ class BoomModel:
         self.base = base
         self.pivot_offset = pivot_offset
         self.anchors = anchors
+        self._moves_with = np.tril(np.ones((arm_lengths.size, arm_lengths.size)))
         for array in (self.arm_lengths, self.base, self.anchors):
             array.flags.writeable = False
 
@@ -158,12 +159,13 @@ class BoomModel:
         across = np.array([-np.sin(slew), np.cos(slew), 0.0])
         reach = self.pivot_offset + np.cumsum(self.arm_lengths * np.cos(pitches))
         # d/dpitch_i of section i's vector: L_i (-sin phi_i along + cos phi_i up).
-        section = self.arm_lengths[:, None] * (-np.sin(pitches)[:, None] * along
-                                               + np.cos(pitches)[:, None] * [0.0, 0.0, 1.0])
+        section = np.empty((3, p))
+        section[:2] = -(self.arm_lengths * np.sin(pitches)) * along[:2, None]
+        section[2] = self.arm_lengths * np.cos(pitches)
         jacobian = np.zeros((p, 3, p + 1))
         jacobian[:, :, 0] = reach[:, None] * across
-        lower = np.tril(np.ones((p, p)))                  # joint k moves with sections i <= k
-        jacobian[:, :, 1:] = lower[:, None, :] * section.T[None, :, :]
+        # Joint k moves with sections i <= k.
+        jacobian[:, :, 1:] = self._moves_with[:, None, :] * section[None, :, :]
         return jacobian
 
     def ranges(self, joints):

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import expit, log_ndtr
 
-__all__ = ['NlosMixture']
+__all__ = ['NlosMixture', 'LinkLoss']
 
 _HALF_LOG_2PI = 0.5 * np.log(2.0 * np.pi)
 
@@ -61,27 +61,11 @@ class NlosMixture:
             Posterior probability that each link is NLOS.
         """
         s = np.asarray(excess, dtype=float)
-        if self.fraction == 0.0:
-            return 0.5 * s ** 2, s, np.zeros_like(s)
-        inverse_g = np.broadcast_to(np.asarray(sigma, dtype=float) / self.gamma, s.shape)
-        # At the excesses and at zero in one pass, for the shift below.
-        cost, slope, nlos = (v.reshape((2,) + s.shape) for v in self._terms(
-            np.concatenate([s.ravel(), np.zeros(s.size)]),
-            np.concatenate([inverse_g.ravel(), inverse_g.ravel()])))
-        return cost[0] - cost[1] - slope[1] * s, slope[0] - slope[1], nlos[0]
+        return self.bind(np.broadcast_to(np.asarray(sigma, dtype=float), s.shape))(s)
 
-    def _terms(self, s, inverse_g):
-        """Negative log-likelihood, its slope and the NLOS posterior, unshifted."""
-        z = s - inverse_g
-        log_cdf = log_ndtr(z)
-        los = np.log1p(-self.fraction) - 0.5 * s ** 2
-        # Exponentially modified Gaussian, scaled by sqrt(2 pi) like the Gaussian term.
-        blocked = (np.log(self.fraction) + _HALF_LOG_2PI + np.log(inverse_g)
-                   + 0.5 * inverse_g ** 2 - inverse_g * s + log_cdf)
-        nlos = expit(blocked - los)
-        mills = np.exp(-0.5 * z ** 2 - _HALF_LOG_2PI - log_cdf)         # pdf(z) / cdf(z)
-        slope = (1.0 - nlos) * s + nlos * (inverse_g - mills)
-        return -np.logaddexp(los, blocked), slope, nlos
+    def bind(self, sigma):
+        """:meth:`loss` for ranges of fixed sigmas (any shape), its constants computed once."""
+        return LinkLoss(self, sigma)
 
     def approximate_loss(self, excess, sigma):
         """A cheap stand-in for :meth:`loss` (cost only), for scoring many candidates.
@@ -97,3 +81,38 @@ class NlosMixture:
         offset = (np.log(self.fraction / (1.0 - self.fraction)) + _HALF_LOG_2PI
                   + np.log(inverse_g) + 0.5 * inverse_g ** 2)
         return np.where(s > 0.0, np.minimum(0.5 * s ** 2, inverse_g * s - offset), 0.5 * s ** 2)
+
+
+class LinkLoss:
+    """:meth:`NlosMixture.loss` for links of given sigmas, called on their excesses.
+
+    Per-link constants (and the loss's value and slope at zero) are computed once, which
+    matters inside an iterative fit where the same links are evaluated many times.
+    """
+
+    def __init__(self, mixture, sigma):
+        self.gaussian = mixture.fraction == 0.0
+        if self.gaussian:
+            return
+        self.inverse_g = np.asarray(sigma, dtype=float) / mixture.gamma
+        self.los_offset = np.log1p(-mixture.fraction)
+        self.blocked_offset = (np.log(mixture.fraction) + _HALF_LOG_2PI
+                               + np.log(self.inverse_g) + 0.5 * self.inverse_g ** 2)
+        self.zero_cost, self.zero_slope = 0.0, 0.0
+        self.zero_cost, self.zero_slope, _ = self(np.zeros_like(self.inverse_g))
+
+    def __call__(self, excess):
+        """(cost, slope, nlos) of excesses shaped like the sigmas; see :meth:`NlosMixture.loss`."""
+        s = np.asarray(excess, dtype=float)
+        if self.gaussian:
+            return 0.5 * s ** 2, s, np.zeros_like(s)
+        z = s - self.inverse_g
+        log_cdf = log_ndtr(z)
+        los = self.los_offset - 0.5 * s ** 2
+        # Exponentially modified Gaussian, scaled by sqrt(2 pi) like the Gaussian term.
+        blocked = self.blocked_offset - self.inverse_g * s + log_cdf
+        nlos = expit(blocked - los)
+        mills = np.exp(-0.5 * z ** 2 - _HALF_LOG_2PI - log_cdf)         # pdf(z) / cdf(z)
+        slope = (1.0 - nlos) * s + nlos * (self.inverse_g - mills) - self.zero_slope
+        cost = -np.logaddexp(los, blocked) - self.zero_cost - self.zero_slope * s
+        return cost, slope, nlos
