@@ -12,7 +12,7 @@ links. Its negative log-likelihood, as a loss on the excess ``e = measured - d``
 Minimising it is the maximum-likelihood estimate under that model (an exponentially
 modified Gaussian mixture), rather than a threshold tuned by hand, with one change: the
 likelihood peaks slightly past zero excess, so the loss is tilted by its slope at zero
-(about 1 % of sigma per sigma) for exact ranges to be fitted exactly.
+(it moves a fit by about 1 % of sigma) for exact ranges to be fitted exactly.
 """
 from dataclasses import dataclass
 
