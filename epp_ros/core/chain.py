@@ -231,12 +231,8 @@ class ChainMethod:
                              + np.sin(options)[:, None] * up)                 # (s, c, 3)
             ends = joints[:, :, None, :] + step[:, None, :, :]                # (s, w, c, 3)
             added = np.where(ends[..., 2] < self.lowest_joint, np.inf, 0.0)
-            valid = np.isfinite(measurements.ranges[k])
-            if valid.any():
-                distance = np.linalg.norm(ends[..., None, :] - self.model.anchors[valid], axis=-1)
-                sigma = range_sigma[k, valid]
-                excess = (measurements.ranges[k, valid] - distance) / sigma
-                added = added + self.nlos.approximate_loss(excess, sigma).sum(axis=-1)
+            if np.isfinite(measurements.ranges[k]).any():
+                added = added + self._tag_loss(k, ends, measurements, range_sigma)
             elif options.size > 1:
                 added = added + np.abs(options)     # unseen section: prefer level
             total = (cost[:, :, None] + added).reshape(slews.size, -1)
@@ -249,6 +245,14 @@ class ChainMethod:
                                           rows, choice][..., None]], axis=-1)
             cost = total[rows, keep]
         return pitches, cost
+
+    def _tag_loss(self, k, ends, measurements, range_sigma):
+        """Approximate NLOS loss of tag ``k``'s measured ranges at candidate joints (..., 3)."""
+        valid = np.isfinite(measurements.ranges[k])
+        distance = np.linalg.norm(ends[..., None, :] - self.model.anchors[valid], axis=-1)
+        sigma = range_sigma[k, valid]
+        excess = (measurements.ranges[k, valid] - distance) / sigma
+        return self.nlos.approximate_loss(excess, sigma).sum(axis=-1)
 
     def _cold_starts(self, measurements, guess, range_sigma, extra=16):
         """Starting angles: the prior's, each slew's best chain, and the next best overall."""
@@ -280,16 +284,13 @@ class ChainMethod:
         if not valid.any() or np.isfinite(measurements.pitches[-1]):
             return []
         grid = np.linspace(-np.pi, np.pi, candidates, endpoint=False)
-        slew = psi[0]
-        hinge = self.model.forward_kinematics(slew, psi[1:])[-2] if psi.size > 2 \
-            else self.model.pivot(slew)
-        ends = hinge + self.model.arm_lengths[-1] * (
-            np.cos(grid)[:, None] * [np.cos(slew), np.sin(slew), 0.0]
+        tip = self.model.n_sections - 1
+        hinge = self.model.forward_kinematics(psi[0], psi[1:])[tip - 1] if tip \
+            else self.model.pivot(psi[0])
+        ends = hinge + self.model.arm_lengths[tip] * (
+            np.cos(grid)[:, None] * [np.cos(psi[0]), np.sin(psi[0]), 0.0]
             + np.sin(grid)[:, None] * [0.0, 0.0, 1.0])
-        distance = np.linalg.norm(ends[:, None, :] - self.model.anchors[valid], axis=-1)
-        sigma = range_sigma[-1, valid]
-        cost = self.nlos.approximate_loss((measurements.ranges[-1, valid] - distance) / sigma,
-                                          sigma).sum(axis=1)
+        cost = self._tag_loss(tip, ends, measurements, range_sigma)
         minima = np.flatnonzero((cost <= np.roll(cost, 1)) & (cost <= np.roll(cost, -1)))
         far = np.abs(wrap_angle(grid[minima] - psi[-1])) > 3 * (2 * np.pi / candidates)
         minima = minima[far][np.argsort(cost[minima[far]])][:most]

@@ -29,6 +29,7 @@ from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
 from epp_ros.core import RANGE_METHODS, PostureEstimator
+from epp_ros.core.estimators import accepted_options
 from epp_ros.core.nlos import NlosMixture
 from epp_ros.health import Thresholds, assess, grade
 from epp_ros.nodes.common import (POSTURE_QOS, RANGES_INPUT_QOS, StartupError, declare,
@@ -63,7 +64,7 @@ class PostureEstimatorNode(Node):
         if self.reset_after < 1:
             raise StartupError('reset_after_failures: must be >= 1')
         noise = {'sigma': declare(self, 'range_sigma', 0.1,
-                                  'UWB range standard deviation, m (chain).'),
+                                  'UWB range standard deviation, m (methods that weigh it).'),
                  'nlos_fraction': declare(self, 'nlos_fraction', 0.1,
                                           'Prior probability that a range is NLOS (chain).'),
                  'nlos_gamma': declare(self, 'nlos_gamma', 1.0, 'Mean NLOS excess, m (chain).')}
@@ -75,8 +76,9 @@ class PostureEstimatorNode(Node):
             raise StartupError(str(exc)) from None
         self.model = self.config.model()
         try:
-            self.estimator = PostureEstimator(self.model, method,
-                                              **(noise if method == 'chain' else {}))
+            self.estimator = PostureEstimator(self.model, method, **{
+                name: value for name, value in noise.items()
+                if name in accepted_options(method)})
         except ImportError as exc:
             raise StartupError(f'method: {exc}') from None
         self.lengths = self.model.arm_lengths
