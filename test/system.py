@@ -121,8 +121,16 @@ def poses_to_joints(message):
     return np.array([[p.position.x, p.position.y, p.position.z] for p in message.poses[1:]])
 
 
-def truth_window(listener):
-    """Stamps between which truth was received (earlier truth was published unheard)."""
+def truth_window(listener, covering=None, timeout=10.0):
+    """Stamps between which truth was received (earlier truth was published unheard).
+
+    With ``covering`` (seconds), first wait until truth reaches that stamp: a restarted
+    emulator's truth publisher must be discovered again, which under load can take longer
+    than its ranges take to arrive through the already running driver.
+    """
+    if covering is not None:
+        listener.spin_until(lambda: bool(listener.truth) and to_seconds(
+            listener.truth[-1].header.stamp) >= covering, timeout)
     listener.spin_until(lambda: False, 0.5)      # the truth of the newest cycle comes last
     return (to_seconds(listener.truth[0].header.stamp) + 0.15,
             to_seconds(listener.truth[-1].header.stamp))

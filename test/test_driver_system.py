@@ -21,7 +21,8 @@ def check_ranges_against_truth(listener, config, since, tolerance):
     """Every tag's ranges in every frame must match some true posture's (no noise) within
     the format's precision, and frames carry the configured names. (Tags on separate ports
     are not synchronised: one frame may hold rows of adjacent cycles.)"""
-    first, last = truth_window(listener)
+    checked = listener.ranges[min(since + 2, len(listener.ranges) - 1)]
+    first, last = truth_window(listener, covering=to_seconds(checked.header.stamp))
     model = config.model()
     true_ranges = np.array([model.ranges(poses_to_joints(m)) for m in listener.truth])
     frames = [f for f in listener.ranges[since:]
