@@ -1,7 +1,8 @@
 import numpy as np
 
-from epp_ros.core.edm import (align_to_known, centering_matrix, classical_mds,
-                              project_edm_cone, rank_penalty, squared_distances)
+from epp_ros.core.edm import (align_to_known, centering_matrix, classical_mds, double_centre,
+                              project_edm_cone, rank_penalty, squared_distances,
+                              symmetric_eigh)
 
 
 def random_rotation(rng, dim, reflect=False):
@@ -12,6 +13,20 @@ def random_rotation(rng, dim, reflect=False):
     if reflect:
         q[:, 0] *= -1
     return q
+
+
+def test_symmetric_eigh_and_double_centre_match_their_definitions():
+    rng = np.random.default_rng(3)
+    matrix = rng.standard_normal((7, 7))
+    matrix = matrix + matrix.T
+    eigenvalues, eigenvectors = symmetric_eigh(matrix)
+    np.testing.assert_allclose(eigenvalues, np.linalg.eigvalsh(matrix), atol=1e-12)
+    assert np.all(np.diff(eigenvalues) >= 0)
+    np.testing.assert_allclose(eigenvectors @ np.diag(eigenvalues) @ eigenvectors.T, matrix,
+                               atol=1e-12)
+    np.testing.assert_allclose(eigenvectors.T @ eigenvectors, np.eye(7), atol=1e-12)
+    j = centering_matrix(np.ones(7))
+    np.testing.assert_allclose(double_centre(matrix), j @ matrix @ j, atol=1e-12)
 
 
 def test_squared_distances_known_values():

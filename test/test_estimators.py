@@ -117,6 +117,10 @@ def test_unknown_method_or_option_raises():
     with pytest.raises(ValueError, match='slew_iterations'):
         PostureEstimator(truck_pump(), 'epp2', slew_iterations=2)
     PostureEstimator(truck_pump(), 'cepp', slew_iterations=2, prior_weight=1.0)
+    with pytest.raises(ValueError, match='predict_slew'):
+        PostureEstimator(truck_pump(), 'cepp', predict_slew='false')
+    with pytest.raises(ValueError, match='slew_iterations'):
+        PostureEstimator(truck_pump(), 'cepp', slew_iterations=-1)
 
 
 @pytest.mark.parametrize('method', sorted(RANGE_METHODS))
@@ -182,13 +186,13 @@ def test_cepp_follows_a_slewing_boom_under_noise():
     trajectory = working_cycle(model, duration=20.0, rate=5.0, rng=np.random.default_rng(10))
     rng = np.random.default_rng(11)
     errors = {}
-    for iterations in (0, 2):
-        estimator = PostureEstimator(model, 'cepp', slew_iterations=iterations)
+    for predict in (False, True):
+        estimator = PostureEstimator(model, 'cepp', predict_slew=predict)
         sq = [np.mean(np.sum((estimator.update(RangeNoise(sigma=0.05).apply(
             model.ranges(joints), rng)[0]) - joints) ** 2, axis=1))
             for joints in trajectory.joints]
-        errors[iterations] = np.sqrt(np.mean(sq))
-    assert errors[2] < 0.5 < 5.0 < errors[0]
+        errors[predict] = np.sqrt(np.mean(sq))
+    assert errors[True] < 0.5 < 5.0 < errors[False]
 
 
 def load_semiphysical():

@@ -86,6 +86,27 @@ def test_subproblem_satisfies_kkt(seed):
     assert abs(np.sum(z * y_mat)) <= 1e-8
 
 
+def test_newton_matrix_is_the_jacobian_of_the_dual_gradient():
+    """Away from zero or repeated eigenvalues the generalized Hessian is the true one."""
+    rng = np.random.default_rng(12)
+    n = 8
+    target = rng.standard_normal((n, n)) * 3
+    target = target + target.T
+    q = np.sqrt(rng.uniform(0.5, 2.0, n))
+    rows, cols = _constraint_operator(n, np.array([[0, 1], [2, 5], [3, 4], [1, 6]]))
+    projector = _Projector(q, rows, cols)
+    values = rng.standard_normal(rows.size)
+    y = rng.standard_normal(rows.size)
+    _, gradient, _, eigenvalues, eigenvectors = projector.evaluate(target, values, y)
+    assert np.min(np.abs(eigenvalues[np.abs(eigenvalues) > 1e-9])) > 1e-3
+    step = 1e-6
+    numeric = np.stack([(projector.evaluate(target, values, y + step * e)[1]
+                         - projector.evaluate(target, values, y - step * e)[1]) / (2 * step)
+                        for e in np.eye(rows.size)], axis=1)
+    np.testing.assert_allclose(projector.newton_matrix(eigenvalues, eigenvectors, 0.0),
+                               numeric, atol=1e-6)
+
+
 def test_subproblem_newton_converges_fast():
     rng = np.random.default_rng(11)
     _, noisy = noisy_edm(rng, 10, 3, 5.0)

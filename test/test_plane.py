@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from epp_ros.core.plane import fit_slew, from_plane, project_ranges, to_plane
+from epp_ros.core.plane import (fit_plane_to_ranges, fit_slew, from_plane, project_ranges,
+                                to_plane)
 
 BASE = np.array([1.0, -2.0, 3.5])
 
@@ -43,3 +44,32 @@ def test_range_projection_clips_impossible_ranges_and_keeps_missing():
     squared, clipped = project_ranges(ranges, anchors, np.zeros(3), 0.0)
     assert squared[0, 0] == 0.0 and clipped[0, 0]
     assert np.isnan(squared[0, 1]) and not clipped[0, 1]
+
+
+@pytest.mark.parametrize('with_lengths', [False, True])
+def test_plane_fit_recovers_the_slew_of_exact_ranges(with_lengths):
+    rng = np.random.default_rng(2)
+    slew = 2.9
+    coords = np.cumsum(rng.uniform(3, 6, (4, 2)), axis=0)          # a chain rising outward
+    pivot = np.array([0.0, BASE[2]])
+    lengths = np.linalg.norm(np.diff(np.vstack([pivot, coords]), axis=0), axis=1)
+    anchors = np.column_stack([rng.uniform(-6, 6, (5, 2)), rng.uniform(0, 4, 5)])
+    ranges = np.linalg.norm(from_plane(coords, BASE, slew)[:, None] - anchors[None], axis=-1)
+    ranges[0, :3] = np.nan                     # a tag with two ranges still fits
+    start = coords + rng.normal(0, 0.3, coords.shape)
+    fitted_slew, fitted = fit_plane_to_ranges(
+        start, ranges, anchors, BASE, slew - 0.05,
+        *((pivot, lengths) if with_lengths else ()), max_iter=20, tol=1e-12)
+    assert abs(fitted_slew - slew) < 1e-9
+    np.testing.assert_allclose(fitted, coords, atol=1e-7)
+
+
+def test_plane_fit_holds_a_tag_without_ranges():
+    anchors = np.array([[5.0, 1.0, 0.0], [-3.0, 4.0, 1.0], [0.0, -5.0, 2.0], [2.0, 2.0, 6.0]])
+    coords = np.array([[4.0, 6.0], [9.0, 8.0]])
+    ranges = np.linalg.norm(from_plane(coords, BASE, 0.4)[:, None] - anchors[None], axis=-1)
+    ranges[1] = np.nan
+    start = coords + [[0.2, -0.1], [1.0, 1.0]]
+    fitted_slew, fitted = fit_plane_to_ranges(start, ranges, anchors, BASE, 0.35, max_iter=20)
+    assert np.all(np.isfinite(fitted)) and np.isfinite(fitted_slew)
+    np.testing.assert_allclose(fitted[1], start[1])

@@ -47,6 +47,8 @@ def test_bench_option_parsing():
     assert bench.parse_option('anchor_weight=inf')[1] == float('inf')
     assert bench.parse_option('slew_iterations=3') == ('slew_iterations', 3)
     assert bench.parse_option('tol=1e-9') == ('tol', 1e-9)
+    assert bench.parse_option('predict_slew=false') == ('predict_slew', False)
+    assert bench.parse_option('predict_slew=True') == ('predict_slew', True)
     with pytest.raises(argparse.ArgumentTypeError):
         bench.parse_option('novalue')
 

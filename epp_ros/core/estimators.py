@@ -22,7 +22,7 @@ from .edm import align_to_known, squared_distances
 from .measurements import Measurements, plausible_limits
 from .multilateration import intersect_spheres, srls
 from .nedm import nearest_edm
-from .plane import fit_slew, from_plane, project_ranges, to_plane
+from .plane import fit_plane_to_ranges, fit_slew, from_plane, project_ranges, to_plane
 
 __all__ = ['PostureEstimator', 'METHODS', 'RANGE_METHODS', 'cold_start_guess']
 
@@ -199,17 +199,28 @@ class EPP2(EPP1):
 class CEPP(_EDMMethod):
     """EPP2 in the boom's vertical plane (the paper's CEPP).
 
-    The plane comes from the prior (previous estimate or cold start). Then, beyond the
-    paper, the slew is refined against the 3-D ranges and the plane problem re-solved until
-    the slew settles, so that a slewing boom is not held in last frame's plane.
+    The paper takes the plane from the prior (previous estimate or cold start), so the plane
+    never turns. Beyond the paper, the plane is first fitted to this frame's 3-D ranges
+    (``predict_slew``: Gauss-Newton on the slew and free in-plane tags, from the prior);
+    ``slew_iterations`` more times the slew is then refined from the solution and the plane
+    problem re-solved.
     """
 
     rank = 2
+    #: Gauss-Newton steps when predicting the slew: from last frame's plane, three converge
+    #: it far below what the ranges resolve.
+    PREDICTION_STEPS = 3
 
-    def __init__(self, model, clip_weight=0.1, slew_iterations=1, slew_tol=1e-6, **options):
+    def __init__(self, model, clip_weight=0.1, predict_slew=True, slew_iterations=0,
+                 slew_tol=1e-6, **options):
         super().__init__(model, **options)
         self.clip_weight = float(clip_weight)
+        if not isinstance(predict_slew, (bool, np.bool_)):
+            raise ValueError(f'predict_slew: must be true or false, got {predict_slew!r}')
+        self.predict_slew = bool(predict_slew)
         self.slew_iterations = int(slew_iterations)
+        if self.slew_iterations < 0:
+            raise ValueError(f'slew_iterations: must be >= 0, got {slew_iterations}')
         self.slew_tol = float(slew_tol)
 
     def _solve_in_plane(self, measurements, prior, slew):
@@ -229,9 +240,12 @@ class CEPP(_EDMMethod):
     def solve(self, measurements, prior):
         ranges = measurements.ranges
         slew = fit_slew(prior, self.model.base)
-        if self.slew_iterations:
-            # Move last frame's plane to this frame's ranges before the first solve.
-            slew += slew_step(self.model, to_plane(prior, self.model.base, slew), ranges, slew)
+        if self.predict_slew:
+            predicted, _ = fit_plane_to_ranges(
+                to_plane(prior, self.model.base, slew), ranges, self.model.anchors,
+                self.model.base, slew, (self.model.pivot_offset, self.model.base[2]),
+                self.model.arm_lengths, self.PREDICTION_STEPS, self.slew_tol)
+            slew = predicted if np.isfinite(predicted) else slew
         totals = {'iterations': 0, 'inner_iterations': 0}
         for attempt in range(self.slew_iterations + 1):
             coords, info = self._solve_in_plane(measurements, prior, slew)
@@ -299,7 +313,9 @@ class PostureEstimator:
         Passed to the method: ``prior_weight`` (weight of tag-tag distances from the
         previous pose, default 0; the paper uses 1), ``anchor_weight`` (inf: anchor-anchor
         distances fixed, the default; a number: weighted), ``tol``, ``max_iter``; CEPP also
-        ``slew_iterations`` (default 1) and ``clip_weight``; chain: ``sigma`` (range noise,
+        ``predict_slew`` (default true; false: the paper's plane from the previous pose),
+        ``slew_iterations`` (re-solves after refining the slew, default 0), ``slew_tol`` and
+        ``clip_weight``; chain: ``sigma`` (range noise,
         0.1 m), ``eta``, ``tag_sigma``, ``pitch_sigma``, ``slew_sigma``, ``nlos_fraction``
         (0.1) and ``nlos_gamma`` (1 m), ``lowest_joint`` (-0.5 m), ``tol``, ``max_iter``,
         ``slew_starts``, ``screen_iterations``; sdp: ``solver``.

@@ -19,8 +19,9 @@ Jacobian; our problems have n <= ~20 points.
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import lapack
 
-from .edm import centering_matrix, classical_mds, rank_penalty
+from .edm import centering_matrix, classical_mds, rank_penalty, symmetric_eigh
 
 __all__ = ['nearest_edm', 'project_constrained_edm', 'NearestEDMResult', 'ProjectionResult']
 
@@ -75,6 +76,10 @@ class _Projector:
         self.gram = np.where(rows == cols, 1.0, 0.5)     # <A_s, A_t>: diagonal
         self.flat = rows * self.n + cols
         self.flat_transposed = cols * self.n + rows
+        self.diagonal = np.arange(rows.size) * (rows.size + 1)   # of the (k, k) Hessian
+        self.upper_a, self.upper_b = np.triu_indices(self.n)
+        # -1/4 of each (a, b) term of the Hessian, counted twice off the diagonal.
+        self.pair_factor = np.where(self.upper_a == self.upper_b, -0.25, -0.5)
 
     def adjoint(self, y):
         """``A*(y) = sum_s y_s A_s`` as a symmetric (n, n) matrix (pairs are unique)."""
@@ -87,27 +92,37 @@ class _Projector:
         """Dual value, gradient, primal projection and the eigensystem behind it."""
         z = target + self.adjoint(y)
         centred = self.centering @ z @ self.centering
-        eigenvalues, eigenvectors = np.linalg.eigh(centred)
+        eigenvalues, eigenvectors = symmetric_eigh(centred)
         projection = z - (eigenvectors * np.maximum(eigenvalues, 0.0)) @ eigenvectors.T
         value = 0.5 * np.sum(projection * projection) - values @ y
         gradient = projection[self.rows, self.cols] - values
         return value, gradient, projection, eigenvalues, eigenvectors
 
     def newton_matrix(self, eigenvalues, eigenvectors, regularisation):
-        """Generalized Hessian ``A V A*`` of the dual (+ regularisation), (k, k)."""
-        positive = np.maximum(eigenvalues, 0.0)
-        diff = eigenvalues[:, None] - eigenvalues[None, :]
+        """Generalized Hessian ``A V A*`` of the dual (+ regularisation), (k, k).
+
+        Sums over the eigenvector pairs (a, b) run over a <= b only: both factors are
+        symmetric in (a, b).
+        """
+        first, second = eigenvalues[self.upper_a], eigenvalues[self.upper_b]
+        diff = first - second
         close = np.abs(diff) <= 1e-14
         # Clarke Jacobian of Pi_{S+}: first divided differences of max(., 0).
-        omega = np.divide(positive[:, None] - positive[None, :], diff,
-                          out=((eigenvalues[:, None] > 0) & (eigenvalues[None, :] > 0))
-                          .astype(float), where=~close)
+        omega = np.divide(np.maximum(first, 0.0) - np.maximum(second, 0.0), diff,
+                          out=((first > 0) & (second > 0)).astype(float), where=~close)
         basis = self.centering @ eigenvectors
-        outer = basis[self.rows][:, :, None] * basis[self.cols][:, None, :]
-        blocks = (outer + outer.transpose(0, 2, 1)).reshape(self.rows.size, -1)
-        hessian = -0.25 * (blocks * omega.reshape(-1)) @ blocks.T
-        hessian[np.diag_indices_from(hessian)] += self.gram + regularisation
+        left, right = basis[self.rows], basis[self.cols]
+        blocks = (left[:, self.upper_a] * right[:, self.upper_b]
+                  + right[:, self.upper_a] * left[:, self.upper_b])
+        hessian = (blocks * (omega * self.pair_factor)) @ blocks.T
+        hessian.flat[self.diagonal] += self.gram + regularisation
         return hessian
+
+    def newton_step(self, eigenvalues, eigenvectors, gradient, regularisation):
+        """Solve ``(A V A* + reg I) step = -gradient``: positive definite, so by Cholesky."""
+        hessian = self.newton_matrix(eigenvalues, eigenvectors, regularisation)
+        _, step, info = lapack.dposv(hessian, -gradient)
+        return step if info == 0 else np.linalg.lstsq(hessian, -gradient, rcond=None)[0]
 
     def __call__(self, target, values, multipliers=None, tol=1e-10, max_iter=50):
         y = np.zeros(self.rows.size) if multipliers is None else multipliers.copy()
@@ -117,8 +132,7 @@ class _Projector:
         while np.linalg.norm(gradient) > tol and iterations < max_iter:
             iterations += 1
             regularisation = min(1e-2, float(np.linalg.norm(gradient))) + 1e-12
-            step = np.linalg.solve(self.newton_matrix(eigenvalues, eigenvectors,
-                                                      regularisation), -gradient)
+            step = self.newton_step(eigenvalues, eigenvectors, gradient, regularisation)
             slope = gradient @ step
             if slope >= 0:                            # not a descent direction: fall back
                 step, slope = -gradient, -gradient @ gradient
@@ -171,7 +185,7 @@ def project_constrained_edm(target, q, rows, cols, values, multipliers=None, tol
 
 def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1e-7,
                 rank_tol=1e-8, max_iter=300, tau=0.1, penalty_parameter=None,
-                inner_tol=1e-12):
+                inner_tol=1e-9):
     """Nearest EDM of embedding dimension ``rank`` to a partly known squared-distance matrix.
 
     Parameters
@@ -201,7 +215,8 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
         [1, 1e3] in the scaled problem (1 from a warm start); multiplied by 4 while the
         rank error is large and by 1.2 while it is above ``rank_tol``.
     inner_tol : float
-        Relative tolerance of the convex subproblem.
+        Relative tolerance of the convex subproblem: fixed entries are held to about this
+        fraction of the largest squared distance (1e-9: under a micrometre on a 40 m boom).
 
     Returns
     -------
@@ -254,67 +269,74 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
     centering = centering_matrix(np.ones(n))
     state = {'multipliers': None, 'inner_iterations': 0, 'kkt_residual': 0.0}
 
-    def mm_step(edm, c):
-        """Minimiser of the majorant of f + c p at ``edm`` over the constraint set."""
-        leading = rank_penalty(edm, rank)[2] if c > 0 else np.zeros((n, 0))
-        basis = centering @ leading
+    def point(edm):
+        """An iterate with its rank penalty, trace and leading eigenvectors (one eigh)."""
+        return edm, rank_penalty(edm, rank)
+
+    def mm_step(current, c):
+        """Minimiser of the majorant of f + c p at ``current`` over the constraint set."""
+        edm, (_, _, leading) = current
+        basis = centering @ leading if c > 0 else np.zeros((n, 0))
         complement = centering - basis @ basis.T          # J (I - U) J
         shifted = edm - (sq_weights * (edm - goal) - c * complement) / w_outer
         projected = projector(shifted * q_outer, constraint_values, state['multipliers'],
                               tol=inner_tol)
         state['multipliers'] = projected.multipliers
         state['inner_iterations'] += projected.iterations
-        return projected.matrix / q_outer, projected.kkt_residual
+        return point(projected.matrix / q_outer), projected.kkt_residual
 
-    def squarem_step(edm, c):
+    def squarem_step(current, c):
         """One SQUAREM cycle (Varadhan & Roland 2008) on the MM map, never worse than 2 steps.
 
         The MM map converges linearly and slowly along weakly determined directions (zero
         or unequal weights); squared extrapolation removes most of that tail.
         """
-        first, _ = mm_step(edm, c)
+        first, _ = mm_step(current, c)
         second, residual = mm_step(first, c)
-        step, curvature = first - edm, second - 2.0 * first + edm
+        step, curvature = first[0] - current[0], second[0] - 2.0 * first[0] + current[0]
         norm_curvature = np.linalg.norm(curvature)
         if norm_curvature > 1e-15:
             alpha = min(-np.linalg.norm(step) / norm_curvature, -1.0)
             candidate, candidate_residual = mm_step(
-                edm - 2.0 * alpha * step + alpha ** 2 * curvature, c)
+                point(current[0] - 2.0 * alpha * step + alpha ** 2 * curvature), c)
             if merit(candidate, c) <= merit(second, c):
                 second, residual = candidate, candidate_residual
         state['kkt_residual'] = residual          # of the iterate kept
         return second, 3 if norm_curvature > 1e-15 else 2
 
-    def merit(edm, c):
-        return objective(edm) + c * rank_penalty(edm, rank)[0]
+    def merit(current, c):
+        return objective(current[0]) + c * current[1][0]
 
     if initial is None:
         # Start from the convex relaxation (c = 0), with c set by its rank error.
-        edm, _ = squarem_step(np.where(known, goal, 0.0), 0.0)
-        penalty, trace, _ = rank_penalty(edm, rank)
-        c = float(np.clip(penalty, 1.0, 1e3))
+        current, _ = squarem_step(point(np.where(known, goal, 0.0)), 0.0)
+        c = float(np.clip(current[1][0], 1.0, 1e3))
     else:
         # A warm start is already of rank r: penalise from it directly.
-        edm = np.asarray(initial, dtype=float) / scale
-        penalty, trace, _ = rank_penalty(edm, rank)
+        current = point(np.asarray(initial, dtype=float) / scale)
         c = 1.0
     if penalty_parameter is not None:
         c = float(penalty_parameter) / scale
-    rank_error = penalty / trace if trace > 0 else 0.0
+
+    def relative_rank_error(current):
+        penalty, trace, _ = current[1]
+        return penalty / trace if trace > 0 else 0.0
+
+    rank_error = relative_rank_error(current)
     converged = initial is None and rank_error <= rank_tol
     iterations = 0
     while not converged and iterations < max_iter:
-        previous = np.sqrt(merit(edm, c))
-        edm, steps = squarem_step(edm, c)
+        previous = np.sqrt(merit(current, c))
+        current, steps = squarem_step(current, c)
         iterations += steps
-        penalty, trace, _ = rank_penalty(edm, rank)
-        rank_error = penalty / trace if trace > 0 else 0.0
-        relative_change = abs(previous - np.sqrt(merit(edm, c))) / max(1.0, previous)
+        rank_error = relative_rank_error(current)
+        relative_change = abs(previous - np.sqrt(merit(current, c))) / max(1.0, previous)
         if rank_error <= rank_tol and relative_change <= tol:
             converged = True
         elif rank_error > rank_tol:
             c = min(c * (4.0 if rank_error > 0.1 * rank else 1.2), 1e12)
 
+    edm = current[0]
     edm = 0.5 * (edm + edm.T) * scale
     np.fill_diagonal(edm, 0.0)
     return NearestEDMResult(

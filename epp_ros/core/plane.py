@@ -6,7 +6,7 @@ direction ``u = (cos theta, sin theta, 0)``. In-plane coordinates of a point x a
 """
 import numpy as np
 
-__all__ = ['fit_slew', 'to_plane', 'from_plane', 'project_ranges']
+__all__ = ['fit_slew', 'fit_plane_to_ranges', 'to_plane', 'from_plane', 'project_ranges']
 
 
 def fit_slew(points, base):
@@ -80,3 +80,83 @@ def project_ranges(ranges, anchors, base, slew):
     with np.errstate(invalid='ignore'):
         clipped = squared < 0
     return np.where(clipped, 0.0, squared), clipped
+
+
+def fit_plane_to_ranges(coords, ranges, anchors, base, slew, pivot=None, arm_lengths=None,
+                        max_iter=5, tol=1e-9):
+    """Slew and in-plane tag positions that best fit 3-D ranges, by Gauss-Newton.
+
+    Least squares ``sum (||w_k - a_j|| - delta_kj)^2`` over the valid ranges, where
+    ``w_k = from_plane(coords[k], base, slew)``, plus, given ``arm_lengths``, the squared
+    misfits of the section lengths (pivot to tag 1, tag k-1 to tag k). The slew and every
+    tag's (reach, z) are free. A small ridge holds directions the data leave open.
+
+    Parameters
+    ----------
+    coords : ndarray, shape (p, 2)
+        Starting in-plane positions (reach, z), metres, e.g. the previous pose's.
+    ranges : ndarray, shape (p, m)
+        Measured tag-anchor distances, metres, NaN where missing.
+    anchors : ndarray, shape (m, 3)
+    base : ndarray, shape (3,)
+    slew : float
+        Starting slew, radians.
+    pivot : ndarray, shape (2,), optional
+        In-plane position of the boom's pivot; needed with ``arm_lengths``.
+    arm_lengths : ndarray, shape (p,), optional
+    max_iter : int
+    tol : float
+        Stop when the slew step is below this, radians.
+
+    Returns
+    -------
+    slew : float
+        Radians (not wrapped).
+    coords : ndarray, shape (p, 2)
+    """
+    coords = np.array(coords, dtype=float)
+    anchors = np.asarray(anchors, dtype=float)
+    base = np.asarray(base, dtype=float)
+    valid = np.isfinite(ranges)
+    measured = np.where(valid, ranges, 0.0)
+    p = coords.shape[0]
+    for _ in range(max_iter):
+        direction = np.array([np.cos(slew), np.sin(slew), 0.0])
+        tangent = np.array([-np.sin(slew), np.cos(slew), 0.0])
+        difference = from_plane(coords, base, slew)[:, None, :] - anchors[None, :, :]
+        distance = np.maximum(np.linalg.norm(difference, axis=-1), 1e-9)
+        unit = difference / distance[..., None] * valid[..., None]      # (p, m, 3)
+        # Rows: ranges (p, m), columns: slew, then (reach, z) of each tag.
+        jacobian = np.zeros(valid.shape + (1 + 2 * p,))
+        jacobian[..., 0] = (unit @ tangent) * coords[:, 0, None]
+        tags = np.arange(p)
+        jacobian[tags, :, 1 + 2 * tags] = unit @ direction
+        jacobian[tags, :, 2 + 2 * tags] = unit[..., 2]
+        jacobian = jacobian.reshape(-1, 1 + 2 * p)
+        residual = ((distance - measured) * valid).reshape(-1)
+        if arm_lengths is not None:
+            jacobian, residual = _with_sections(jacobian, residual, coords, pivot, arm_lengths)
+        normal = jacobian.T @ jacobian
+        normal[np.diag_indices_from(normal)] += 1e-9 + 1e-9 * np.trace(normal)
+        step = -np.linalg.solve(normal, jacobian.T @ residual)
+        slew += step[0]
+        coords += step[1:].reshape(p, 2)
+        if abs(step[0]) <= tol:
+            break
+    return float(slew), coords
+
+
+def _with_sections(jacobian, residual, coords, pivot, arm_lengths):
+    """Append the section-length residuals and their Jacobian rows."""
+    p = coords.shape[0]
+    chain = np.vstack([pivot, coords])
+    section = np.diff(chain, axis=0)                                    # (p, 2)
+    length = np.maximum(np.linalg.norm(section, axis=1), 1e-9)
+    unit = section / length[:, None]
+    rows = np.zeros((p, jacobian.shape[1]))
+    tags = np.arange(p)
+    rows[tags, 1 + 2 * tags] = unit[:, 0]
+    rows[tags, 2 + 2 * tags] = unit[:, 1]
+    rows[tags[1:], 2 * tags[1:] - 1] = -unit[1:, 0]
+    rows[tags[1:], 2 * tags[1:]] = -unit[1:, 1]
+    return np.vstack([jacobian, rows]), np.concatenate([residual, length - arm_lengths])

@@ -15,7 +15,7 @@ Suites:
             Table 1, Table 3 (NLOS), xie3dim, tracking, and the chain's targets. Writes
             paper.md, paper.json and PNG plots into --out. Not part of the default run.
 Every table ends with the commit it was measured on. ``--option KEY=VALUE`` passes an
-option to the estimators (e.g. ``anchor_weight=inf``, ``slew_iterations=0``).
+option to the estimators (e.g. ``anchor_weight=inf``, ``predict_slew=false``).
 """
 import argparse
 import json
@@ -43,10 +43,12 @@ DEFAULT_METHODS = ['epp1', 'epp2', 'cepp', 'chain']
 
 
 def parse_option(text):
-    """``'key=value'`` -> (key, number or string); ``inf`` is a number."""
+    """``'key=value'`` -> (key, bool, number or string); ``inf`` is a number."""
     key, sep, value = text.partition('=')
     if not sep or not key:
         raise argparse.ArgumentTypeError(f'expected KEY=VALUE, got {text!r}')
+    if value.lower() in ('true', 'false'):
+        return key, value.lower() == 'true'
     try:
         number = float(value)
         return key, int(number) if number.is_integer() and 'e' not in value.lower() and \
