@@ -73,6 +73,8 @@ def test_bench_paper_writes_tables_json_and_plots(tmp_path, capsys):
     targets = report['reports']['targets']['rows']
     assert len(targets) == 18
     assert all(row['search_misses'] >= 0 and row['local_fit_rmse_m'] > 0 for row in targets)
+    assert all(0 <= row['other_posture_frames'] <= row['runs']
+               and row['rmse_same_posture_m'] > 0 for row in targets)
     for name in ('rmse_vs_eta.png', 'rmse_vs_sigma.png'):
         assert (out / name).read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 
