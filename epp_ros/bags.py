@@ -187,15 +187,19 @@ def _stamp_ns(message):
 
 
 def read_frames(path, config):
-    """(stamp_ns, (p, m) ranges) of every ``/uwb/ranges`` message, by the config's names."""
+    """(stamp_ns, (p, m) ranges, (p, p) tag ranges) of every ``/uwb/ranges`` message.
+
+    Labels are arranged by the config's names (:meth:`PumpConfig.link_matrices`).
+    """
     frames = []
     with _Bag(path) as bag:
         for _, message in bag.messages(RANGES, TYPES[RANGES]):
             try:
-                ranges, _ = config.range_matrix(list(message.name), message.position)
+                ranges, tag_ranges, _ = config.link_matrices(list(message.name),
+                                                             message.position)
             except ValueError as exc:
                 raise BagError(f'{path}: a /uwb/ranges message is malformed: {exc}') from None
-            frames.append((_stamp_ns(message), ranges))
+            frames.append((_stamp_ns(message), ranges, tag_ranges))
     return frames
 
 
@@ -241,9 +245,9 @@ def evaluate(path, config, method='cepp', out=None, **options):
     model = config.model()
     estimator = PostureEstimator(model, method, **options)
     postures, rmses, squared, stamps, length_errors, elapsed = [], [], [], [], [], 0.0
-    for stamp, ranges in frames:
+    for stamp, ranges, tag_ranges in frames:
         start = time.perf_counter()
-        joints = estimator.update(ranges)
+        joints = estimator.update(ranges, tag_ranges=tag_ranges)
         elapsed += time.perf_counter() - start
         diagnostics = estimator.last_diagnostics
         if not diagnostics['valid']:

@@ -76,20 +76,27 @@ class PumpConfig:
         """``"<tag>:<anchor>"`` for every tag-anchor pair, tag-major (row k, column j)."""
         return [f'{tag}:{anchor}' for tag in self.tag_names for anchor in self.anchor_names]
 
-    def range_matrix(self, names, values):
-        """Arrange labelled ranges into the (p, m) matrix of the estimators.
+    def tag_link_name(self, row, column):
+        """``"<tag>:<tag>"`` of the range measured by tag ``row`` to tag ``column``."""
+        return f'{self.tag_names[row]}:{self.tag_names[column]}'
+
+    def link_matrices(self, names, values):
+        """Arrange labelled ranges into the arrays of the estimators.
 
         Parameters
         ----------
         names : sequence of str
-            ``"<tag>:<anchor>"`` labels, as ``uwb/ranges`` carries them, in any order.
+            ``"<tag>:<anchor>"`` and ``"<tag>:<tag>"`` labels, as ``uwb/ranges`` carries
+            them, in any order.
         values : sequence of float
             The ranges, metres (NaN for missing).
 
         Returns
         -------
         ranges : ndarray, shape (p, m)
-            NaN where a pair is absent.
+            Tag-anchor ranges, NaN where a pair is absent.
+        tag_ranges : ndarray, shape (p, p)
+            Tag-tag ranges, row the measuring tag, NaN where absent (always on the diagonal).
         unknown : int
             Labels that name no configured pair (ignored).
 
@@ -100,23 +107,31 @@ class PumpConfig:
         """
         if len(names) != len(values):
             raise ValueError(f'{len(names)} names but {len(values)} ranges')
-        index = self._link_index()
-        ranges = np.full((len(self.tag_ids), len(self.anchor_ids)), np.nan)
-        flat = ranges.reshape(-1)
+        links, tag_links = self._link_index()
+        p, m = len(self.tag_ids), len(self.anchor_ids)
+        ranges, tag_ranges = np.full((p, m), np.nan), np.full((p, p), np.nan)
+        flat, tag_flat = ranges.reshape(-1), tag_ranges.reshape(-1)
         unknown = 0
         for name, value in zip(names, values):
-            position = index.get(name)
+            position = links.get(name)
+            if position is not None:
+                flat[position] = value
+                continue
+            position = tag_links.get(name)
             if position is None:
                 unknown += 1
             else:
-                flat[position] = value
-        return ranges, unknown
+                tag_flat[position] = value
+        return ranges, tag_ranges, unknown
 
     def _link_index(self):
         try:
             return self._links
         except AttributeError:
-            links = {name: i for i, name in enumerate(self.link_names)}
+            p = len(self.tag_names)
+            links = ({name: i for i, name in enumerate(self.link_names)},
+                     {self.tag_link_name(row, column): row * p + column
+                      for row in range(p) for column in range(p) if row != column})
             object.__setattr__(self, '_links', links)
             return links
 
@@ -199,6 +214,10 @@ def pump_config_from_parameters(values):
     tag_names = _names(get['tag_names'], 'tag_names')
     tag_ids = _device_ids(get['tag_ids'], 'tag_ids', len(tag_names))
     anchor_names = _names(get['anchor_names'], 'anchor_names')
+    shared = sorted(set(tag_names) & set(anchor_names))
+    if shared:
+        raise ConfigError(f'anchor_names: {shared} also name tags; "<tag>:<name>" labels '
+                          'must say which')
     anchor_ids = _device_ids(get['anchor_ids'], 'anchor_ids', len(anchor_names))
     flat = _numbers(get['anchor_positions'], 'anchor_positions')
     if len(flat) != 3 * len(anchor_names):

@@ -35,6 +35,21 @@ def test_packaged_pump_description_loads():
     assert config.anchor_index('a1b2') is None
 
 
+def test_labelled_ranges_are_arranged_by_name_in_any_order():
+    config = load_pump_config(PUMP_YAML)
+    names = ['joint5:cab', 'joint2:joint3', 'joint1:turret', 'crane:turret', 'joint3:joint2',
+             'joint1:joint1']
+    ranges, tag_ranges, unknown = config.link_matrices(names, [1.0, 7.1, 2.0, 3.0, 7.2, 0.0])
+    assert ranges.shape == (5, 6) and tag_ranges.shape == (5, 5)
+    assert ranges[4, 5] == 1.0 and ranges[0, 0] == 2.0 and np.isfinite(ranges).sum() == 2
+    assert tag_ranges[1, 2] == 7.1 and tag_ranges[2, 1] == 7.2
+    assert np.isfinite(tag_ranges).sum() == 2
+    assert unknown == 2                      # no crane, and a tag does not range itself
+    assert config.tag_link_name(1, 2) == 'joint2:joint3'
+    with pytest.raises(ValueError, match='2 names but 1 ranges'):
+        config.link_matrices(['joint1:turret', 'joint1:cab'], [1.0])
+
+
 def test_default_path_finds_the_packaged_file():
     assert load_pump_config() == load_pump_config(PUMP_YAML)
 
@@ -53,6 +68,7 @@ def test_device_ids_compare_case_insensitively():
     ({'tag_names': ['a', 'b', 'c', 'd', 'a']}, 'duplicate names'),
     ({'tag_names': ['a', 'b', 'c', 'd', 'e f']}, 'tag_names'),
     ({'anchor_names': []}, 'anchor_names'),
+    ({'anchor_names': ['turret', 'joint2', 'a', 'b', 'c', 'd']}, 'also name tags'),
     ({'anchor_positions': [0.0] * 17}, 'anchor_positions'),
     ({'anchor_positions': ['x'] * 18}, 'anchor_positions'),
     ({'arm_lengths': [9.0, 7.0]}, 'arm_lengths'),

@@ -151,17 +151,22 @@ def test_trek_with_more_than_four_anchors_is_refused_at_start():
     assert result.returncode == 2 and 'at most 4 anchors' in result.stderr
 
 
-@pytest.mark.parametrize('executable, name, value', [('uwb_driver', 'frame_period', 'fast'),
-                                                     ('posture_estimator', 'residual_warn',
-                                                      [1.0]),
-                                                     ('posture_estimator', 'method', 'magic'),
-                                                     ('posture_estimator', 'method', 'tpsm'),
-                                                     ('posture_estimator', 'nlos_fraction',
-                                                      1.5),
-                                                     ('posture_estimator', 'range_sigma', 0.0)])
-def test_bad_settings_stop_a_node_with_one_line(executable, name, value, tmp_path):
+@pytest.mark.parametrize('executable, name, value, method', [
+    ('uwb_driver', 'frame_period', 'fast', None),
+    ('posture_estimator', 'residual_warn', [1.0], None),
+    ('posture_estimator', 'method', 'magic', None),
+    ('posture_estimator', 'method', 'tpsm', None),
+    ('posture_estimator', 'nlos_fraction', 1.5, None),
+    ('posture_estimator', 'range_sigma', 0.0, None),
+    ('posture_estimator', 'slew_sigma', -1.0, None),
+    ('posture_estimator', 'pitch_names', ['pitch1', 'pitch2'], 'chain'),
+    ('posture_estimator', 'angle_max_age', 0.0, 'chain'),
+])
+def test_bad_settings_stop_a_node_with_one_line(executable, name, value, method, tmp_path):
     document = yaml.safe_load(PUMP_YAML.read_text())
     document['/**']['ros__parameters'][name] = value
+    if method is not None:
+        document['/**']['ros__parameters']['method'] = method
     path = tmp_path / 'settings.yaml'
     path.write_text(yaml.safe_dump(document))
     result = subprocess.run([script(executable), '--ros-args', '--params-file', str(path)],

@@ -48,6 +48,23 @@ def test_a_pair_reporting_again_starts_a_new_cycle():
     assert second.ranges[0, 0] == 3.1
 
 
+def test_tag_tag_ranges_ride_along_without_holding_the_cycle_open():
+    assembler = FrameAssembler(CONFIG)
+    assert assembler.add(RangeRecord(TAGS[2], 7.2, tag=TAGS[1]), 1.0) == []
+    assert assembler.add(RangeRecord(TAGS[1], 7.1, tag=TAGS[2]), 1.0) == []
+    assert assembler.add(RangeRecord(TAGS[0], 0.0, tag=TAGS[0]), 1.0) == []  # itself
+    (frame,) = full_cycle(assembler, 1.01)
+    assert frame.tag_ranges[1, 2] == 7.2 and frame.tag_ranges[2, 1] == 7.1
+    assert np.isfinite(frame.tag_ranges).sum() == 2
+    assert assembler.dropped == {'unknown_anchor': 1}
+    # The same tag pair again belongs to the next cycle.
+    assembler.add(RangeRecord(TAGS[2], 7.3, tag=TAGS[1]), 2.0)
+    (first,) = assembler.add(RangeRecord(TAGS[2], 7.4, tag=TAGS[1]), 2.01)
+    (second,) = assembler.poll(3.0)
+    assert first.tag_ranges[1, 2] == 7.3 and second.tag_ranges[1, 2] == 7.4
+    assert np.isnan(first.ranges).all() and np.isnan(second.ranges).all()
+
+
 def test_source_tag_applies_when_the_line_names_none():
     assembler = FrameAssembler(CONFIG)
     assembler.add(RangeRecord(ANCHORS[2], 7.5, rx_power_dbm=-81.0), 1.0, source_tag='4')

@@ -110,6 +110,59 @@ def test_out_of_order_and_duplicate_frames_are_ignored_and_counted(listener, pro
         listener.destroy_publisher(publisher)
 
 
+def test_chain_fuses_boom_angles_and_tag_tag_ranges(listener, processes):
+    """Without its ranges the tip is found from its inclinometer, then from a tag-tag range."""
+    processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML),
+               '-p', 'method:=chain'])
+    ranges_publisher = listener.create_publisher(JointState, 'uwb/ranges', RANGES_QOS)
+    angles_publisher = listener.create_publisher(JointState, 'boom_angles', RANGES_QOS)
+    try:
+        model = CONFIG.model()
+        slew, pitches = 0.3, np.radians([50.0, 20.0, 0.0, -20.0, -40.0])
+        joints = model.forward_kinematics(slew, pitches)
+        ranges = model.ranges(joints)
+        ranges[-1] = np.nan                                  # the tip's tag is blocked
+        assert listener.spin_until(
+            lambda: ranges_publisher.get_subscription_count() >= 2
+            and angles_publisher.get_subscription_count() >= 1, 10)
+
+        def publish_ranges(stamp, names=(), values=()):
+            message = JointState(name=CONFIG.link_names + list(names),
+                                 position=[float(v) for v in ranges.ravel()] + list(values))
+            message.header.stamp = to_time(stamp)
+            ranges_publisher.publish(message)
+
+        def reported(key, value):
+            """Wait until the estimator's diagnostics show ``key == value`` (1 Hz)."""
+            return listener.spin_until(lambda: any(
+                (key, value) in {(kv.key, kv.value) for kv in status.values}
+                for status in listener.statuses('posture_estimator')), 10)
+
+        now = time.time()
+        publish_ranges(now)                                  # no angles: the tip is unseen
+        assert reported('frames unsolved', '1')
+        angles = JointState(name=['slew'] + [f'pitch{k}' for k in range(1, 6)],
+                            position=[slew, *pitches])
+        angles.header.stamp = to_time(now + 0.1)
+        angles_publisher.publish(angles)
+        assert reported('boom_angles messages', '1')
+        publish_ranges(now + 0.1)                            # with fresh angles
+        tip_link = np.linalg.norm(joints[-1] - joints[-2])
+        publish_ranges(now + 1.0, ['joint4:joint5', 'joint5:joint4'], [tip_link, tip_link])
+        assert listener.spin_until(lambda: len(listener.postures) >= 2, 10)
+        assert reported('boom_angles frames_without_fresh_angles', '1')
+        assert len(listener.postures) == 2
+        for posture in listener.postures:
+            np.testing.assert_allclose(poses_to_joints(posture), joints, atol=1e-4)
+        counts = {kv.key: kv.value
+                  for kv in listener.statuses('posture_estimator')[-1].values}
+        assert counts['frames unsolved'] == '1' and counts['frames published'] == '2'
+        assert counts['boom_angles frames_with_angles'] == '1'
+    finally:
+        listener.destroy_publisher(ranges_publisher)
+        listener.destroy_publisher(angles_publisher)
+
+
 def test_two_pumps_side_by_side_in_namespaces(processes, tmp_path):
     start_pump(processes, tmp_path, 'ttyPump1', '/pump1', seed=1)
     start_pump(processes, tmp_path, 'ttyPump2', '/pump2', seed=2)

@@ -3,13 +3,16 @@
 Publishes ``sensor_msgs/JointState`` on ``uwb/ranges`` (relative: namespaces work), one
 message per ranging cycle, as a stamped, labelled range array: ``name[i] = "<tag>:<anchor>"``
 (config names), ``position[i]`` the range in metres or NaN where the pair did not report this
-cycle, ``header.stamp`` the receive time of the newest range, ``velocity`` and ``effort``
-empty. It never publishes on ``joint_states``. Diagnostics at 1 Hz on ``/diagnostics``.
+cycle, then ``"<tag>:<tag>"`` for each tag-tag range reported this cycle (a record whose
+anchor id is another configured tag's), ``header.stamp`` the receive time of the newest
+range, ``velocity`` and ``effort`` empty. It never publishes on ``joint_states``.
+Diagnostics at 1 Hz on ``/diagnostics``.
 """
 import sys
 import threading
 import time
 
+import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -100,8 +103,11 @@ class UwbDriver(Node):
         message = JointState()
         message.header.stamp = to_time(frame.stamp)
         message.header.frame_id = self.config.frame_id
-        message.name = self.link_names
-        message.position = [float(v) for v in frame.ranges.ravel()]
+        rows, columns = np.nonzero(np.isfinite(frame.tag_ranges))
+        message.name = self.link_names + [self.config.tag_link_name(row, column)
+                                          for row, column in zip(rows, columns)]
+        message.position = ([float(v) for v in frame.ranges.ravel()]
+                            + [float(v) for v in frame.tag_ranges[rows, columns]])
         self.publisher.publish(message)
         self._last_frame = time.time()
 

@@ -2,8 +2,11 @@
 
 Subscribes to ``uwb/ranges`` (``sensor_msgs/JointState`` from uwb_driver; reliable, keep
 all, so no frame is lost silently: a node that lags shows it as latency), arranges the
-``"<tag>:<anchor>"`` ranges as the configured (p, m) matrix and runs
-:class:`epp_ros.core.PostureEstimator`, warm-started from the previous pose. Publishes, with
+``"<tag>:<anchor>"`` ranges as the configured (p, m) matrix (and ``"<tag>:<tag>"`` ones as
+tag-tag ranges) and runs :class:`epp_ros.core.PostureEstimator`, warm-started from the
+previous pose. With a method that fuses angle sensors (chain), it also subscribes to
+``boom_angles`` (``sensor_msgs/JointState``: slew encoder and inclinometers, radians) and
+gives each frame the newest angles within ``angle_max_age`` of its stamp. Publishes, with
 the range frame's stamp:
 
 - ``arm_posture`` (``geometry_msgs/PoseArray``): the base pivot, then joints 1..p; pose k's
@@ -18,6 +21,7 @@ in a row the estimator starts cold. Frames whose stamp is not newer than the las
 ignored and counted; a stamp more than 1 s older than the last is taken as a clock jump and
 the estimator starts over. Topic names are relative: ``-r __ns:=/pump7`` runs one per pump.
 """
+import math
 import sys
 import time
 from collections import Counter
@@ -28,7 +32,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
-from epp_ros.core import RANGE_METHODS, PostureEstimator
+from epp_ros.angles import AngleSamples
+from epp_ros.core import METHODS, RANGE_METHODS, PostureEstimator
 from epp_ros.core.estimators import accepted_options
 from epp_ros.core.nlos import NlosMixture
 from epp_ros.health import Thresholds, assess, grade
@@ -67,9 +72,17 @@ class PostureEstimatorNode(Node):
                                   'UWB range standard deviation, m (methods that weigh it).'),
                  'nlos_fraction': declare(self, 'nlos_fraction', 0.1,
                                           'Prior probability that a range is NLOS (chain).'),
-                 'nlos_gamma': declare(self, 'nlos_gamma', 1.0, 'Mean NLOS excess, m (chain).')}
-        if not noise['sigma'] > 0:
-            raise StartupError(f'range_sigma: must be > 0 m, got {noise["sigma"]}')
+                 'nlos_gamma': declare(self, 'nlos_gamma', 1.0, 'Mean NLOS excess, m (chain).'),
+                 'tag_sigma': declare(self, 'tag_sigma', 0.1,
+                                      'Tag-tag range standard deviation, m (chain).'),
+                 'pitch_sigma': declare(self, 'pitch_sigma', math.radians(0.5),
+                                        'Inclinometer standard deviation, rad (chain).'),
+                 'slew_sigma': declare(self, 'slew_sigma', math.radians(0.5),
+                                       'Slew encoder standard deviation, rad (chain).')}
+        for name, parameter in (('sigma', 'range_sigma'), ('tag_sigma', 'tag_sigma'),
+                                ('pitch_sigma', 'pitch_sigma'), ('slew_sigma', 'slew_sigma')):
+            if not noise[name] > 0:
+                raise StartupError(f'{parameter}: must be > 0, got {noise[name]}')
         try:
             NlosMixture(noise['nlos_fraction'], noise['nlos_gamma'])   # checked for every method
         except ValueError as exc:
@@ -81,11 +94,15 @@ class PostureEstimatorNode(Node):
                 if name in accepted_options(method)})
         except ImportError as exc:
             raise StartupError(f'method: {exc}') from None
+        self.angles = self._angle_input(method)
         self.lengths = self.model.arm_lengths
         self.posture = self.create_publisher(PoseArray, 'arm_posture', POSTURE_QOS)
         self.markers = self.create_publisher(MarkerArray, 'arm_posture/markers', POSTURE_QOS)
         self.diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(JointState, 'uwb/ranges', self.on_ranges, RANGES_INPUT_QOS)
+        if self.angles is not None:
+            self.create_subscription(JointState, 'boom_angles', self.on_angles,
+                                     RANGES_INPUT_QOS)
         self.create_timer(1.0, self.publish_diagnostics)
         self.counts = Counter()
         self.failures_in_a_row = 0
@@ -94,7 +111,30 @@ class PostureEstimatorNode(Node):
         self.worst = None               # worst (level, message) since the last report
         self.status_name = f'{self.get_fully_qualified_name()}'
         self.get_logger().info(f'{method} on {self.model.n_sections} sections, '
-                               f'{self.model.n_anchors} anchors')
+                               f'{self.model.n_anchors} anchors'
+                               + (', with boom_angles' if self.angles is not None else ''))
+
+    def _angle_input(self, method):
+        """Angle sensors for a method that fuses them (else None); their names and age."""
+        if 'pitches' not in METHODS[method].inputs:
+            return None
+        p = self.model.n_sections
+        slew_name = declare(self, 'slew_name', 'slew',
+                            'boom_angles joint name of the slew encoder.')
+        pitch_names = declare(self, 'pitch_names', [f'pitch{k}' for k in range(1, p + 1)],
+                              'boom_angles joint names of the inclinometers, base outward.')
+        max_age = declare(self, 'angle_max_age', 0.2,
+                          'Largest stamp difference between a range frame and its angles, s.')
+        if len(pitch_names) != p:
+            raise StartupError(f'pitch_names: needs one name per section ({p}), '
+                               f'got {list(pitch_names)}')
+        try:
+            return AngleSamples(slew_name, pitch_names, max_age)
+        except ValueError as exc:
+            raise StartupError(str(exc)) from None
+
+    def on_angles(self, message):
+        self.angles.add(to_seconds(message.header.stamp), message.name, message.position)
 
     def on_ranges(self, message):
         try:
@@ -115,14 +155,17 @@ class PostureEstimatorNode(Node):
             self.counts['clock_jumps'] += 1
             self.estimator.reset()
         try:
-            ranges, unknown = self.config.range_matrix(message.name, message.position)
+            ranges, tag_ranges, unknown = self.config.link_matrices(message.name,
+                                                                    message.position)
         except ValueError:
             self.counts['malformed'] += 1
             return
         self.counts['unknown_links'] += unknown
         self.last_stamp = stamp
         self.last_frame_time = time.monotonic()
-        joints = self.estimator.update(ranges)
+        slew, pitches = (None, None) if self.angles is None else self.angles.at(stamp)
+        joints = self.estimator.update(ranges, tag_ranges=tag_ranges, pitches=pitches,
+                                       slew=slew)
         level, summary = grade(self.estimator.last_diagnostics, self.thresholds, self.lengths)
         if self.worst is None or level > self.worst[0]:
             self.worst = (level, summary)
@@ -162,6 +205,9 @@ class PostureEstimatorNode(Node):
                 status.level = LEVELS[level]
         self.worst = None
         values.update({f'frames {key}': str(value) for key, value in self.counts.items()})
+        if self.angles is not None:
+            values.update({f'boom_angles {key}': str(value)
+                           for key, value in self.angles.counts.items()})
         status.values = [KeyValue(key=key, value=value) for key, value in values.items()]
         array = DiagnosticArray(status=[status])
         array.header.stamp = to_time(time.time())

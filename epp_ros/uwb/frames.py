@@ -1,7 +1,9 @@
 """Range records -> frames: one (p, m) range matrix per ranging cycle.
 
 A cycle opens with its first range and closes when every configured tag-anchor pair has
-reported, or ``frame_period`` seconds after it opened, whichever comes first. In formats
+reported, or ``frame_period`` seconds after it opened, whichever comes first. Ranges from a
+tag to another configured tag (a record whose "anchor" is a tag id) are kept as the cycle's
+tag-tag ranges; they are optional and never needed to close a cycle. In formats
 whose lines carry all of a tag's ranges (``WHOLE_TAG_LINES``) a tag's line also reports its
 missing pairs, so the cycle closes as soon as every tag has reported. A pair (or a whole
 tag) that reports again before its cycle closed starts the next cycle (the devices have
@@ -24,6 +26,7 @@ class Frame:
                             #: needed so that stamps strictly increase), seconds
     ranges: np.ndarray      #: (p, m) metres, NaN where the pair did not report
     rx_power: np.ndarray    #: (p, m) dBm where the device reported it, else NaN
+    tag_ranges: np.ndarray  #: (p, p) metres from tag row to tag column, NaN where none
 
 
 class FrameAssembler:
@@ -63,6 +66,7 @@ class FrameAssembler:
     def _reset(self):
         self._ranges = np.full(self.shape, np.nan)
         self._rx_power = np.full(self.shape, np.nan)
+        self._tag_ranges = np.full((self.shape[0], self.shape[0]), np.nan)
         self._opened = None
         self._newest = None
         self._tags_done = set()
@@ -71,7 +75,7 @@ class FrameAssembler:
         # Stamps strictly increase: lines of two cycles can arrive in one read.
         stamp = self._newest if self._last_stamp is None else \
             max(self._newest, self._last_stamp + 1e-6)
-        frame = Frame(stamp, self._ranges, self._rx_power)
+        frame = Frame(stamp, self._ranges, self._rx_power, self._tag_ranges)
         self._last_stamp = stamp
         self.frames += 1
         self._reset()
@@ -92,19 +96,23 @@ class FrameAssembler:
             return closed
         row = self.config.tag_index(tag)
         column = self.config.anchor_index(record.anchor)
-        if row is None or column is None:
+        other_tag = self.config.tag_index(record.anchor) if column is None else None
+        if row is None or (column is None and other_tag in (None, row)):
             self.dropped['unknown_tag' if row is None else 'unknown_anchor'] += 1
             return closed
         if not (math.isfinite(record.range_m)
                 and self.min_range <= record.range_m <= self.max_range):
             self.dropped['implausible'] += 1
             return closed
-        if not math.isnan(self._ranges[row, column]):
+        values, index = ((self._ranges, (row, column)) if column is not None
+                         else (self._tag_ranges, (row, other_tag)))
+        if not math.isnan(values[index]):
             closed.append(self._close())          # the pair reports again: a new cycle
+            values = self._ranges if column is not None else self._tag_ranges
         if self._opened is None:
             self._opened = stamp
-        self._ranges[row, column] = record.range_m
-        if record.rx_power_dbm is not None:
+        values[index] = record.range_m
+        if record.rx_power_dbm is not None and column is not None:
             self._rx_power[row, column] = record.rx_power_dbm
         self._newest = stamp if self._newest is None else max(self._newest, stamp)
         if not np.isnan(self._ranges).any():
