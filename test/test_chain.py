@@ -1,6 +1,7 @@
 """The chain estimator and the Cramér–Rao bound."""
 import numpy as np
 import pytest
+from monte_carlo import assert_mse_at_bound
 
 from epp_ros.core import PostureEstimator
 from epp_ros.core.bounds import crlb, fisher_information
@@ -80,11 +81,7 @@ def test_monte_carlo_rmse_matches_the_bound():
         estimate = estimator.update(RangeNoise(sigma=sigma).apply(model.ranges(joints),
                                                                   rng)[0])
         squared.append(np.sum((estimate - joints) ** 2) / model.n_sections)
-    squared = np.array(squared)
-    # MSE estimate and its standard error from the trials themselves; allow 4 of them.
-    standard_error = squared.std(ddof=1) / np.sqrt(trials)
-    assert abs(squared.mean() - bound.rmse ** 2) < 4 * standard_error
-    assert estimator.last_diagnostics['predicted_rmse'] == pytest.approx(bound.rmse, rel=0.05)
+    assert_mse_at_bound(squared, bound.rmse, estimator)
 
 
 def test_nlos_links_are_flagged_and_do_not_pull_the_estimate():

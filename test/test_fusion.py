@@ -1,6 +1,7 @@
 """Tag-tag ranges and angle sensors fused into the chain least squares; the turntable offset."""
 import numpy as np
 import pytest
+from monte_carlo import assert_mse_at_bound
 
 from epp_ros.core import BoomModel, PostureEstimator
 from epp_ros.core.bounds import crlb, fisher_information
@@ -113,11 +114,8 @@ def test_fused_monte_carlo_rmse_matches_the_fused_bound():
     bound = crlb(model, slew, pitches, noise, measured)
     assert bound.rmse < crlb(model, slew, pitches, sigma).rmse
     estimator = PostureEstimator(model, 'chain', sigma=sigma, pitch_sigma=angles.pitch_sigma)
-    squared = np.array([np.sum((estimator.update(**frame) - joints) ** 2) / 5
-                        for frame in frames])
-    standard_error = squared.std(ddof=1) / np.sqrt(trials)
-    assert abs(squared.mean() - bound.rmse ** 2) < 4 * standard_error
-    assert estimator.last_diagnostics['predicted_rmse'] == pytest.approx(bound.rmse, rel=0.05)
+    squared = [np.sum((estimator.update(**frame) - joints) ** 2) / 5 for frame in frames]
+    assert_mse_at_bound(squared, bound.rmse, estimator)
 
 
 def test_a_too_long_tag_tag_range_is_flagged_as_nlos():

@@ -73,3 +73,9 @@ def test_plane_fit_holds_a_tag_without_ranges():
     fitted_slew, fitted = fit_plane_to_ranges(start, ranges, anchors, BASE, 0.35, max_iter=20)
     assert np.all(np.isfinite(fitted)) and np.isfinite(fitted_slew)
     np.testing.assert_allclose(fitted[1], start[1])
+
+
+def test_plane_fit_with_lengths_needs_the_pivot():
+    with pytest.raises(ValueError, match='pivot'):
+        fit_plane_to_ranges(np.ones((1, 2)), np.ones((1, 3)), np.zeros((3, 3)), BASE, 0.0,
+                            arm_lengths=np.ones(1))

@@ -22,7 +22,8 @@ from .edm import align_to_known, squared_distances
 from .measurements import Measurements, plausible_limits
 from .multilateration import intersect_spheres, srls
 from .nedm import nearest_edm
-from .plane import fit_plane_to_ranges, fit_slew, from_plane, project_ranges, to_plane
+from .plane import (fit_plane_to_ranges, fit_slew, from_plane, project_ranges, slew_step,
+                    to_plane)
 
 __all__ = ['PostureEstimator', 'METHODS', 'RANGE_METHODS', 'cold_start_guess']
 
@@ -254,30 +255,12 @@ class CEPP(_EDMMethod):
             joints = from_plane(coords, self.model.base, slew)
             if attempt == self.slew_iterations:
                 break
-            step = slew_step(self.model, coords, ranges, slew)
+            step = slew_step(coords, ranges, self.model.anchors, self.model.base, slew)
             if abs(step) <= self.slew_tol:
                 break
             slew, prior = slew + step, joints
         info.update(totals, slew=float(np.mod(slew + np.pi, 2 * np.pi) - np.pi))
         return joints, info
-
-
-def slew_step(model, coords, ranges, slew):
-    """Gauss-Newton step on the slew for fixed in-plane coordinates, radians.
-
-    Minimises ``sum (||w_k(theta) - a_j|| - delta_kj)^2`` over the valid ranges, where
-    ``w_k(theta)`` puts the in-plane point ``coords[k]`` into the plane of ``theta``.
-    """
-    joints = from_plane(coords, model.base, slew)
-    difference = joints[:, None, :] - model.anchors[None, :, :]
-    distance = np.linalg.norm(difference, axis=-1)
-    valid = np.isfinite(ranges) & (distance > 1e-9)
-    tangent = coords[:, 0, None] * np.array([-np.sin(slew), np.cos(slew), 0.0])  # dw/dtheta
-    jac = np.einsum('kjc,kc->kj', difference, tangent) / np.where(valid, distance, 1.0)
-    residual = np.where(valid, distance - np.nan_to_num(ranges), 0.0)
-    jac = np.where(valid, jac, 0.0)
-    curvature = np.sum(jac ** 2)
-    return float(-np.sum(jac * residual) / curvature) if curvature > 1e-12 else 0.0
 
 
 METHODS = {'epp1': EPP1, 'epp2': EPP2, 'cepp': CEPP, 'chain': ChainMethod,

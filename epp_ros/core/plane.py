@@ -6,7 +6,8 @@ direction ``u = (cos theta, sin theta, 0)``. In-plane coordinates of a point x a
 """
 import numpy as np
 
-__all__ = ['fit_slew', 'fit_plane_to_ranges', 'to_plane', 'from_plane', 'project_ranges']
+__all__ = ['fit_slew', 'fit_plane_to_ranges', 'slew_step', 'to_plane', 'from_plane',
+           'project_ranges']
 
 
 def fit_slew(points, base):
@@ -82,6 +83,33 @@ def project_ranges(ranges, anchors, base, slew):
     return np.where(clipped, 0.0, squared), clipped
 
 
+def slew_step(coords, ranges, anchors, base, slew):
+    """Gauss-Newton step on the slew for fixed in-plane coordinates, radians.
+
+    Minimises ``sum (||w_k(theta) - a_j|| - delta_kj)^2`` over the valid ranges, where
+    ``w_k(theta) = from_plane(coords[k], base, theta)``.
+
+    Parameters
+    ----------
+    coords : ndarray, shape (p, 2)
+    ranges : ndarray, shape (p, m)
+        Metres, NaN where missing.
+    anchors : ndarray, shape (m, 3)
+    base : ndarray, shape (3,)
+    slew : float
+    """
+    joints = from_plane(coords, base, slew)
+    difference = joints[:, None, :] - np.asarray(anchors, dtype=float)[None, :, :]
+    distance = np.linalg.norm(difference, axis=-1)
+    valid = np.isfinite(ranges) & (distance > 1e-9)
+    tangent = coords[:, 0, None] * np.array([-np.sin(slew), np.cos(slew), 0.0])  # dw/dtheta
+    jac = np.einsum('kjc,kc->kj', difference, tangent) / np.where(valid, distance, 1.0)
+    residual = np.where(valid, distance - np.nan_to_num(ranges), 0.0)
+    jac = np.where(valid, jac, 0.0)
+    curvature = np.sum(jac ** 2)
+    return float(-np.sum(jac * residual) / curvature) if curvature > 1e-12 else 0.0
+
+
 def fit_plane_to_ranges(coords, ranges, anchors, base, slew, pivot=None, arm_lengths=None,
                         max_iter=5, tol=1e-9):
     """Slew and in-plane tag positions that best fit 3-D ranges, by Gauss-Newton.
@@ -102,7 +130,7 @@ def fit_plane_to_ranges(coords, ranges, anchors, base, slew, pivot=None, arm_len
     slew : float
         Starting slew, radians.
     pivot : ndarray, shape (2,), optional
-        In-plane position of the boom's pivot; needed with ``arm_lengths``.
+        In-plane position of the boom's pivot; required with ``arm_lengths``.
     arm_lengths : ndarray, shape (p,), optional
     max_iter : int
     tol : float
@@ -114,6 +142,8 @@ def fit_plane_to_ranges(coords, ranges, anchors, base, slew, pivot=None, arm_len
         Radians (not wrapped).
     coords : ndarray, shape (p, 2)
     """
+    if arm_lengths is not None and pivot is None:
+        raise ValueError('pivot: required with arm_lengths')
     coords = np.array(coords, dtype=float)
     anchors = np.asarray(anchors, dtype=float)
     base = np.asarray(base, dtype=float)

@@ -104,20 +104,23 @@ class FrameAssembler:
                 and self.min_range <= record.range_m <= self.max_range):
             self.dropped['implausible'] += 1
             return closed
-        values, index = ((self._ranges, (row, column)) if column is not None
-                         else (self._tag_ranges, (row, other_tag)))
-        if not math.isnan(values[index]):
+        tag_link = column is None
+        index = (row, other_tag) if tag_link else (row, column)
+        if not math.isnan(self._values(tag_link)[index]):
             closed.append(self._close())          # the pair reports again: a new cycle
-            values = self._ranges if column is not None else self._tag_ranges
         if self._opened is None:
             self._opened = stamp
-        values[index] = record.range_m
-        if record.rx_power_dbm is not None and column is not None:
+        self._values(tag_link)[index] = record.range_m
+        if record.rx_power_dbm is not None and not tag_link:
             self._rx_power[row, column] = record.rx_power_dbm
         self._newest = stamp if self._newest is None else max(self._newest, stamp)
         if not np.isnan(self._ranges).any():
             closed.append(self._close())
         return closed
+
+    def _values(self, tag_link):
+        """The open cycle's tag-tag (p, p) or tag-anchor (p, m) ranges."""
+        return self._tag_ranges if tag_link else self._ranges
 
     def add_line(self, records, stamp, source_tag=None, whole=False):
         """Add the records of one line; return the frames closed (0 to 2 or so).
