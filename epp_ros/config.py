@@ -12,12 +12,15 @@ import numpy as np
 import yaml
 
 from epp_ros.core.model import BoomModel
+from epp_ros.uwb.formats import FORMATS, device_number
 
 __all__ = ['ConfigError', 'Source', 'PumpConfig', 'PUMP_PARAMETERS', 'PROTOCOLS',
-           'pump_config_from_parameters', 'load_pump_config', 'default_config_path']
+           'pump_config_from_parameters', 'load_pump_config', 'default_config_path',
+           'normalise_device_id', 'device_number', 'listen_address']
 
-PROTOCOLS = ('trek', 'lec', 'arduino', 'json', 'auto')
-_DEVICE_ID = re.compile(r'^[0-9A-F]{1,16}$')
+PROTOCOLS = (*FORMATS, 'auto')
+_LISTEN = re.compile(r'tcp-listen://(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+)'
+                     r':(?P<port>[0-9]{1,5})')
 
 #: Parameters of the shared pump description: name -> (default, description).
 PUMP_PARAMETERS = {
@@ -28,14 +31,19 @@ PUMP_PARAMETERS = {
     'pivot_offset': (0.0, 'Horizontal distance from the slew axis to the boom pivot, '
                           'metres, along the slew direction (0: pivot on the axis).'),
     'tag_names': ([''], 'Tag names, one per joint, base outward.'),
-    'tag_ids': ([''], 'Tag device ids (hexadecimal short addresses), as tag_names.'),
+    'tag_ids': ([''], 'Tag device ids as the firmware prints them, as tag_names (compared as '
+                      'hexadecimal numbers: 0B82 = B82 = 0xb82).'),
     'anchor_names': ([''], 'Anchor names.'),
-    'anchor_ids': ([''], 'Anchor device ids (hexadecimal short addresses).'),
+    'anchor_ids': ([''], 'Anchor device ids as the firmware prints them (compared as '
+                         'hexadecimal numbers).'),
     'anchor_positions': ([0.0], 'Anchor positions, metres, flattened [x0, y0, z0, x1, ...].'),
-    'source_ports': ([''], 'Range sources: /dev/tty... or socket://host:port, one each.'),
-    'source_protocols': ([''], 'Line protocol of each source: trek, lec, arduino, json, '
+    'source_ports': ([''], 'Range sources, one each: /dev/tty..., socket://host:port (we '
+                           'connect), tcp-listen://address:port (devices connect to us).'),
+    'source_protocols': ([''], f'Line protocol of each source: {", ".join(FORMATS)} or '
                                'auto.'),
     'source_tags': ([''], "Tag id on each source for formats that do not name it, else ''."),
+    'source_anchors': ([''], "Anchor id on each source for formats that name no device, else "
+                             "'' (all '' when no source needs one)."),
 }
 
 
@@ -47,9 +55,10 @@ class ConfigError(ValueError):
 class Source:
     """One stream of range lines."""
 
-    port: str                   #: device path or pyserial URL (socket://host:port)
+    port: str                   #: device path, socket://host:port or tcp-listen://host:port
     protocol: str               #: one of PROTOCOLS
     tag: str | None = None      #: tag id for formats that do not name it
+    anchor: str | None = None   #: anchor id for formats that name no device
 
 
 @dataclass(frozen=True)
@@ -136,24 +145,49 @@ class PumpConfig:
             return links
 
     def tag_index(self, device_id):
-        """Joint index (0-based) of a tag device id, or None."""
-        return _index(self.tag_ids, device_id)
+        """Joint index (0-based) of a tag device id, or None.
+
+        Ids compare as the hexadecimal numbers they spell: ``'B82'``, ``'0B82'`` and
+        ``'0xb82'`` are the same device.
+        """
+        return self._id_index()[0].get(device_number(device_id))
 
     def anchor_index(self, device_id):
-        """Column of an anchor device id, or None."""
-        return _index(self.anchor_ids, device_id)
+        """Column of an anchor device id (compared as :meth:`tag_index` does), or None."""
+        return self._id_index()[1].get(device_number(device_id))
+
+    def _id_index(self):
+        try:
+            return self._ids
+        except AttributeError:
+            ids = tuple({device_number(i): k for k, i in enumerate(values)}
+                        for values in (self.tag_ids, self.anchor_ids))
+            object.__setattr__(self, '_ids', ids)
+            return ids
 
 
 def normalise_device_id(value):
-    """Device ids compare as upper-case text without surrounding blanks."""
-    return str(value).strip().upper()
+    """A device id as written, without surrounding blanks, upper-case (``0x`` kept out)."""
+    text = str(value).strip().upper()
+    return text[2:] if text.startswith('0X') and len(text) > 2 else text
 
 
-def _index(ids, device_id):
-    try:
-        return ids.index(normalise_device_id(device_id))
-    except ValueError:
+def listen_address(port):
+    """(host, port) of a ``tcp-listen://host:port`` source, None for other ports.
+
+    Raises
+    ------
+    ConfigError
+        For a ``tcp-listen://`` port without an explicit address and a port 1-65535.
+    """
+    if not port.startswith('tcp-listen://'):
         return None
+    match = _LISTEN.fullmatch(port)
+    if match is None or not 0 < int(match['port']) < 65536:
+        raise ConfigError(f'source_ports: {port!r} must be tcp-listen://ADDRESS:PORT with an '
+                          'address to bind (e.g. 192.168.4.1, or 0.0.0.0 for every '
+                          'interface) and a port 1-65535')
+    return match['host'].strip('[]'), int(match['port'])
 
 
 def _names(values, field):
@@ -172,12 +206,14 @@ def _device_ids(values, field, count):
     ids = tuple(normalise_device_id(v) for v in values)
     if len(ids) != count:
         raise ConfigError(f'{field}: needs {count} entries (one per name), got {len(ids)}')
-    bad = [v for v, i in zip(values, ids) if not _DEVICE_ID.match(i)]
+    numbers = [device_number(i) for i in ids]
+    bad = [v for v, number in zip(values, numbers) if number is None]
     if bad:
         raise ConfigError(f'{field}: device ids must be 1-16 hexadecimal digits, got {bad}')
-    duplicates = sorted({i for i in ids if ids.count(i) > 1})
+    duplicates = sorted({i for i, n in zip(ids, numbers) if numbers.count(n) > 1})
     if duplicates:
-        raise ConfigError(f'{field}: duplicate device ids {duplicates}')
+        raise ConfigError(f'{field}: duplicate device ids {duplicates} (ids compare as '
+                          'numbers: 0B82 = B82)')
     return ids
 
 
@@ -239,35 +275,57 @@ def pump_config_from_parameters(values):
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     sources = _sources(get['source_ports'], get['source_protocols'], get['source_tags'],
-                       tag_ids)
+                       get['source_anchors'], tag_ids, anchor_ids)
     return PumpConfig(frame_id, arm_lengths, base, tag_names, tag_ids, anchor_names,
                       anchor_ids, positions, sources, pivot_offset)
 
 
-def _sources(ports, protocols, tags, tag_ids):
+def _sources(ports, protocols, tags, anchors, tag_ids, anchor_ids):
     ports = [str(p).strip() for p in ports]
     if not ports or any(not p for p in ports):
         raise ConfigError(f'source_ports: every source needs a port, got {ports}')
     if len(protocols) != len(ports) or len(tags) != len(ports):
         raise ConfigError(f'source_protocols, source_tags: need one entry per source port '
                           f'({len(ports)}), got {len(protocols)} and {len(tags)}')
-    sources = []
-    for port, protocol, tag in zip(ports, protocols, tags):
-        protocol = str(protocol).strip().lower()
-        if protocol not in PROTOCOLS:
-            raise ConfigError(f'source_protocols: {protocol!r} for {port} is not one of '
-                              f'{list(PROTOCOLS)}')
-        tag = normalise_device_id(tag) or None
-        if tag is not None and tag not in tag_ids:
-            raise ConfigError(f'source_tags: {tag!r} for {port} is not in tag_ids {list(tag_ids)}')
-        if protocol in ('lec', 'arduino') and tag is None:
-            raise ConfigError(f'source_tags: {port} speaks {protocol}, which does not name '
-                              'the tag: give its tag id')
-        sources.append(Source(port, protocol, tag))
+    anchors = [str(a).strip() for a in anchors]
+    if not any(anchors):
+        anchors = [''] * len(ports)
+    elif len(anchors) != len(ports):
+        raise ConfigError(f'source_anchors: needs one entry per source port ({len(ports)}) '
+                          f'or none, got {len(anchors)}')
+    sources = tuple(_source(*entry, tag_ids, anchor_ids)
+                    for entry in zip(ports, protocols, tags, anchors))
     duplicates = sorted({p for p in ports if ports.count(p) > 1})
     if duplicates:
         raise ConfigError(f'source_ports: duplicate ports {duplicates}')
-    return tuple(sources)
+    return sources
+
+
+def _source(port, protocol, tag, anchor, tag_ids, anchor_ids):
+    """One validated Source."""
+    listen_address(port)
+    protocol = str(protocol).strip().lower()
+    if protocol not in PROTOCOLS:
+        raise ConfigError(f'source_protocols: {protocol!r} for {port} is not one of '
+                          f'{list(PROTOCOLS)}')
+    tag = _known_id(tag, tag_ids, 'source_tags', 'tag_ids', port)
+    anchor = _known_id(anchor, anchor_ids, 'source_anchors', 'anchor_ids', port)
+    line_format = FORMATS.get(protocol)
+    if line_format is not None and not line_format.names_tag and tag is None:
+        raise ConfigError(f'source_tags: {port} speaks {protocol}, which does not name '
+                          'the tag: give its tag id')
+    if line_format is not None and not line_format.names_anchor and anchor is None:
+        raise ConfigError(f'source_anchors: {port} speaks {protocol}, which does not name '
+                          'the anchor: give its anchor id')
+    return Source(port, protocol, tag, anchor)
+
+
+def _known_id(value, ids, field, ids_field, port):
+    """A source's device id (None if empty), ConfigError unless it is one of ``ids``."""
+    value = normalise_device_id(value) or None
+    if value is not None and device_number(value) not in {device_number(i) for i in ids}:
+        raise ConfigError(f'{field}: {value!r} for {port} is not in {ids_field} {list(ids)}')
+    return value
 
 
 def default_config_path():

@@ -112,3 +112,51 @@ def test_pivot_offset_reaches_the_model():
     assert model.pivot_offset == 0.8
     np.testing.assert_allclose(model.pivot(np.pi / 2), np.array(values['base']) + [0, 0.8, 0],
                                atol=1e-12)
+
+
+def test_device_ids_compare_as_numbers_whatever_the_padding():
+    values = shared_values()
+    values['anchor_ids'] = ['0B82', '0x0081', '1784', '1785', '1786', '1787']
+    config = pump_config_from_parameters(values)
+    assert config.anchor_index('B82') == 0 and config.anchor_index('0xb82') == 0
+    assert config.anchor_index('81') == 1 and config.anchor_index('0081') == 1
+    assert config.anchor_index('B83') is None and config.anchor_index('not-hex') is None
+    values['anchor_ids'] = ['0B82', 'B82', '1784', '1785', '1786', '1787']
+    with pytest.raises(ConfigError, match='duplicate device ids'):
+        pump_config_from_parameters(values)
+
+
+@pytest.mark.parametrize('port', ['tcp-listen://0.0.0.0:80', 'tcp-listen://192.168.4.1:8080',
+                                  'tcp-listen://[::1]:9000'])
+def test_listening_sources_are_accepted(port):
+    values = shared_values()
+    values['source_ports'] = [port]
+    assert pump_config_from_parameters(values).sources[0].port == port
+
+
+@pytest.mark.parametrize('port', ['tcp-listen://:80', 'tcp-listen://0.0.0.0',
+                                  'tcp-listen://0.0.0.0:0', 'tcp-listen://0.0.0.0:70000'])
+def test_listening_sources_need_an_address_and_a_port(port):
+    values = shared_values()
+    values['source_ports'] = [port]
+    with pytest.raises(ConfigError, match='source_ports'):
+        pump_config_from_parameters(values)
+
+
+def test_formats_that_name_no_device_need_the_source_anchor():
+    values = shared_values()
+    values.update(source_protocols=['bare'], source_tags=['0x1'])
+    with pytest.raises(ConfigError, match='source_anchors'):
+        pump_config_from_parameters(values)
+    values['source_anchors'] = ['01782']
+    assert pump_config_from_parameters(values).sources == (
+        Source('/dev/ttyUSB0', 'bare', '1', '01782'),)
+    values['source_anchors'] = ['9999']
+    with pytest.raises(ConfigError, match='source_anchors'):
+        pump_config_from_parameters(values)
+
+
+def test_every_registered_format_is_a_protocol():
+    from epp_ros.config import PROTOCOLS
+    from epp_ros.uwb.formats import FORMATS
+    assert PROTOCOLS == (*FORMATS, 'auto')

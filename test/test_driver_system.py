@@ -183,3 +183,82 @@ def test_command_line_settings_override_the_file(listener, processes):
     assert listener.spin_until(lambda: any(
         kv.key == 'method' and kv.value == 'chain' for status in
         listener.statuses('posture_estimator') for kv in status.values), 10)
+
+
+def start_any_emulator(start, protocol, config):
+    """Start uwb_emulator in any format; return it and its announced channels."""
+    from epp_ros.uwb.emulation import channel_devices
+    emulator = start([script('uwb_emulator'), '--protocol', protocol, '--pty', '--truth',
+                      '--sigma', '0', '--rate', '10', '--config', str(config)])
+    expected = len(channel_devices(protocol, load_pump_config(config)))
+    announced = [emulator.stdout.readline().split() for _ in range(expected)]
+    assert all(a and a[0] == 'PTY' for a in announced), emulator.stderr.read()
+    return emulator, announced
+
+
+def slot_config(tmp_path):
+    """The packaged pump with anchors numbered 0-5, as the 8-slot formats print them."""
+    document = yaml.safe_load(PUMP_YAML.read_text())
+    document['/**']['ros__parameters']['anchor_ids'] = ['0', '1', '2', '3', '4', '05']
+    path = tmp_path / 'slot_pump.yaml'
+    path.write_text(yaml.safe_dump(document))
+    return path
+
+
+@pytest.mark.parametrize('protocol', ['haoru', 'les', 'mauwb_json'])
+def test_new_formats_over_pty_reach_uwb_ranges(protocol, listener, processes, tmp_path):
+    config_path = slot_config(tmp_path) if protocol != 'les' else PUMP_YAML
+    config = load_pump_config(config_path)
+    _, announced = start_any_emulator(processes, protocol, config_path)
+    params = params_with_sources(tmp_path, config_path, announced, protocol)
+    since = len(listener.ranges)
+    driver = processes([script('uwb_driver'), '--ros-args', '--params-file', str(params)])
+    assert listener.spin_until(lambda: len(listener.ranges) >= since + 8, 20), \
+        driver.stderr.read() if driver.poll() is not None else 'no frames'
+    check_ranges_against_truth(listener, config, since + 2, 6e-3)
+
+
+def test_a_wifi_tag_that_connects_to_us_is_read_without_newlines(listener, processes):
+    port = free_port()
+    listener.diagnostics.clear()
+    driver = processes([script('uwb_driver'), '--ros-args', '--params-file', str(PUMP_YAML),
+                        '-p', f'port:=tcp-listen://127.0.0.1:{port}', '-p', 'protocol:=auto',
+                        '-p', "tag:='01'"])
+    message = ('{"links":[' + ','.join(f'{{"A":"{a}","R":"{2 + i}.5"}}' for i, a in
+                                        enumerate(['1782', '1783', '1784', '1785', '1786',
+                                                   '1787'])) + ']}').encode()
+    deadline = time.monotonic() + 20
+    while True:
+        try:
+            tag = socket.create_connection(('127.0.0.1', port), timeout=2)
+            break
+        except OSError:
+            assert time.monotonic() < deadline and driver.poll() is None
+            time.sleep(0.2)
+    try:
+        tag.sendall(b'GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n')
+        since = len(listener.ranges)
+
+        def sent_until(condition, timeout):
+            end = time.monotonic() + timeout
+            while time.monotonic() < end:
+                tag.sendall(message)
+                if listener.spin_until(condition, 0.1):
+                    return True
+            return False
+
+        assert sent_until(lambda: len(listener.ranges) >= since + 5, 20)
+        frame = listener.ranges[-1]
+        assert list(frame.position[:6]) == [2.5, 3.5, 4.5, 5.5, 6.5, 7.5]
+
+        def values():
+            return [{kv.key: kv.value for kv in status.values}
+                    for status in listener.statuses(f'uwb_driver: tcp-listen://127.0.0.1:{port}')]
+
+        assert sent_until(lambda: any(v['clients'] == '1' and v['preamble lines'] == '3'
+                                      and v['protocol'] == 'json' for v in values()), 10)
+        assert all('input backlog (bytes)' in v and 'newest line age (s)' in v
+                   for v in values())
+    finally:
+        tag.close()
+    assert driver.poll() is None

@@ -119,3 +119,41 @@ def test_config_validation_is_shared_with_the_emulator():
               'source_protocols': ['json'], 'source_tags': ['']}
     config = pump_config_from_parameters(values)
     assert len(cycle_lines(config, np.array([[1.0, 2.0, np.nan]]), 'arduino')) == 2
+
+
+def config_for(protocol):
+    """The packaged pump, with anchors 0-5 (or 0-3) for formats whose anchors are slots."""
+    import dataclasses
+
+    from epp_ros.uwb.formats import FORMATS
+    slots = FORMATS[protocol].anchor_slots
+    if slots is None:
+        return CONFIG
+    count = min(slots, len(CONFIG.anchor_ids))
+    return dataclasses.replace(CONFIG, anchor_ids=tuple(str(i) for i in range(count)),
+                               anchor_names=CONFIG.anchor_names[:count],
+                               anchor_positions=CONFIG.anchor_positions[:count])
+
+
+def every_format():
+    from epp_ros.uwb.formats import FORMATS
+    return list(FORMATS)
+
+
+@pytest.mark.parametrize('protocol', every_format())
+def test_the_emulator_speaks_every_format_and_the_driver_reads_it_back(protocol):
+    from epp_ros.uwb.emulation import channel_devices
+    config = config_for(protocol)
+    model = config.model()
+    rng = np.random.default_rng(3)
+    ranges, _ = RangeNoise(dropout=0.2).apply(model.ranges(random_posture(model, rng)[2]), rng)
+    devices = channel_devices(protocol, config)
+    decoders = [LineDecoder('auto') for _ in devices]
+    assembler = FrameAssembler(config)
+    for channel, line in cycle_lines(config, ranges, protocol, sequence=5):
+        tag, anchor = devices[channel]
+        assembler.add_line(decoders[channel].decode(line), 1.0, tag, False, anchor)
+    (frame,) = assembler.poll(2.0)
+    np.testing.assert_array_equal(np.isnan(frame.ranges), np.isnan(ranges))
+    np.testing.assert_allclose(frame.ranges, ranges, atol=0.005 + 1e-9)
+    assert set(assembler.dropped) <= {'raw_range'}

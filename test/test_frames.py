@@ -128,3 +128,30 @@ def test_frames_from_one_read_get_strictly_increasing_stamps():
     assembler = FrameAssembler(CONFIG)
     frames = full_cycle(assembler, 100.0) + full_cycle(assembler, 100.0)
     assert len(frames) == 2 and frames[1].stamp > frames[0].stamp == 100.0
+
+
+def test_unpadded_ids_as_sketches_print_them_reach_their_pair():
+    """pump.yaml says 0B82 and 0001; thotro-style firmware prints B82 and 1."""
+    import dataclasses
+
+    from epp_ros.uwb.decoder import LineDecoder
+    config = dataclasses.replace(CONFIG, anchor_ids=('0B82',) + ANCHORS[1:],
+                                 tag_ids=('0001',) + TAGS[1:])
+    assembler = FrameAssembler(config)
+    decoder = LineDecoder('auto')
+    for line in ['from: B82\t Range: 2.34 m\t RX power: -78.32 dBm',
+                 '{"tag":"1","links":[{"A":"0xb82","R":"2.35"}]}']:
+        assert decoder.decode(line)
+    assembler.add_line(LineDecoder('arduino').decode('from: B82\t Range: 2.34 m'), 1.0,
+                       source_tag='1')
+    (frame,) = assembler.poll(2.0)
+    assert frame.ranges[0, 0] == 2.34 and assembler.dropped == {}
+
+
+def test_records_that_name_no_anchor_take_the_source_anchor():
+    assembler = FrameAssembler(CONFIG)
+    record = RangeRecord(None, 3.5)
+    assembler.add(record, 1.0, source_tag=TAGS[1], source_anchor=ANCHORS[2])
+    assembler.add(record, 1.0, source_tag=TAGS[1])
+    (frame,) = assembler.poll(2.0)
+    assert frame.ranges[1, 2] == 3.5 and assembler.dropped == {'no_anchor': 1}

@@ -156,3 +156,109 @@ def test_missing_devices_are_retried_without_raising(port):
         assert source.state == 'disconnected' and source.last_error
     finally:
         source.stop()
+
+
+MESSAGES = [b'{"links":[{"A":"B82","R":"2.3"}]}', b'{"links":[{"A":"}{\\"","R":"1"}]}',
+            b'{"id":1,"range":[0,0,30,0,0,0,0,0]}']
+PREAMBLE = b'GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n'
+
+
+def test_splitter_frames_concatenated_json_however_it_is_cut():
+    from hypothesis import given, settings, strategies as st
+
+    stream = PREAMBLE + b''.join(MESSAGES * 3)
+    expected = ['GET / HTTP/1.1', 'Host: 127.0.0.1', 'Connection: close'] + \
+        [m.decode() for m in MESSAGES * 3]
+
+    @settings(max_examples=100, deadline=None)
+    @given(cuts=st.lists(st.integers(0, len(stream)), max_size=20))
+    def check(cuts):
+        splitter = LineSplitter()
+        lines = []
+        bounds = [0, *sorted(cuts), len(stream)]
+        for start, end in zip(bounds, bounds[1:]):
+            lines += splitter.feed(stream[start:end])
+        assert lines == expected and splitter.overlong == 0
+
+    check()
+
+
+def test_splitter_splits_objects_on_one_line_and_recovers_after_an_overlong_one():
+    splitter = LineSplitter(max_line=64)
+    assert splitter.feed(b'{"a":1}{"b":"}"}\r\n{"c":2}\n') == ['{"a":1}', '{"b":"}"}', '{"c":2}']
+    assert splitter.feed(b'mc 07 0000 a0:0\n') == ['mc 07 0000 a0:0']
+    assert splitter.feed(b'{"x":"' + b'y' * 100) == [] and splitter.overlong == 1
+    assert splitter.feed(b'"}{"d":3}') == ['{"d":3}']        # resynchronised on the next object
+
+
+def test_a_listening_source_serves_several_tags_that_write_json_without_newlines():
+    with socket.socket() as probe:
+        probe.bind(('127.0.0.1', 0))
+        port = probe.getsockname()[1]
+    lines, on_line = collect()
+    from epp_ros.uwb.source import open_source
+    source = open_source(f'tcp-listen://127.0.0.1:{port}', on_line, backoff=0.1).start()
+    clients = []
+    try:
+        assert wait_for(lambda: source.state == 'listening')
+        for _ in range(2):
+            clients.append(socket.create_connection(('127.0.0.1', port), timeout=5))
+        assert wait_for(lambda: source.clients == 2 and source.state == 'connected')
+        clients[0].sendall(PREAMBLE + MESSAGES[0])
+        clients[1].sendall(MESSAGES[2][:10])
+        clients[0].sendall(MESSAGES[1])
+        clients[1].sendall(MESSAGES[2][10:] + MESSAGES[2])
+        assert wait_for(lambda: len(lines) == 7, 10)
+        got = [line for line, _ in lines]
+        assert got[:3] == ['GET / HTTP/1.1', 'Host: 127.0.0.1', 'Connection: close']
+        assert sorted(got[3:]) == sorted(m.decode() for m in
+                                         [MESSAGES[0], MESSAGES[1], MESSAGES[2], MESSAGES[2]])
+        clients.pop(0).close()
+        assert wait_for(lambda: source.clients == 1 and source.counts['disconnects'] == 1)
+        assert source.counts['connections'] == 2 and source.state == 'connected'
+    finally:
+        for client in clients:
+            client.close()
+        source.stop()
+    with pytest.raises(OSError):                 # nothing listens once stopped
+        socket.create_connection(('127.0.0.1', port), timeout=1).close()
+
+
+def test_a_listening_source_binds_to_the_given_address_only():
+    from epp_ros.uwb.source import ListenSource
+    with socket.socket() as probe:
+        probe.bind(('127.0.0.1', 0))
+        port = probe.getsockname()[1]
+    source = ListenSource(f'tcp-listen://127.0.0.1:{port}', lambda line, stamp: None).start()
+    try:
+        assert wait_for(lambda: source.state == 'listening')
+        with socket.socket() as other:        # the same port on another address is free
+            other.bind(('127.0.0.2', port))
+        blocker = ListenSource(f'tcp-listen://127.0.0.1:{port}', lambda line, stamp: None,
+                               backoff=0.1).start()
+        assert wait_for(lambda: blocker.counts['io_errors'] >= 2)
+        assert blocker.state == 'disconnected' and blocker.last_error
+        blocker.stop()
+    finally:
+        source.stop()
+    with pytest.raises(ValueError):
+        ListenSource('tcp-listen://:80', lambda line, stamp: None)
+
+
+def test_tcp_reads_take_what_the_socket_holds_and_report_the_backlog():
+    bridge = Bridge()
+    lines, on_line = collect()
+    source = LineSource(f'socket://127.0.0.1:{bridge.port}', on_line).start()
+    line = b'{"tag":"1","links":[{"A":"1782","R":"2.300"}]}\r\n'
+    count = 20000
+    try:
+        assert wait_for(lambda: bridge.client is not None and source.state == 'connected')
+        bridge.send(line * count)
+        assert wait_for(lambda: len(lines) == count, 60)
+        # Bulk reads: far fewer reads than lines (one byte a read would be 50 a line).
+        assert source.counts['reads'] < count / 4
+        assert source.counts['bytes'] == len(line) * count
+        assert source.backlog >= 0 and source.newest_line == lines[-1][1]
+    finally:
+        source.stop()
+        bridge.close()

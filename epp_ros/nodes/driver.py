@@ -1,4 +1,4 @@
-"""uwb_driver: DWM1000 range lines from serial ports or WiFi bridges -> /uwb/ranges.
+"""uwb_driver: UWB range lines from serial ports, WiFi bridges and WiFi tags -> /uwb/ranges.
 
 Publishes ``sensor_msgs/JointState`` on ``uwb/ranges`` (relative: namespaces work), one
 message per ranging cycle, as a stamped, labelled range array: ``name[i] = "<tag>:<anchor>"``
@@ -17,13 +17,14 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from epp_ros.config import PROTOCOLS, Source, normalise_device_id
+from epp_ros.config import (PROTOCOLS, ConfigError, Source, listen_address,
+                            normalise_device_id)
 from epp_ros.nodes.common import (RANGES_QOS, StartupError, declare, declare_pump_parameters,
                                   run_node, to_time)
 from epp_ros.uwb.decoder import LineDecoder
+from epp_ros.uwb.formats import FORMATS, fits_slots
 from epp_ros.uwb.frames import FrameAssembler
-from epp_ros.uwb.protocols import TREK_ANCHOR_IDS, WHOLE_TAG_LINES
-from epp_ros.uwb.source import LineSource
+from epp_ros.uwb.source import open_source
 
 
 class UwbDriver(Node):
@@ -44,12 +45,12 @@ class UwbDriver(Node):
         port = declare(self, 'port', '', 'A single source instead of the configured list.')
         protocol = declare(self, 'protocol', 'auto', f'Protocol of `port`: {PROTOCOLS}.')
         tag = declare(self, 'tag', '', 'Tag id on `port` for formats that do not name it.')
+        anchor = declare(self, 'anchor', '', 'Anchor id on `port` for formats that name no '
+                                             'device.')
         sources = self.config.sources
         if port:
-            if protocol not in PROTOCOLS:
-                raise StartupError(f'protocol: {protocol!r} is not one of {list(PROTOCOLS)}')
-            sources = (Source(port, protocol, normalise_device_id(tag) or None),)
-        self._check_trek(sources)
+            sources = (self._single_source(port, protocol, tag, anchor),)
+        self._check_anchor_slots(sources)
         try:
             self.assembler = FrameAssembler(self.config, frame_period, min_range, max_range)
         except ValueError as exc:
@@ -64,8 +65,8 @@ class UwbDriver(Node):
         self.readers = []
         for source in sources:
             decoder = LineDecoder(source.protocol)
-            reader = LineSource(source.port, self._handler(source, decoder), baud=baud,
-                                max_line=max_line)
+            reader = open_source(source.port, self._handler(source, decoder), baud=baud,
+                                 max_line=max_line)
             self.readers.append((source, decoder, reader))
         for _, _, reader in self.readers:
             reader.start()
@@ -75,22 +76,41 @@ class UwbDriver(Node):
             f'reading {", ".join(f"{s.port} ({s.protocol})" for s in sources)}; '
             f'{len(self.link_names)} tag-anchor pairs')
 
-    def _check_trek(self, sources):
-        if all(s.protocol == 'trek' for s in sources):
-            extra = sorted(set(self.config.anchor_ids) - TREK_ANCHOR_IDS)
-            if extra:
-                raise StartupError(
-                    f'anchor_ids: the trek format carries at most 4 anchors per tag (ids 0-3); '
-                    f'anchors {extra} need another source or another format')
+    @staticmethod
+    def _single_source(port, protocol, tag, anchor):
+        """The source given by the ``port`` parameters."""
+        if protocol not in PROTOCOLS:
+            raise StartupError(f'protocol: {protocol!r} is not one of {list(PROTOCOLS)}')
+        try:
+            listen_address(port)
+        except ConfigError as exc:
+            raise StartupError(f'port: {exc}') from None
+        return Source(port, protocol, normalise_device_id(tag) or None,
+                      normalise_device_id(anchor) or None)
+
+    def _check_anchor_slots(self, sources):
+        """Refuse a pump whose anchors no source's format can carry (field positions)."""
+        formats = [FORMATS.get(s.protocol) for s in sources]
+        if not formats or any(f is None or f.anchor_slots is None for f in formats):
+            return
+        slots = max(f.anchor_slots for f in formats)
+        extra = [a for a in self.config.anchor_ids if not fits_slots(a, slots)]
+        if extra:
+            names = '/'.join(sorted({f.name for f in formats}))
+            raise StartupError(
+                f'anchor_ids: the {names} format carries at most {slots} anchors per tag '
+                f'(ids 0-{slots - 1}); anchors {extra} need another source or another format')
 
     def _handler(self, source, decoder):
         def on_line(line, received):
             records = decoder.decode(line)
             if not records:
                 return
+            line_format = decoder.format
+            whole = line_format is not None and line_format.whole_tag
             with self._lock:
-                for frame in self.assembler.add_line(records, received, source.tag,
-                                                     decoder.protocol in WHOLE_TAG_LINES):
+                for frame in self.assembler.add_line(records, received, source.tag, whole,
+                                                     source.anchor):
                     self._publish(frame)
         return on_line
 
@@ -127,7 +147,10 @@ class UwbDriver(Node):
                      for key, value in counts.items()}
             for key, value in counts.items():
                 self._previous_counts[(source.port, key)] = value
-            if reader.state != 'connected':
+            if reader.state == 'listening':
+                status.level = DiagnosticStatus.WARN
+                status.message = f'listening, no device connected {reader.last_error}'.strip()
+            elif reader.state != 'connected':
                 status.level = DiagnosticStatus.ERROR
                 status.message = f'{reader.state}: {reader.last_error}'
             elif silent > 1.0:
@@ -142,13 +165,21 @@ class UwbDriver(Node):
                 'lines': reader.counts['lines'], 'frames': frames,
                 'unparsed lines': decoder.counts['unparsed'],
                 'parse errors': decoder.counts['errors'],
+                'position lines': decoder.counts['position'],
+                'preamble lines': decoder.counts['preamble'],
+                'input backlog (bytes)': reader.backlog,
+                'newest line age (s)': ('none' if reader.newest_line is None
+                                        else f'{now - reader.newest_line:.3f}'),
+                'clients': reader.clients,
+                'connections': reader.counts['connections'],
                 'dropped implausible': dropped.get('implausible', 0),
                 'dropped unknown device': dropped.get('unknown_tag', 0)
                 + dropped.get('unknown_anchor', 0),
                 'dropped without tag': dropped.get('no_tag', 0),
+                'dropped without anchor': dropped.get('no_anchor', 0),
                 'anchor-anchor ranges': dropped.get('anchor_range', 0),
                 'raw ranges (corrected ones used)': dropped.get('raw_range', 0),
-                'overlong lines': reader.splitter.overlong,
+                'overlong lines': reader.overlong,
                 'reconnects': reader.counts['reconnects'],
                 'io errors': reader.counts['io_errors'],
                 'handler errors': reader.counts['handler_errors'],

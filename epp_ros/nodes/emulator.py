@@ -1,11 +1,12 @@
 """uwb_emulator: a simulated pump whose UWB modules talk like the real ones.
 
-The boom follows a working cycle; each cycle's noisy ranges are written, in the chosen
-protocol, to a pseudo-terminal (like a USB-UART) or to TCP clients (like the ESP8266 WiFi
-bridge). The first stdout lines say where: ``PTY <device path>`` or ``TCP <url>``, one per
-channel (formats that do not name the tag need one channel per tag; then the tag id
-follows). With ``--truth`` the true posture is published as ``geometry_msgs/PoseArray`` on
-``arm_posture/ground_truth`` (base first, then joints 1..p).
+The boom follows a working cycle; each cycle's noisy ranges are written, in any format of
+the registry (:data:`epp_ros.uwb.formats.FORMATS`), to a pseudo-terminal (like a USB-UART)
+or to TCP clients (like the ESP8266 WiFi bridge). The first stdout lines say where:
+``PTY <device path>`` or ``TCP <url>``, one per channel (formats that do not name the tag
+need one channel per tag, formats that name no device one per tag-anchor pair; the ids the
+lines leave out follow). With ``--truth`` the true posture is published as
+``geometry_msgs/PoseArray`` on ``arm_posture/ground_truth`` (base first, then joints 1..p).
 """
 import argparse
 import sys
@@ -19,20 +20,22 @@ from rclpy.utilities import remove_ros_args
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core.simulate import RangeNoise, working_cycle
 from epp_ros.nodes.common import POSTURE_QOS, posture_message, run_node
-from epp_ros.uwb.protocols import TREK_ANCHOR_IDS
-from epp_ros.uwb.emulation import (TAG_NAMING, PtyOutput, TcpOutput, channel_count, corrupt,
-                                   cycle_lines)
+from epp_ros.uwb.emulation import PtyOutput, TcpOutput, channel_devices, corrupt, cycle_lines
+from epp_ros.uwb.formats import FORMATS, fits_slots
 
 
 def parse_args(argv):
     parser = argparse.ArgumentParser(prog='uwb_emulator', description=__doc__.splitlines()[0])
-    parser.add_argument('--protocol', choices=sorted(TAG_NAMING), default='json')
+    parser.add_argument('--protocol', choices=list(FORMATS), default='json')
     where = parser.add_mutually_exclusive_group(required=True)
     where.add_argument('--pty', action='store_true', help='serve on pseudo-terminal(s)')
     where.add_argument('--tcp', metavar='HOST:PORT',
                        help='serve as TCP bridge(s) (per-tag channels on PORT, PORT+1, ...)')
     parser.add_argument('--link', help='symlink to the (first) pty, e.g. /tmp/ttyUWB; '
                                        'further channels get .1, .2, ...')
+    parser.add_argument('--no-newline', action='store_true',
+                        help='write messages back to back without line ends, as the '
+                             'Makerfabs ESP32 UWB tag writes its JSON')
     parser.add_argument('--config', help='pump description (default: the packaged pump.yaml)')
     parser.add_argument('--rate', type=float, default=10.0, help='ranging cycles per second')
     parser.add_argument('--sigma', type=float, default=0.05, help='range noise, metres')
@@ -57,10 +60,13 @@ def parse_args(argv):
 
 
 def open_outputs(args, config):
-    """The channels for this protocol, and the lines announcing them."""
-    count = channel_count(args.protocol, len(config.tag_ids))
+    """The channels for this protocol, and the lines announcing them.
+
+    Each announcement is ``PTY <path>`` or ``TCP <url>``, followed by the tag id and the
+    anchor id that the channel's lines do not name, where the format names none.
+    """
     outputs, announcements = [], []
-    for channel in range(count):
+    for channel, devices in enumerate(channel_devices(args.protocol, config)):
         suffix = '' if channel == 0 else f'.{channel}'
         if args.pty:
             output = PtyOutput(link=args.link + suffix if args.link else None)
@@ -68,9 +74,8 @@ def open_outputs(args, config):
         else:
             output = TcpOutput(args.host, args.port + channel if args.port else 0)
             kind = 'TCP'
-        tag = '' if TAG_NAMING[args.protocol] else f' {config.tag_ids[channel]}'
         outputs.append(output)
-        announcements.append(f'{kind} {output.path}{tag}')
+        announcements.append(' '.join([kind, output.path, *(d for d in devices if d)]))
     return outputs, announcements
 
 
@@ -104,10 +109,11 @@ class UwbEmulator(Node):
         joints = self.trajectory.joints[index if index < count else 2 * count - 2 - index]
         ranges, _ = self.noise.apply(self.model.ranges(joints), self.rng)
         stamp = time.time()
+        ending = '' if self.args.no_newline else '\r\n'
         for channel, line in cycle_lines(self.config, ranges, self.args.protocol, self.cycle):
-            data = (line + '\r\n').encode()
+            data = (line + ending).encode()
             if self.rng.random() < self.args.garbage:
-                data = corrupt(line, self.rng) + b'\r\n'
+                data = corrupt(line, self.rng) + ending.encode()
             self.outputs[channel].write(data)
         if self.truth is not None:
             self.truth.publish(posture_message(self.model.pivot_of(joints), joints, stamp,
@@ -127,9 +133,11 @@ def main(argv=None):
     except ConfigError as exc:
         print(f'uwb_emulator: bad pump configuration: {exc}', file=sys.stderr)
         return 2
-    if args.protocol == 'trek' and not set(config.anchor_ids) <= TREK_ANCHOR_IDS:
-        print(f'uwb_emulator: anchor_ids: the trek format carries anchors 0-3 only, the '
-              f'configuration has {list(config.anchor_ids)}', file=sys.stderr)
+    slots = FORMATS[args.protocol].anchor_slots
+    if slots is not None and not all(fits_slots(a, slots) for a in config.anchor_ids):
+        print(f'uwb_emulator: anchor_ids: the {args.protocol} format carries anchors '
+              f'0-{slots - 1} only, the configuration has {list(config.anchor_ids)}',
+              file=sys.stderr)
         return 2
     try:
         outputs, announcements = open_outputs(args, config)

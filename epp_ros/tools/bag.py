@@ -22,6 +22,7 @@ import numpy as np
 from epp_ros import bags
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core import RANGE_METHODS
+from epp_ros.uwb.formats import FORMATS
 
 DEFAULT_RECORD = [bags.RANGES, bags.POSTURE, bags.TRUTH, '/diagnostics']
 
@@ -41,7 +42,7 @@ def parse_args(argv):
     synth.add_argument('--drop', type=float, default=0.0)
     synth.add_argument('--seed', type=int, default=0)
     synth.add_argument('--config')
-    synth.add_argument('--raw', choices=['json', 'lec', 'arduino', 'trek'],
+    synth.add_argument('--raw', choices=list(FORMATS),
                        help='also write the device lines on /uwb/raw')
     record = commands.add_parser('record', help='record topics until Ctrl-C or --duration')
     record.add_argument('out')

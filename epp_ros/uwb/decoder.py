@@ -1,12 +1,14 @@
 """Lines of one source -> range records, with protocol auto-detection.
 
-With ``protocol="auto"`` every parser is tried on each line until one protocol has parsed
-``lock_after`` lines; from then on only that parser runs. Records parsed while detecting
-are kept, not dropped.
+With ``protocol="auto"`` every format's parser is tried on each line until one format has
+parsed ``lock_after`` lines; from then on only that parser runs. Records parsed while
+detecting are kept, not dropped. Lines that give no range but that a format knows (a
+DWM1001 position, a WiFi tag's HTTP preamble) are counted under their label, not as
+unparsed.
 """
 from collections import Counter
 
-from epp_ros.uwb.protocols import PARSERS
+from epp_ros.uwb.formats import FORMATS, recognised
 
 __all__ = ['LineDecoder']
 
@@ -17,7 +19,7 @@ class LineDecoder:
     Parameters
     ----------
     protocol : str
-        A name in ``PARSERS`` or ``"auto"``.
+        A name in :data:`epp_ros.uwb.formats.FORMATS` or ``"auto"``.
     lock_after : int
         Lines one protocol must parse before auto-detection settles on it.
 
@@ -27,27 +29,33 @@ class LineDecoder:
         The protocol in use (None while auto-detection has not settled).
     counts : collections.Counter
         ``lines``, ``parsed`` (lines that gave records), ``unparsed`` (lines no parser
-        understood), ``errors`` (broken pieces inside parsed lines), ``records``.
+        understood), ``errors`` (broken pieces inside parsed lines), ``records``, and one
+        count per label of lines known to carry no range (``position``, ``preamble``).
     """
 
     def __init__(self, protocol='auto', lock_after=3):
-        if protocol != 'auto' and protocol not in PARSERS:
-            raise ValueError(f'protocol must be auto or one of {list(PARSERS)}, got {protocol!r}')
+        if protocol != 'auto' and protocol not in FORMATS:
+            raise ValueError(f'protocol must be auto or one of {list(FORMATS)}, got {protocol!r}')
         self.protocol = None if protocol == 'auto' else protocol
         self.lock_after = int(lock_after)
         self.counts = Counter()
         self._votes = Counter()
 
+    @property
+    def format(self):
+        """The :class:`~epp_ros.uwb.formats.LineFormat` in use, None while detecting."""
+        return FORMATS.get(self.protocol)
+
     def decode(self, line):
         """Records of one line (a tuple, empty when nothing valid was in it)."""
         self.counts['lines'] += 1
-        candidates = [self.protocol] if self.protocol else list(PARSERS)
+        candidates = [self.protocol] if self.protocol else list(FORMATS)
         for name in candidates:
-            result = PARSERS[name](line)
+            result = FORMATS[name].parse(line)
             if result is not None and result.records:
                 break
         else:
-            self.counts['unparsed'] += 1
+            self.counts[recognised(line, candidates) or 'unparsed'] += 1
             return ()
         if self.protocol is None:
             self._votes[name] += 1

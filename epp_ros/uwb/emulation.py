@@ -1,11 +1,11 @@
 """Impersonating the UWB hardware: device lines per ranging cycle, and where they go.
 
-A ranging cycle's (p, m) ranges become the lines the real devices would print, in one of the
-protocols of :mod:`epp_ros.uwb.protocols`. Formats that name the tag (trek, json) put every
-tag on one channel; formats that do not (lec, arduino) need one channel per tag, as on the
-real rig where each tag has its own serial port or WiFi bridge. A channel is a
-pseudo-terminal (:class:`PtyOutput`) or a TCP server like the ESP8266 bridge
-(:class:`TcpOutput`).
+A ranging cycle's (p, m) ranges become the lines the real devices would print, in any format
+of :data:`epp_ros.uwb.formats.FORMATS` (each format's ``emit``). Formats that name the tag
+put every tag on one channel; formats that do not need one channel per tag, as on the real
+rig where each tag has its own serial port or WiFi bridge; formats that name no device at
+all need one channel per tag-anchor pair. A channel is a pseudo-terminal
+(:class:`PtyOutput`) or a TCP server like the ESP8266 bridge (:class:`TcpOutput`).
 """
 import os
 import socket
@@ -16,20 +16,42 @@ from collections import Counter
 
 import numpy as np
 
-from epp_ros.uwb.protocols import format_arduino, format_json, format_lec, format_trek
+from epp_ros.uwb.formats import FORMATS, Cycle
+from epp_ros.uwb.formats.trek import RAW_BIAS
 
-__all__ = ['TAG_NAMING', 'channel_count', 'cycle_lines', 'corrupt', 'PtyOutput', 'TcpOutput']
+__all__ = ['TAG_NAMING', 'channel_count', 'channel_devices', 'cycle_lines', 'corrupt',
+           'PtyOutput', 'TcpOutput']
 
 #: Range bias of the emulated TREK1000 raw (``mr``) lines, metres.
-TREK_RAW_BIAS = 0.25
+TREK_RAW_BIAS = RAW_BIAS
 
 #: Whether a protocol's lines name the tag.
-TAG_NAMING = {'trek': True, 'json': True, 'lec': False, 'arduino': False}
+TAG_NAMING = {name: line_format.names_tag for name, line_format in FORMATS.items()}
 
 
-def channel_count(protocol, n_tags):
-    """Channels (ports) a protocol needs for ``n_tags`` tags."""
-    return 1 if TAG_NAMING[protocol] else n_tags
+def _format(protocol):
+    try:
+        return FORMATS[protocol]
+    except KeyError:
+        raise ValueError(f'unknown protocol {protocol!r}') from None
+
+
+def channel_count(protocol, n_tags, n_anchors=1):
+    """Channels (ports) a protocol needs for ``n_tags`` tags and ``n_anchors`` anchors."""
+    line_format = _format(protocol)
+    if not line_format.names_anchor:
+        return n_tags * n_anchors
+    return 1 if line_format.names_tag else n_tags
+
+
+def channel_devices(protocol, config):
+    """Per channel, the (tag id, anchor id) its lines leave unnamed (None where named)."""
+    line_format = _format(protocol)
+    if line_format.names_tag and line_format.names_anchor:
+        return [(None, None)]
+    if line_format.names_anchor:
+        return [(tag, None) for tag in config.tag_ids]
+    return [(tag, anchor) for tag in config.tag_ids for anchor in config.anchor_ids]
 
 
 def cycle_lines(config, ranges, protocol, sequence=0, rx_power=-80.0):
@@ -41,37 +63,39 @@ def cycle_lines(config, ranges, protocol, sequence=0, rx_power=-80.0):
     ranges : ndarray, shape (p, m)
         Metres; NaN links are not reported.
     protocol : str
-        trek, lec, arduino or json.
+        A name in :data:`epp_ros.uwb.formats.FORMATS`.
     sequence : int
-        Cycle number (the trek format carries it).
+        Cycle number (some formats carry it).
+    rx_power : float
+        dBm, for the formats that print it.
 
     Returns
     -------
     list of (channel, line)
-        ``channel`` is 0 for tag-naming formats, else the tag's row.
+        ``channel`` as :func:`channel_devices` numbers them.
+
+    Raises
+    ------
+    ValueError
+        For an unknown protocol, or ids or ranges the format cannot carry.
     """
+    line_format = _format(protocol)
+    cycle = Cycle(sequence, dict(zip(config.anchor_ids, config.anchor_positions)), rx_power)
+    m = len(config.anchor_ids)
     lines = []
     for row, tag in enumerate(config.tag_ids):
         measured = {config.anchor_ids[j]: float(ranges[row, j])
                     for j in np.flatnonzero(np.isfinite(ranges[row]))}
-        if protocol == 'trek':
-            if measured:      # the firmware prints raw (biased) and corrected ranges
-                raw = {anchor: value + TREK_RAW_BIAS for anchor, value in measured.items()}
-                lines.append((0, format_trek(tag, raw, kind='mr', sequence=sequence)))
-                lines.append((0, format_trek(tag, measured, kind='mc', sequence=sequence)))
-        elif protocol == 'json':
-            if measured:
-                lines.append((0, format_json(tag, measured)))
-        elif protocol == 'lec':
-            if measured:
-                positions = {config.anchor_ids[j]: config.anchor_positions[j]
-                             for j in range(len(config.anchor_ids))}
-                lines.append((row, format_lec(measured, positions)))
-        elif protocol == 'arduino':
-            lines.extend((row, format_arduino(anchor, value, rx_power))
-                         for anchor, value in measured.items())
-        else:
-            raise ValueError(f'unknown protocol {protocol!r}')
+        if not measured:
+            continue
+        if not line_format.names_anchor:
+            for anchor, value in measured.items():
+                channel = row * m + config.anchor_ids.index(anchor)
+                lines += [(channel, line) for line in line_format.emit(tag, {anchor: value},
+                                                                       cycle)]
+            continue
+        channel = 0 if line_format.names_tag else row
+        lines += [(channel, line) for line in line_format.emit(tag, measured, cycle)]
     return lines
 
 

@@ -45,6 +45,7 @@ class FrameAssembler:
     dropped : collections.Counter
         Unused records by reason: ``implausible``, ``unknown_tag``, ``unknown_anchor``,
         ``no_tag`` (a line that names no tag on a source configured without one),
+        ``no_anchor`` (a line that names no anchor on a source configured without one),
         ``anchor_range`` (anchor-anchor ranges) and ``raw_range`` (TREK1000 ranges before
         bias correction, reported again corrected), which the estimators do not use.
     frames : int
@@ -81,22 +82,24 @@ class FrameAssembler:
         self._reset()
         return frame
 
-    def add(self, record, stamp, source_tag=None):
+    def add(self, record, stamp, source_tag=None, source_anchor=None):
         """Add one record received at ``stamp`` (s); return the frames it closed (0 to 2).
 
-        ``source_tag`` is the tag id of the record's source, used when the line names none.
+        ``source_tag`` and ``source_anchor`` are the device ids of the record's source, used
+        when the line names none. Ids compare as numbers (see ``PumpConfig.tag_index``).
         """
         closed = self.poll(stamp)
         if record.kind != 'range':
             self.dropped[f'{record.kind}_range'] += 1
             return closed
         tag = record.tag if record.tag is not None else source_tag
-        if tag is None:
-            self.dropped['no_tag'] += 1
+        anchor = record.anchor if record.anchor is not None else source_anchor
+        if tag is None or anchor is None:
+            self.dropped['no_tag' if tag is None else 'no_anchor'] += 1
             return closed
         row = self.config.tag_index(tag)
-        column = self.config.anchor_index(record.anchor)
-        other_tag = self.config.tag_index(record.anchor) if column is None else None
+        column = self.config.anchor_index(anchor)
+        other_tag = self.config.tag_index(anchor) if column is None else None
         if row is None or (column is None and other_tag in (None, row)):
             self.dropped['unknown_tag' if row is None else 'unknown_anchor'] += 1
             return closed
@@ -122,7 +125,7 @@ class FrameAssembler:
         """The open cycle's tag-tag (p, p) or tag-anchor (p, m) ranges."""
         return self._tag_ranges if tag_link else self._ranges
 
-    def add_line(self, records, stamp, source_tag=None, whole=False):
+    def add_line(self, records, stamp, source_tag=None, whole=False, source_anchor=None):
         """Add the records of one line; return the frames closed (0 to 2 or so).
 
         With ``whole`` the line carries all of its tag's ranges this cycle (see
@@ -140,7 +143,7 @@ class FrameAssembler:
             if rows & self._tags_done:
                 closed.append(self._close())
         for record in records:
-            closed += self.add(record, stamp, source_tag)
+            closed += self.add(record, stamp, source_tag, source_anchor)
         if rows and self._opened is not None:
             self._tags_done |= rows
             if len(self._tags_done) == self.shape[0]:

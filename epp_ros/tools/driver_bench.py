@@ -1,0 +1,122 @@
+"""How fast the driver reads: lines/s and CPU per 1,000 lines, over TCP and a pty.
+
+A child process floods a transport with ``count`` copies of one device line as fast as the
+transport takes them; this process reads them with the driver's own path
+(:class:`~epp_ros.uwb.source.LineSource` and :class:`~epp_ros.uwb.decoder.LineDecoder`).
+The child's CPU is not counted. No ROS.
+"""
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+import tty
+
+from epp_ros.uwb.decoder import LineDecoder
+from epp_ros.uwb.source import LineSource
+
+__all__ = ['measure_reading', 'run_driver_bench', 'TRANSPORTS']
+
+TRANSPORTS = ('tcp', 'pty')
+DEFAULT_LINE = '{"tag":"1","links":[{"A":"1782","R":"2.300"},{"A":"1783","R":"4.125"}]}'
+
+_WRITER = '''
+import os, socket, sys
+fd, kind, count, line = int(sys.argv[1]), sys.argv[2], int(sys.argv[3]), sys.argv[4]
+data = (line + "\\r\\n").encode() * count
+if kind == "tcp":
+    conn, _ = socket.socket(fileno=fd).accept()
+    conn.sendall(data)
+    conn.recv(1)
+else:
+    os.set_blocking(fd, True)
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view[:65536]):]
+    sys.stdin.read()
+'''
+
+
+def _transport(kind):
+    """(port to read, fd to hand to the writer, things to close)."""
+    if kind == 'tcp':
+        server = socket.create_server(('127.0.0.1', 0))
+        return f'socket://127.0.0.1:{server.getsockname()[1]}', server.fileno(), [server]
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    return os.ttyname(slave), master, [master, slave]
+
+
+def measure_reading(transport='tcp', count=20000, line=DEFAULT_LINE, protocol='json',
+                    timeout=300.0):
+    """Read ``count`` lines flooded through ``transport``; how fast, at what CPU cost.
+
+    Parameters
+    ----------
+    transport : str
+        'tcp' (``socket://``, the WiFi bridge path) or 'pty' (the serial path).
+    count : int
+        Lines written.
+    line : str
+        The device line (written with ``\\r\\n``).
+    protocol : str
+        Decoder protocol for the lines.
+    timeout : float
+        Longest wait for every line, seconds.
+
+    Returns
+    -------
+    dict
+        ``lines``, ``seconds`` (first byte written to last line decoded), ``lines_per_s``,
+        ``cpu_ms_per_1000_lines`` (this process: reader thread and decoder), ``reads``.
+    """
+    port, fd, owned = _transport(transport)
+    decoder = LineDecoder(protocol)
+    done = threading.Event()
+
+    def on_line(text, stamp):
+        decoder.decode(text)
+        if decoder.counts['lines'] >= count:
+            done.set()
+
+    source = LineSource(port, on_line, max_line=max(4096, 2 * len(line)))
+    cpu, started = time.process_time(), time.monotonic()
+    source.start()
+    writer = subprocess.Popen([sys.executable, '-c', _WRITER, str(fd), transport, str(count),
+                               line], pass_fds=(fd,), stdin=subprocess.PIPE)
+    try:
+        finished = done.wait(timeout)
+        seconds, cpu = time.monotonic() - started, time.process_time() - cpu
+    finally:
+        source.stop()
+        writer.stdin.close()
+        writer.wait(10)
+        for item in owned:
+            if isinstance(item, int):
+                os.close(item)
+            else:
+                item.close()
+    lines = decoder.counts['lines']
+    return {'transport': transport, 'lines': lines, 'complete': finished,
+            'seconds': seconds, 'lines_per_s': lines / seconds,
+            'cpu_ms_per_1000_lines': 1e6 * cpu / max(lines, 1),
+            'reads': source.counts['reads']}
+
+
+def run_driver_bench(count=20000, transports=TRANSPORTS):
+    """One row per transport (see :func:`measure_reading`)."""
+    return [measure_reading(kind, count) for kind in transports]
+
+
+def format_rows(rows):
+    """A plain table of :func:`run_driver_bench` rows."""
+    lines = ['transport   lines   seconds   lines/s   CPU ms / 1000 lines   reads']
+    lines += [f"{r['transport']:<9} {r['lines']:>7} {r['seconds']:>9.2f} "
+              f"{r['lines_per_s']:>9.0f} {r['cpu_ms_per_1000_lines']:>21.1f} {r['reads']:>7}"
+              for r in rows]
+    return '\n'.join(lines)
+
+
+if __name__ == '__main__':
+    print(format_rows(run_driver_bench(int(sys.argv[1]) if len(sys.argv) > 1 else 20000)))

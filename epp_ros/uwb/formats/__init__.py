@@ -1,0 +1,51 @@
+"""Every UWB device output format, one descriptor each, in one registry.
+
+A format is one module here that defines ``FORMAT``, a
+:class:`~epp_ros.uwb.formats.base.LineFormat`: its parser, its emitter (the emulator's
+voice), whether its lines name the tag and the anchor, whether a line carries all of a tag's
+ranges, its anchor slots and how it prints ids. Everything else -- the decoder and its
+auto-detection, the emulator, the configuration check, the driver, the bag tool -- reads
+:data:`FORMATS`, so a new format is a new module, one line below, and its tests.
+"""
+from epp_ros.uwb.formats import (arduino, bare, haoru, jremington, json_links, lec, les,
+                                 mauwb, mauwb_json, nrng, trek)
+from epp_ros.uwb.formats.base import (Cycle, LineFormat, ParseResult, RangeRecord,
+                                      device_number, slot_of)
+
+__all__ = ['FORMATS', 'LineFormat', 'Cycle', 'ParseResult', 'RangeRecord', 'device_number',
+           'detect_format', 'recognised', 'fits_slots']
+
+#: name -> LineFormat. The order breaks ties in auto-detection: older, stricter formats first.
+FORMATS = {module.FORMAT.name: module.FORMAT for module in (
+    trek, lec, arduino, json_links, les, haoru, nrng, mauwb, mauwb_json, jremington, bare)}
+
+
+def detect_format(lines, names=None):
+    """The format among ``names`` (default all) whose parser gives records for most ``lines``.
+
+    Ties go to the earlier name in :data:`FORMATS`; None if no parser reads any line.
+    """
+    lines = list(lines)
+    names = list(FORMATS if names is None else names)
+    counts = {name: sum(FORMATS[name].parse(line) is not None for line in lines)
+              for name in names}
+    best = max(names, key=counts.get)
+    return best if counts[best] > 0 else None
+
+
+def recognised(line, names=None):
+    """The label under which a format among ``names`` counts a line without ranges, or None."""
+    for name in FORMATS if names is None else names:
+        label = FORMATS[name].recognise(line)
+        if label:
+            return label
+    return None
+
+
+def fits_slots(anchor, slots):
+    """Whether an anchor id is one of the field positions 0..slots-1 of a positional format."""
+    try:
+        slot_of(anchor, slots)
+    except ValueError:
+        return False
+    return True

@@ -1,0 +1,230 @@
+"""What every line format shares: the records, the descriptor, and small safe conversions.
+
+Standard library only, no ROS. A parser takes one line (with or without its ``\\r\\n``) and
+returns None when the line is not of its format or holds no valid range, else a
+:class:`ParseResult`. Parsers never raise, whatever the input. A range is returned only when
+it is finite and >= 0; no plausibility limits are applied here. Device ids are returned as
+the firmware printed them, stripped and upper-cased; they are compared as numbers later
+(:func:`device_number`).
+"""
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Callable
+
+__all__ = ['RangeRecord', 'ParseResult', 'LineFormat', 'Cycle', 'device_number',
+           'printed_number']
+
+
+@dataclass(frozen=True)
+class RangeRecord:
+    """One range measurement taken from a device line."""
+
+    anchor: str | None          # device id of the anchor as the line names it, normalised;
+                                # None in formats that name no device (from the source)
+    range_m: float              # metres, finite, >= 0
+    tag: str | None = None      # device id of the tag if the line names it, else None
+    kind: str = 'range'         # 'range' (tag-anchor), 'raw' (TREK mr: the same exchange
+                                # before bias correction) or 'anchor' (anchor-anchor)
+    rx_power_dbm: float | None = None
+
+
+@dataclass(frozen=True)
+class ParseResult:
+    """What one line gave: the valid records and the number of broken pieces skipped."""
+
+    records: tuple              # tuple[RangeRecord, ...]
+    errors: int                 # 0 for a clean line
+
+
+@dataclass(frozen=True)
+class Cycle:
+    """What an emitter may need besides one tag's ranges (see :attr:`LineFormat.emit`)."""
+
+    sequence: int = 0                           #: ranging cycle number
+    anchor_positions: dict = field(default_factory=dict)   #: anchor id -> (x, y, z), m
+    rx_power_dbm: float = -80.0
+
+
+@dataclass(frozen=True)
+class LineFormat:
+    """One device output format: everything the driver, emulator and tools need to know.
+
+    Attributes
+    ----------
+    name : str
+        The ``protocol`` name in ``pump.yaml``.
+    parse : callable(str) -> ParseResult or None
+        The parser (never raises).
+    emit : callable(tag, ranges, cycle) -> list of str
+        The lines the device prints for one tag's ranges of one cycle: ``tag`` its id,
+        ``ranges`` ``{anchor_id: metres}`` (one entry, ``{None: metres}``, when the format
+        names no anchor), ``cycle`` a :class:`Cycle`. Raises ValueError for what the
+        format cannot carry.
+    firmware : str
+        Where the format comes from.
+    example : str
+        One line as the firmware prints it.
+    names_tag : bool
+        Whether a line names the tag (else the source's ``source_tags`` entry gives it).
+    names_anchor : bool
+        Whether a line names the anchor (else the source's ``source_anchors`` entry).
+    whole_tag : bool
+        Whether one line carries all of one tag's ranges of a ranging cycle (it then also
+        says which of that tag's pairs are missing).
+    anchor_slots : int or None
+        For formats whose anchors are field positions 0..n-1, n; else None.
+    id_base : int
+        How the firmware prints device ids: 16 (short addresses) or 10 (small numbers).
+        Either way ids are compared as the hexadecimal numbers their digits spell, so a
+        ``pump.yaml`` gives each id as the firmware prints it (0-9 read the same).
+    recognise : callable(str) -> str or None
+        For lines of the format that carry no range (positions, HTTP preambles): a label
+        to count them under, else None.
+    """
+
+    name: str
+    parse: Callable
+    emit: Callable
+    firmware: str
+    example: str
+    names_tag: bool = True
+    names_anchor: bool = True
+    whole_tag: bool = False
+    anchor_slots: int | None = None
+    id_base: int = 16
+    recognise: Callable = field(default=lambda line: None)
+
+
+# --- device ids -------------------------------------------------------------------------
+
+_ID_NUMBER = re.compile(r'(?:0[xX])?([0-9A-Fa-f]{1,16})', re.ASCII)
+
+
+def device_number(value):
+    """The number a device id spells in hexadecimal, or None if it is not one.
+
+    Case-insensitive, with or without ``0x``, any zero padding: ``'0B82'``, ``'b82'`` and
+    ``'0x0b82'`` are all 0xB82. Integers are taken by their decimal digits (``17`` is
+    ``'17'``), as JSON bridges print them.
+    """
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, int):
+        value = str(value) if value >= 0 else ''
+    if not isinstance(value, str):
+        return None
+    match = _ID_NUMBER.fullmatch(value.strip())
+    return int(match.group(1), 16) if match else None
+
+
+def printed_number(value, maximum=None):
+    """The decimal digits a firmware that prints small numbers shows for an id, else ValueError.
+
+    ``'3'``, ``'03'`` and ``'0x3'`` give ``'3'``; an id whose digits are not decimal (``'A'``)
+    cannot be printed by such firmware.
+    """
+    number = device_number(value)
+    text = None if number is None else f'{number:X}'
+    if text is None or not text.isdigit() or (maximum is not None and int(text) > maximum):
+        limit = '' if maximum is None else f' up to {maximum}'
+        raise ValueError(f'this format prints ids as decimal numbers{limit}, got {value!r}')
+    return text
+
+
+# --- safe conversions for parsers --------------------------------------------------------
+
+#: Longest number or id text accepted; anything longer is junk.
+MAX_FIELD_CHARS = 64
+
+_DECIMAL = re.compile(r'[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?', re.ASCII)
+HEX_ID = re.compile(r'[0-9A-Fa-f]{1,16}', re.ASCII)
+#: Shell prompts that DWM1001 and other firmware print before output (not noise).
+_PROMPT = re.compile(r'^(?:dwm>|nsh>|>)[ \t]*')
+
+
+def line_text(line):
+    """The line without surrounding whitespace (and line ending), or None if not a str."""
+    return line.strip() if isinstance(line, str) else None
+
+
+def without_prompt(text):
+    """``text`` without a leading shell prompt such as ``dwm> ``."""
+    return _PROMPT.sub('', text, count=1)
+
+
+def junk_errors(text, start):
+    """One error if anything but whitespace precedes the start of the line's content."""
+    return 1 if text[:start].strip() else 0
+
+
+def result(records, errors):
+    """A ParseResult, or None when no record survived."""
+    return ParseResult(tuple(records), int(errors)) if records else None
+
+
+def decimal(text):
+    """Finite float of a plain ASCII decimal number (text or int/float), else None."""
+    if isinstance(text, bool):
+        return None
+    if isinstance(text, (int, float)):
+        try:
+            value = float(text)
+        except OverflowError:
+            return None
+    elif isinstance(text, str):
+        text = text.strip()
+        if len(text) > MAX_FIELD_CHARS or not _DECIMAL.fullmatch(text):
+            return None
+        value = float(text)
+    else:
+        return None
+    return value if math.isfinite(value) else None
+
+
+def metres(value, scale=1.0):
+    """A valid range in metres (finite, >= 0, never -0.0) from text or number, else None."""
+    number = decimal(value)
+    if number is None or number < 0:
+        return None
+    value = number * scale
+    return value + 0.0 if math.isfinite(value) else None
+
+
+def normalised_id(value):
+    """A device id stripped and upper-cased, or None if empty, too long or not one word."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, int):
+        value = str(value)
+    if not isinstance(value, str):
+        return None
+    text = value.strip().upper()
+    if not text or len(text) > MAX_FIELD_CHARS or not text.isprintable():
+        return None
+    if any(character.isspace() for character in text):
+        return None
+    return text
+
+
+# --- checks for emitters -----------------------------------------------------------------
+
+def checked_range(value):
+    """``value`` as a float if finite and >= 0, else ValueError (for the formatters)."""
+    number = float(value)
+    if not math.isfinite(number) or number < 0:
+        raise ValueError(f'a range must be finite and >= 0, got {value!r}')
+    return number
+
+
+def checked_id(value, pattern=None):
+    """A formatter's id as text, ValueError unless it is one normalisable word."""
+    text = str(value).strip()
+    if normalised_id(text) is None or (pattern and not pattern.fullmatch(text)):
+        raise ValueError(f'not a usable device id: {value!r}')
+    return text
+
+
+def slot_of(anchor, slots):
+    """The field position of an anchor id in a format with ``slots`` positional anchors."""
+    return int(printed_number(anchor, slots - 1))
