@@ -22,6 +22,7 @@ from epp_ros.core.simulate import RangeNoise, working_cycle
 from epp_ros.uwb.emulation import cycle_lines
 
 __all__ = ['BagError', 'RANGES', 'TRUTH', 'POSTURE', 'RAW', 'TYPES', 'synthesize', 'info',
+           'write_frames',
            'read_frames', 'read_truth', 'evaluate', 'qos_profile', 'read_all', 'write_raw']
 
 RANGES, TRUTH, POSTURE, RAW = ('/uwb/ranges', '/arm_posture/ground_truth', '/arm_posture',
@@ -141,6 +142,28 @@ def synthesize(path, config, duration=60.0, rate=10.0, sigma=0.1, nlos=0.0, drop
     return counts
 
 
+def write_frames(path, config, frames, storage='mcap'):
+    """Write range frames as ``/uwb/ranges``, exactly as uwb_driver publishes them.
+
+    Parameters
+    ----------
+    frames : iterable of (int, ndarray)
+        ``(stamp_ns, ranges)`` with ranges (p, m) in metres, NaN where missing.
+
+    Returns
+    -------
+    int
+        Messages written.
+    """
+    count = 0
+    with _BagWriter(path, storage) as bag:
+        for stamp_ns, ranges in frames:
+            message = _ranges_message(stamp_ns, config.frame_id, config.link_names, ranges)
+            bag.write(RANGES, stamp_ns, _serialize(message))
+            count += 1
+    return count
+
+
 class _Bag:
     """A bag opened for reading, with one-line errors."""
 
@@ -236,7 +259,8 @@ def evaluate(path, config, method='cepp', out=None, **options):
     Returns
     -------
     dict
-        ``frames``, ``solved``, ``rmse_m`` (NaN without truth), ``joint_rmse_m`` (p,),
+        ``frames``, ``solved`` (published by the node's policy), ``rejected`` (frames not
+        published, by reason), ``published_stamps_ns``, ``rmse_m`` (NaN without truth), ``joint_rmse_m`` (p,),
         ``max_arm_length_error_m``, ``ms_per_frame``, ``method``, and the per-frame series
         ``stamps_ns``, ``frame_rmse_m`` for plotting.
     """
@@ -245,12 +269,14 @@ def evaluate(path, config, method='cepp', out=None, **options):
     model = config.model()
     estimator = PostureEstimator(model, method, **options)
     postures, rmses, squared, stamps, length_errors, elapsed = [], [], [], [], [], 0.0
+    rejected = {}
     for stamp, ranges, tag_ranges in frames:
         start = time.perf_counter()
-        joints = estimator.update(ranges, tag_ranges=tag_ranges)
+        joints = estimator.update(ranges, tag_ranges=tag_ranges, stamp=stamp * 1e-9)
         elapsed += time.perf_counter() - start
         diagnostics = estimator.last_diagnostics
-        if not diagnostics['valid']:
+        if not diagnostics['valid']:        # the node's publishing policy: the estimator's
+            rejected[diagnostics['status']] = rejected.get(diagnostics['status'], 0) + 1
             continue
         postures.append((stamp, joints))
         length_errors.append(float(np.max(diagnostics['arm_length_error'])))
@@ -261,6 +287,7 @@ def evaluate(path, config, method='cepp', out=None, **options):
     if out is not None:
         _copy_with_postures(path, out, postures, config, model)
     return {'frames': len(frames), 'solved': len(postures), 'method': method,
+            'rejected': rejected, 'published_stamps_ns': [stamp for stamp, _ in postures],
             'rmse_m': pooled_rmse(rmses),
             'joint_rmse_m': np.sqrt(np.mean(squared, axis=0)).tolist() if squared else [],
             'max_arm_length_error_m': max(length_errors, default=float('nan')),

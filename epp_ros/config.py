@@ -273,7 +273,9 @@ def pump_config_from_parameters(values):
     try:
         BoomModel(arm_lengths, base, positions, pivot_offset)
     except ValueError as exc:
-        raise ConfigError(str(exc)) from None
+        text = str(exc)
+        raise ConfigError(f'anchor_positions: {text}' if text.startswith('anchors ') else text) \
+            from None
     sources = _sources(get['source_ports'], get['source_protocols'], get['source_tags'],
                        get['source_anchors'], tag_ids, anchor_ids)
     return PumpConfig(frame_id, arm_lengths, base, tag_names, tag_ids, anchor_names,

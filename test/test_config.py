@@ -160,3 +160,18 @@ def test_every_registered_format_is_a_protocol():
     from epp_ros.config import PROTOCOLS
     from epp_ros.uwb.formats import FORMATS
     assert PROTOCOLS == (*FORMATS, 'auto')
+
+
+@pytest.mark.parametrize('positions, message', [
+    ([1.0, 2.0, 3.0] * 6, 'same point'),
+    ([0.0, 0.0, 1.0, 0.0, 0.0, 2.0, 0.0, 0.0, 3.0, 0.0, 0.0, 4.0, 0.0, 0.0, 5.0,
+      0.0, 0.0, 6.0], 'one line'),
+])
+def test_coincident_or_collinear_anchors_are_refused(positions, message, tmp_path):
+    document = yaml.safe_load(PUMP_YAML.read_text())
+    document['/**']['ros__parameters']['anchor_positions'] = positions
+    path = tmp_path / 'pump.yaml'
+    path.write_text(yaml.safe_dump(document))
+    with pytest.raises(ConfigError, match=f'anchor_positions: .*{message}') as error:
+        load_pump_config(path)
+    assert '\n' not in str(error.value)

@@ -158,6 +158,13 @@ def test_trek_with_more_than_four_anchors_is_refused_at_start():
     ('posture_estimator', 'method', 'tpsm', None),
     ('posture_estimator', 'nlos_fraction', 1.5, None),
     ('posture_estimator', 'range_sigma', 0.0, None),
+    ('posture_estimator', 'range_sigma', float('inf'), None),
+    ('posture_estimator', 'residual_warn', float('nan'), None),
+    ('posture_estimator', 'predicted_rmse_warn', 5.0, None),     # above its ERROR level
+    ('posture_estimator', 'reset_after_failures', 0, None),
+    ('posture_estimator', 'anchor_positions', [1.0, 2.0, 3.0] * 6, None),
+    ('uwb_driver', 'anchor_positions', [0.0, 0.0, 1.0, 0.0, 0.0, 2.0, 0.0, 0.0, 3.0,
+                                        0.0, 0.0, 4.0, 0.0, 0.0, 5.0, 0.0, 0.0, 6.0], None),
     ('posture_estimator', 'slew_sigma', -1.0, None),
     ('posture_estimator', 'pitch_names', ['pitch1', 'pitch2'], 'chain'),
     ('posture_estimator', 'angle_max_age', 0.0, 'chain'),

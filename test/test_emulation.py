@@ -114,7 +114,8 @@ def test_unknown_protocol_raises():
 
 def test_config_validation_is_shared_with_the_emulator():
     values = {'tag_names': ['a'], 'tag_ids': ['1'], 'anchor_names': ['x', 'y', 'z'],
-              'anchor_ids': ['1', '2', '3'], 'anchor_positions': [0.0] * 6 + [1.0, 2.0, 3.0],
+              'anchor_ids': ['1', '2', '3'],
+              'anchor_positions': [0.0, 0.0, 0.0, 4.0, 0.0, 0.0, 1.0, 2.0, 3.0],
               'arm_lengths': [1.0], 'base': [0.0, 0.0, 0.0], 'source_ports': ['p'],
               'source_protocols': ['json'], 'source_tags': ['']}
     config = pump_config_from_parameters(values)

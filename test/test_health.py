@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 
 from epp_ros.core import PostureEstimator
 from epp_ros.core.simulate import RangeNoise, random_posture, truck_pump
@@ -8,15 +9,15 @@ MODEL = truck_pump()
 JOINTS = random_posture(MODEL, np.random.default_rng(0))[2]
 
 
-def diagnostics_of(method, ranges):
-    estimator = PostureEstimator(MODEL, method)
+def diagnostics_of(method, ranges, **options):
+    estimator = PostureEstimator(MODEL, method, **options)
     estimator.update(ranges)
     return estimator.last_diagnostics
 
 
 def test_good_fit_is_ok_with_the_paper_diagnostic():
     level, message, values = assess(diagnostics_of('cepp', MODEL.ranges(JOINTS)),
-                                    Thresholds(), MODEL.arm_lengths)
+                                    MODEL.arm_lengths)
     assert level == OK and message == 'tracking'
     assert float(values['section 1 abs error [m]']) < 1e-6
     assert values['section 1 configured [m]'] == '9.0000'
@@ -25,35 +26,45 @@ def test_good_fit_is_ok_with_the_paper_diagnostic():
 def test_chain_reports_its_predicted_uncertainty_and_nlos():
     ranges = MODEL.ranges(JOINTS)
     ranges[4, 1] += 5.0
-    _, _, values = assess(diagnostics_of('chain', ranges), Thresholds(), MODEL.arm_lengths)
+    _, _, values = assess(diagnostics_of('chain', ranges), MODEL.arm_lengths)
     assert float(values['predicted RMSE [m]']) > 0
     assert 'joint 5 predicted std [m]' in values and values['NLOS links'] == '1'
 
 
 def test_levels_follow_the_thresholds():
-    diagnostics = dict(diagnostics_of('epp2', MODEL.ranges(JOINTS)))
-    thresholds = Thresholds()
-    for error, level in ((0.01, OK), (0.1, WARN), (1.0, ERROR)):
-        diagnostics['section_lengths'] = MODEL.arm_lengths + [0, 0, error, 0, 0]
-        assert assess(diagnostics, thresholds, MODEL.arm_lengths)[0] == level
-    diagnostics['section_lengths'] = MODEL.arm_lengths
-    diagnostics['range_residual_rms'] = 1.0
-    assert assess(diagnostics, thresholds, MODEL.arm_lengths)[0] == WARN
-    diagnostics['range_residual_rms'] = 3.0
-    assert assess(diagnostics, thresholds, MODEL.arm_lengths)[0] == ERROR
-    diagnostics.update(range_residual_rms=0.0, converged=False)
-    assert assess(diagnostics, thresholds, MODEL.arm_lengths)[:2] == (
+    ranges, _ = RangeNoise(sigma=0.1).apply(MODEL.ranges(JOINTS), np.random.default_rng(2))
+    rmse = diagnostics_of('chain', ranges)['predicted_rmse']
+    for warn, level in ((2 * rmse, OK), (0.5 * rmse, WARN)):
+        thresholds = Thresholds(predicted_rmse_warn=warn, predicted_rmse_error=4 * rmse)
+        assert assess(diagnostics_of('chain', ranges, thresholds=thresholds),
+                      MODEL.arm_lengths)[0] == level
+    thresholds = Thresholds(predicted_rmse_warn=0.2 * rmse, predicted_rmse_error=0.5 * rmse)
+    diagnostics = diagnostics_of('chain', ranges, thresholds=thresholds)
+    assert not diagnostics['valid'] and diagnostics['status'] == 'unobservable'
+    assert assess(diagnostics, MODEL.arm_lengths)[0] == ERROR
+    diagnostics = dict(diagnostics_of('epp2', MODEL.ranges(JOINTS)), converged=False)
+    assert assess(diagnostics, MODEL.arm_lengths)[:2] == (
         WARN, 'solver stopped before converging')
 
 
-def test_epp1_is_not_judged_on_lengths_it_does_not_model():
-    ranges, _ = RangeNoise(sigma=0.1).apply(MODEL.ranges(JOINTS), np.random.default_rng(1))
-    diagnostics = diagnostics_of('epp1', ranges)
-    assert np.max(diagnostics['arm_length_error']) > Thresholds().arm_length_warn
-    assert assess(diagnostics, Thresholds(), MODEL.arm_lengths)[0] == OK
+def test_thresholds_are_finite_positive_and_ordered():
+    for bad in ({'residual_warn': float('nan')}, {'arm_length_error': -1.0},
+                {'predicted_rmse_error': float('inf')}, {'residual_warn': 3.0}):
+        with pytest.raises(ValueError, match=list(bad)[0].rsplit('_', 1)[0]):
+            Thresholds(**bad)
+
+
+def test_epp1_is_judged_on_the_lengths_it_does_not_hold():
+    ranges, _ = RangeNoise(sigma=0.3).apply(MODEL.ranges(JOINTS), np.random.default_rng(1))
+    diagnostics = diagnostics_of('epp1', ranges, sigma=0.3)
+    error = np.max(diagnostics['arm_length_error'])
+    level = assess(diagnostics, MODEL.arm_lengths)[0]
+    assert error > Thresholds().arm_length_warn and level >= WARN
+    assert (level == ERROR) == (error > Thresholds().arm_length_error or
+                                not diagnostics['valid'])
 
 
 def test_an_unsolved_frame_is_an_error():
-    level, message, _ = assess(diagnostics_of('cepp', np.full((5, 6), np.nan)), Thresholds(),
+    level, message, _ = assess(diagnostics_of('cepp', np.full((5, 6), np.nan)),
                                MODEL.arm_lengths)
     assert level == ERROR and 'insufficient_data' in message

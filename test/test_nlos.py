@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 from scipy.stats import exponnorm, norm
 
+from epp_ros.core import PostureEstimator
 from epp_ros.core.chain import ChainMethod
 from epp_ros.core.measurements import Measurements, Residuals
 from epp_ros.core.nlos import NlosMixture
@@ -78,7 +79,10 @@ def test_cold_start_finds_the_global_fit_with_blocked_links():
         measurements = Measurements.ranges_only(frame['ranges'])
         chain = ChainMethod(model, sigma=SIGMA, nlos_fraction=FRACTION, nlos_gamma=GAMMA)
         residuals = Residuals(model, measurements, chain.noise)
-        _, info = chain.solve(measurements, None)
+        estimator = PostureEstimator(model, 'chain', sigma=SIGMA, nlos_fraction=FRACTION,
+                                     nlos_gamma=GAMMA)
+        estimator.update(frame['ranges'])
+        info = estimator.last_diagnostics
         found = chain._loss(residuals.residuals(np.r_[info['slew'], info['pitches']])[0],
                             residuals)[0]
         from_truth = chain.fit(np.r_[slew, pitches], residuals)[1]

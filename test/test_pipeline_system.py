@@ -111,7 +111,11 @@ def test_out_of_order_and_duplicate_frames_are_ignored_and_counted(listener, pro
 
 
 def test_chain_fuses_boom_angles_and_tag_tag_ranges(listener, processes):
-    """Without its ranges the tip is found from its inclinometer, then from a tag-tag range."""
+    """Without its ranges the tip is found from its inclinometer.
+
+    A tag-tag range from the tip's hinge joint is always the section's length: it does not
+    place the tip, and that frame is refused (the tip could be anywhere on its circle).
+    """
     processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML),
                '-p', 'method:=chain'])
     ranges_publisher = listener.create_publisher(JointState, 'uwb/ranges', RANGES_QOS)
@@ -149,14 +153,14 @@ def test_chain_fuses_boom_angles_and_tag_tag_ranges(listener, processes):
         publish_ranges(now + 0.1)                            # with fresh angles
         tip_link = np.linalg.norm(joints[-1] - joints[-2])
         publish_ranges(now + 1.0, ['joint4:joint5', 'joint5:joint4'], [tip_link, tip_link])
-        assert listener.spin_until(lambda: len(listener.postures) >= 2, 10)
+        assert listener.spin_until(lambda: len(listener.postures) >= 1, 10)
         assert reported('boom_angles frames_without_fresh_angles', '1')
-        assert len(listener.postures) == 2
-        for posture in listener.postures:
-            np.testing.assert_allclose(poses_to_joints(posture), joints, atol=1e-4)
+        assert reported('frames unsolved', '2')
+        assert len(listener.postures) == 1
+        np.testing.assert_allclose(poses_to_joints(listener.postures[0]), joints, atol=1e-4)
         counts = {kv.key: kv.value
                   for kv in listener.statuses('posture_estimator')[-1].values}
-        assert counts['frames unsolved'] == '1' and counts['frames published'] == '2'
+        assert counts['frames published'] == '1' and counts['frames rejected unobservable'] == '1'
         assert counts['boom_angles frames_with_angles'] == '1'
     finally:
         listener.destroy_publisher(ranges_publisher)
@@ -182,3 +186,79 @@ def test_two_pumps_side_by_side_in_namespaces(processes, tmp_path):
     finally:
         for pump in pumps:
             pump.destroy_node()
+
+
+def hostile_stream(seconds=20.0, rate=10.0, seed=3):
+    """A working cycle with a corrupted frame, a corrupted tip and absurd frames in it.
+
+    Returns (stamps_ns, frames, bad indices), the stamps 0.1 s apart from now.
+    """
+    from epp_ros.core.simulate import RangeNoise, working_cycle
+    model = CONFIG.model()
+    trajectory = working_cycle(model, seconds, rate, rng=np.random.default_rng(seed))
+    rng = np.random.default_rng(seed + 1)
+    noise = RangeNoise(sigma=0.1, dropout=0.05)
+    frames = [noise.apply(model.ranges(j), rng)[0] for j in trajectory.joints]
+    bad = {50: 'all', 100: 'tip', 150: 'tenth', 151: 'zero'}
+    for index, kind in bad.items():
+        if kind == 'all':
+            frames[index] = frames[index] * rng.uniform(0.0, 3.0, frames[index].shape)
+        elif kind == 'tip':
+            frames[index][-1] = frames[index][-1] * rng.uniform(0.0, 3.0, frames[index][-1].shape)
+        else:
+            frames[index] = np.full_like(frames[index], 0.1 if kind == 'tenth' else 0.0)
+    start = time.time_ns()
+    stamps = [start + int(round(1e9 * t)) for t in trajectory.times]
+    return stamps, frames, sorted(bad)
+
+
+def test_hostile_frames_are_not_published_and_eval_decides_the_same(listener, processes,
+                                                                      tmp_path):
+    """The node refuses corrupted and absurd frames and recovers; ``epp_bag eval`` on the
+    same frames publishes exactly the same ones and rejects the rest for the same reasons."""
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from epp_ros import bags
+    stamps, frames, bad = hostile_stream()
+    processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML)])
+    keep_all = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                          history=HistoryPolicy.KEEP_ALL)
+    publisher = listener.create_publisher(JointState, 'uwb/ranges', keep_all)
+    try:
+        assert listener.spin_until(lambda: publisher.get_subscription_count() >= 2, 10)
+        for stamp, ranges in zip(stamps, frames):
+            message = JointState(name=CONFIG.link_names,
+                                 position=[float(v) for v in ranges.ravel()])
+            message.header.stamp = to_time(stamp * 1e-9)
+            publisher.publish(message)
+            listener.spin_until(lambda: False, 0.01)         # pace, and take postures
+        counts = {}
+
+        def processed():
+            for status in listener.statuses('posture_estimator'):
+                values = {kv.key: kv.value for kv in status.values}
+                if values.get('frames received') == str(len(frames)):
+                    counts.update(values)
+                    return True
+            return False
+        assert listener.spin_until(processed, 60)
+    finally:
+        listener.destroy_publisher(publisher)
+    received = {to_seconds(m.header.stamp) for m in listener.postures}
+    for index in bad:
+        assert round(stamps[index] * 1e-9, 6) not in {round(s, 6) for s in received}
+    for posture in listener.postures:
+        values = [[p.position.x, p.position.y, p.position.z] for p in posture.poses]
+        assert np.all(np.isfinite(values)) and min(v[2] for v in values) >= -0.5
+    # Offline, the same frames: the same decisions, counted the same way.
+    bag = tmp_path / 'hostile'
+    bags.write_frames(bag, CONFIG, zip(stamps, frames))
+    result = bags.evaluate(bag, CONFIG, 'cepp')
+    assert counts['frames published'] == str(result['solved'])
+    for reason, count in result['rejected'].items():
+        assert counts[f'frames rejected {reason}'] == str(count)
+    published = {round(s * 1e-9, 6) for s in result['published_stamps_ns']}
+    assert {round(s, 6) for s in received} <= published
+    for index in bad:                  # refused, and a good frame published within 2 s
+        assert round(stamps[index] * 1e-9, 6) not in published
+        later = [round(s * 1e-9, 6) in published for s in stamps[index + 1:index + 21]]
+        assert any(later)

@@ -42,7 +42,7 @@ class _PerTagMethod:
 class SRLSMethod(_PerTagMethod):
     """Each tag located alone by SR-LS from its anchor ranges."""
 
-    def solve(self, measurements, prior):
+    def solve(self, measurements, prior, warm=False):
         joints = np.empty((self.model.n_sections, 3))
         for k, row in enumerate(measurements.ranges):
             valid = np.isfinite(row)
@@ -61,7 +61,7 @@ class SDPMethod(_PerTagMethod):
         super().__init__(model)
         self._localizer = SDPLocalizer(model.anchors, model.n_sections, solver=solver)
 
-    def solve(self, measurements, prior):
+    def solve(self, measurements, prior, warm=False):
         joints, info = self._localizer.solve(measurements.ranges)
         return joints, {'converged': True, 'sdp_status': info['status'],
                         'sdp_objective': info['objective']}
@@ -82,7 +82,7 @@ class TPSMMethod:
     def reset(self):
         """No state between frames."""
 
-    def solve(self, measurements, prior):
+    def solve(self, measurements, prior, warm=False):
         joints = self.model.forward_kinematics(measurements.slew, measurements.pitches)
         return joints, {'converged': True, 'slew': float(measurements.slew),
                         'pitches': measurements.pitches.copy()}

@@ -24,7 +24,6 @@ from dataclasses import replace
 
 import numpy as np
 
-from .bounds import bound_from_information
 from .measurements import Residuals, SensorNoise, wrap_angle
 from .nlos import NlosMixture
 from .plane import fit_slew, to_plane
@@ -35,9 +34,16 @@ __all__ = ['ChainMethod', 'angles_from_joints', 'canonical_angles']
 def angles_from_joints(model, joints):
     """Slew and pitches (radians) of the chain closest to the given joints (p, 3)."""
     slew = fit_slew(joints, model.base)
-    coords = to_plane(np.vstack([model.pivot(slew), joints]), model.base, slew)
-    steps = np.diff(coords, axis=0)
-    return slew, np.arctan2(steps[:, 1], steps[:, 0])
+    slews = [slew] if model.pivot_offset == 0.0 else [slew, slew + np.pi]
+    fits = []
+    for candidate in slews:         # a pivot off the axis: on which side is it?
+        coords = to_plane(np.vstack([model.pivot(candidate), joints]), model.base, candidate)
+        steps = np.diff(coords, axis=0)
+        pitches = np.arctan2(steps[:, 1], steps[:, 0])
+        error = np.sum((model.forward_kinematics(candidate, pitches) - joints) ** 2)
+        fits.append((error, float(wrap_angle(candidate)), pitches))
+    _, slew, pitches = min(fits, key=lambda fit: fit[0])
+    return slew, pitches
 
 
 def canonical_angles(psi, pivot_offset=0.0):
@@ -103,7 +109,6 @@ class ChainMethod:
         self.slew_starts = int(slew_starts)
         self.screen_iterations = int(screen_iterations)
         self.lowest_joint = float(lowest_joint)
-        self._angles = None
         self._link_loss = (None, None)      # (Residuals, its ranges' bound NLOS loss)
 
     def enough_information(self, measurements):
@@ -115,7 +120,7 @@ class ChainMethod:
         return bool(tip_seen) and measurements.count() >= self.model.n_sections + 1
 
     def reset(self):
-        self._angles = None
+        """The chain keeps no state: its warm start is the prior it is given."""
 
     # -- the least-squares problem --------------------------------------------------------
     def _loss(self, scaled, residuals):
@@ -190,11 +195,6 @@ class ChainMethod:
     def cost(self, psi, residuals):
         """The fitted loss at angles ``psi`` (p + 1,) on a :class:`Residuals`."""
         return self._evaluate(np.asarray(psi, dtype=float), residuals)[0]
-
-    def _flag(self, psi, residuals):
-        """Ranges more likely NLOS than not at ``psi`` (boolean over the rows)."""
-        scaled, _ = residuals.residuals(psi)
-        return self._loss(scaled, residuals)[3] > 0.5
 
     # -- starts ---------------------------------------------------------------------------
     def _beam_starts(self, slews, measurements, range_sigma, width=8, candidates=72):
@@ -359,8 +359,17 @@ class ChainMethod:
                 break
         return psi, cost, iterations
 
-    def solve(self, measurements, prior):
-        """Fit one frame. ``prior`` (p, 3) is used only when there is no previous fit."""
+    def solve(self, measurements, prior, warm=False):
+        """Fit one frame.
+
+        Parameters
+        ----------
+        measurements : Measurements
+        prior : ndarray, shape (p, 3), or None
+            Warm: the previous posture, fitted from and searched past only when the fit
+            is lost. Cold: one more start of the global search.
+        warm : bool
+        """
         noise = self.noise
         if self.eta:
             distances = np.nan_to_num(measurements.ranges)
@@ -368,24 +377,19 @@ class ChainMethod:
         residuals = Residuals(self.model, measurements, noise)
         total_iterations = 0
         lost = True
-        if self._angles is not None:
-            psi, cost, total_iterations = self.fit(self._angles, residuals)
+        if warm and prior is not None:
+            slew, pitches = angles_from_joints(self.model, prior)
+            psi, cost, total_iterations = self.fit(np.r_[slew, pitches], residuals)
             lost = cost > 12.5 * residuals.size       # worse than 5 sigma RMS per residual
         if lost:
             range_sigma = np.broadcast_to(noise.range_sigma, measurements.ranges.shape)
             found, found_cost, iterations = self._search(
-                measurements, residuals, prior if self._angles is None else None, range_sigma)
+                measurements, residuals, None if warm else prior, range_sigma)
             total_iterations += iterations
-            if self._angles is None or found_cost < cost:
+            if not warm or found_cost < cost:
                 psi, cost = found, found_cost
-        flagged = self._flag(psi, residuals)
         psi = canonical_angles(psi, self.model.pivot_offset)
-        self._angles = psi
         joints = self.model.forward_kinematics(psi[0], psi[1:])
-        nlos, nlos_tags = residuals.link_flags(flagged)
-        kept_rows = residuals.jacobian(psi)[~flagged]       # the links that determine psi
-        bound = bound_from_information(self.model, psi[0], psi[1:], kept_rows.T @ kept_rows)
         info = {'iterations': total_iterations, 'converged': True, 'slew': float(psi[0]),
-                'pitches': psi[1:].copy(), 'nlos_links': nlos, 'nlos_tag_links': nlos_tags,
-                'predicted_rmse': bound.rmse, 'joint_std': bound.joint_std}
+                'pitches': psi[1:].copy()}
         return joints, info

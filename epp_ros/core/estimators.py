@@ -19,13 +19,16 @@ import numpy as np
 from .baselines import SDPMethod, SRLSMethod, TPSMMethod
 from .chain import ChainMethod
 from .edm import align_to_known, squared_distances
-from .measurements import Measurements, plausible_limits
+from .integrity import ERROR, OK, Integrity, IntegrityLimits, Thresholds
+from .measurements import Measurements, SensorNoise, plausible_limits
 from .multilateration import intersect_spheres, srls
+from .nlos import NlosMixture
 from .nedm import nearest_edm
 from .plane import (fit_plane_to_ranges, fit_slew, from_plane, project_ranges, slew_step,
                     to_plane)
 
-__all__ = ['PostureEstimator', 'METHODS', 'RANGE_METHODS', 'cold_start_guess']
+__all__ = ['PostureEstimator', 'METHODS', 'RANGE_METHODS', 'ESTIMATOR_OPTIONS',
+           'accepted_options', 'cold_start_guess']
 
 
 def cold_start_guess(model, ranges):
@@ -182,7 +185,7 @@ class EPP1(_EDMMethod):
 
     fix_lengths = False
 
-    def solve(self, measurements, prior):
+    def solve(self, measurements, prior, warm=False):
         # A pivot off the slew axis is placed at the prior's slew.
         pivot = self.model.pivot_of(prior)
         known = np.vstack([pivot, self.model.anchors[self._other_anchors]])
@@ -238,7 +241,7 @@ class CEPP(_EDMMethod):
                                        to_plane(prior, base, slew), measurements.tag_ranges)
         return coords, info
 
-    def solve(self, measurements, prior):
+    def solve(self, measurements, prior, warm=False):
         ranges = measurements.ranges
         slew = fit_slew(prior, self.model.base)
         if self.predict_slew:
@@ -270,9 +273,16 @@ METHODS = {'epp1': EPP1, 'epp2': EPP2, 'cepp': CEPP, 'chain': ChainMethod,
 RANGE_METHODS = [name for name, cls in METHODS.items() if 'ranges' in cls.inputs]
 
 
+#: Options of the estimator itself, given to every method that accepts them: what it is
+#: told about the noise (which the integrity checks use for every method) and the ground.
+ESTIMATOR_OPTIONS = {'sigma': 0.1, 'eta': 0.0, 'tag_sigma': None, 'pitch_sigma': np.radians(0.5),
+                     'slew_sigma': np.radians(0.5), 'nlos_fraction': 0.1, 'nlos_gamma': 1.0,
+                     'lowest_joint': -0.5}
+
+
 def accepted_options(method):
-    """Names of the keyword options a method's constructor takes."""
-    names = set()
+    """Names of the keyword options ``PostureEstimator(model, method, ...)`` takes."""
+    names = set(ESTIMATOR_OPTIONS)
     for cls in METHODS[method].__mro__:
         if '__init__' in vars(cls):
             names |= {name for name, parameter in
@@ -283,8 +293,44 @@ def accepted_options(method):
     return names
 
 
+def _constructor_names(method):
+    names = set()
+    for cls in METHODS[method].__mro__:
+        if '__init__' in vars(cls):
+            names |= set(inspect.signature(cls.__init__).parameters) - {'self', 'model'}
+    return names
+
+
+def _told(options):
+    """The estimator options with their defaults, checked (ValueError naming the option)."""
+    told = {name: options.get(name, default) for name, default in ESTIMATOR_OPTIONS.items()}
+    for name, value in told.items():
+        if value is not None and not (isinstance(value, (int, float, np.integer, np.floating))
+                                      and np.isfinite(value)):
+            raise ValueError(f'{name}: must be a finite number, got {value!r}')
+    if told['eta'] < 0:
+        raise ValueError(f'eta: must be >= 0, got {told["eta"]}')
+    if told['tag_sigma'] is None:
+        told['tag_sigma'] = told['sigma']
+    return told
+
+
+def _integrity(model, told, limits, thresholds):
+    """The :class:`Integrity` of the noise the estimator is told."""
+    noise = SensorNoise(float(told['sigma']), float(told['tag_sigma']),
+                        float(told['pitch_sigma']), float(told['slew_sigma']))
+    nlos = NlosMixture(float(told['nlos_fraction']), float(told['nlos_gamma']))
+    return Integrity(model, noise, nlos, told['eta'], told['lowest_joint'], limits, thresholds)
+
+
 class PostureEstimator:
     """Frame-by-frame boom posture from UWB ranges (and, for some methods, angle sensors).
+
+    Every estimate is judged by :class:`~epp_ros.core.integrity.Integrity` before it is
+    called valid or kept as the next frame's warm start: a frame whose residuals the noise
+    cannot explain, whose posture it does not determine, or which puts the boom where it
+    cannot be, is reported invalid with its reason. When the warm start looks lost the
+    frame is also solved from scratch, and that fit taken if it passes.
 
     Parameters
     ----------
@@ -292,59 +338,88 @@ class PostureEstimator:
     method : str
         One of ``METHODS``: ``"epp1"``, ``"epp2"``, ``"cepp"``, ``"chain"``, or a baseline,
         ``"srls"``, ``"sdp"``, ``"tpsm"``.
+    integrity : IntegrityLimits
+        How the consistency and observability checks decide.
+    thresholds : Thresholds
+        WARN and ERROR levels; a frame at ERROR is not valid.
+    reset_after_failures : int
+        Frames in a row that could not be solved or did not fit, after which the warm
+        start is dropped.
     **options
-        Passed to the method: ``prior_weight`` (weight of tag-tag distances from the
-        previous pose, default 0; the paper uses 1), ``anchor_weight`` (inf: anchor-anchor
-        distances fixed, the default; a number: weighted), ``tol``, ``max_iter``; CEPP also
-        ``predict_slew`` (default true; false: the paper's plane from the previous pose),
-        ``slew_iterations`` (re-solves after refining the slew, default 0), ``slew_tol`` and
-        ``clip_weight``; chain: ``sigma`` (range noise,
-        0.1 m), ``eta``, ``tag_sigma``, ``pitch_sigma``, ``slew_sigma``, ``nlos_fraction``
-        (0.1) and ``nlos_gamma`` (1 m), ``lowest_joint`` (-0.5 m), ``tol``, ``max_iter``,
-        ``slew_starts``, ``screen_iterations``; sdp: ``solver``.
+        What the estimator is told, for every method (``ESTIMATOR_OPTIONS``): ``sigma``
+        (tag-anchor range standard deviation, 0.1 m), ``eta`` (multiplicative range
+        noise, 0), ``tag_sigma`` (tag-tag ranges; ``sigma``), ``pitch_sigma`` and
+        ``slew_sigma`` (angle sensors, 0.5 deg), ``nlos_fraction`` (0.1) and ``nlos_gamma``
+        (1 m), ``lowest_joint`` (-0.5 m). And the method's own: ``prior_weight`` (weight
+        of tag-tag distances from the previous pose, default 0; the paper uses 1),
+        ``anchor_weight`` (inf: anchor-anchor distances fixed, the default; a number:
+        weighted), ``tol``, ``max_iter``; CEPP also ``predict_slew`` (default true; false:
+        the paper's plane from the previous pose), ``slew_iterations`` (re-solves after
+        refining the slew, default 0), ``slew_tol`` and ``clip_weight``; chain:
+        ``tol``, ``max_iter``, ``slew_starts``, ``screen_iterations``; sdp: ``solver``.
 
     Attributes
     ----------
     last_diagnostics : dict
         Of the last :meth:`update`: ``status`` (``"ok"``, ``"insufficient_data"``,
-        ``"solver_failed"``), ``valid`` (positions come from this frame), ``method``,
-        ``cold_start``, ``arm_length_error`` (p,) and ``section_lengths`` (p,) in metres,
+        ``"solver_failed"``, or the integrity's ``"inconsistent"``, ``"ambiguous"``,
+        ``"unobservable"``, ``"implausible"``), ``valid`` (positions come from this frame
+        and may be published), ``level`` (0 OK, 1 WARN, 2 ERROR) and ``message``,
+        ``method``, ``cold_start``, ``reacquired`` (a fresh solve replaced the warm one),
+        ``arm_length_error`` (p,) and ``section_lengths`` (p,) in metres,
         ``range_residual_rms`` (m), ``missing_links`` (including ``implausible_links``,
-        those dropped as longer than the geometry allows), ``iterations``, ``solve_time`` (s),
-        and solver details (``rank_error``, ``kkt_residual``, ``converged``, ...).
+        those dropped as longer than the geometry allows), ``iterations``, ``solve_time``
+        (s), the integrity's statistics (``chi_square``, ``chi_square_limit``,
+        ``nlos_links`` (p, m), ``predicted_rmse`` (m), ``joint_std`` (p,),
+        ``ambiguous_joints``), the method's ``estimate`` (p, 3) whether valid or not, and
+        solver details (``converged``, ...).
     """
 
-    def __init__(self, model, method='cepp', **options):
+    def __init__(self, model, method='cepp', *, integrity=IntegrityLimits(),
+                 thresholds=Thresholds(), reset_after_failures=10, **options):
         if method not in METHODS:
             raise ValueError(f'method must be one of {sorted(METHODS)}, got {method!r}')
         unknown = set(options) - accepted_options(method)
         if unknown:
             raise ValueError(f'method {method!r} takes no option {sorted(unknown)}; it takes '
                              f'{sorted(accepted_options(method))}')
+        if isinstance(reset_after_failures, bool) or not isinstance(
+                reset_after_failures, (int, np.integer)) or reset_after_failures < 1:
+            raise ValueError(f'reset_after_failures: must be an integer >= 1, got '
+                             f'{reset_after_failures!r}')
         self.model = model
         self.method = method
-        self._solver = METHODS[method](model, **options)
+        told = _told(options)
+        self.integrity = _integrity(model, told, integrity, thresholds)
+        own = _constructor_names(method)
+        self._solver = METHODS[method](model, **{name: value for name, value
+                                                 in {**options, **told}.items() if name in own})
+        self.reset_after_failures = int(reset_after_failures)
         self._limits = plausible_limits(model)
-        self._previous = None
+        self._previous = None           # (joints, stamp, joint_std) last accepted
+        self._warm = None               # the last estimate that fitted its frame
+        self._stamp = None
+        self._failures = 0
         self.last_diagnostics = {}
 
     def reset(self):
         """Forget the warm start: the next frame is solved from scratch."""
-        self._previous = None
+        self._previous = self._warm = None
+        self._failures = 0
         self._solver.reset()
 
     @property
     def previous(self):
         """The last valid estimate (p, 3), or None."""
-        return None if self._previous is None else self._previous.copy()
+        return None if self._previous is None else self._previous[0].copy()
 
     def _fallback(self):
         if self._previous is not None:
-            return self._previous.copy()
+            return self._previous[0].copy()
         # Nothing known yet: a straight horizontal boom along +x, flagged invalid.
         return self.model.forward_kinematics(0.0, np.zeros(self.model.n_sections))
 
-    def update(self, ranges, *, tag_ranges=None, pitches=None, slew=None):
+    def update(self, ranges, *, tag_ranges=None, pitches=None, slew=None, stamp=None):
         """Estimate the joint positions from one frame of measurements.
 
         Parameters
@@ -358,49 +433,113 @@ class PostureEstimator:
             Inclinometer pitch of each section, radians, NaN where not measured.
         slew : float, optional
             Slew encoder angle, radians.
+        stamp : float, optional
+            The frame's time, seconds: how far the boom can have moved since the last
+            accepted posture. Without it frames are ``integrity.frame_period`` apart.
 
         Inputs a method does not use are listed in ``last_diagnostics["ignored_inputs"]``.
 
         Returns
         -------
         joints : ndarray, shape (p, 3)
-            Base outward, tip last. Never NaN: a frame that cannot be solved returns the
-            previous estimate, and ``last_diagnostics["valid"]`` is False.
+            Base outward, tip last. Never NaN: a frame that is not valid returns the last
+            valid estimate, and ``last_diagnostics["valid"]`` is False.
         """
         start = time.perf_counter()
+        stamp = self._frame_time(stamp)
         p, m = self.model.n_sections, self.model.n_anchors
         measurements, implausible = Measurements.clean(self.model, ranges, tag_ranges,
                                                        pitches, slew, self._limits)
         valid = np.isfinite(measurements.ranges)
         diagnostics = {'method': self.method, 'missing_links': int(p * m - valid.sum()),
-                       'implausible_links': implausible, 'cold_start': self._previous is None,
-                       'iterations': 0,
+                       'implausible_links': implausible, 'cold_start': self._warm is None,
+                       'reacquired': False, 'iterations': 0,
                        'ignored_inputs': [name for name in measurements.present()
                                           if name not in self._solver.inputs]}
-        enough = self._solver.enough_information(measurements)
-        # Methods declare ``prior``: 'required', 'optional' (a start) or 'unused'.
-        prior = self._previous
-        if enough and prior is None and self._solver.prior != 'unused':
-            prior = cold_start_guess(self.model, measurements.ranges)
-        if not enough or (prior is None and self._solver.prior == 'required'):
-            return self._finish(self._fallback(), 'insufficient_data', diagnostics,
-                                measurements.ranges, start)
-        try:
-            joints, info = self._solver.solve(measurements, prior)
-        except (np.linalg.LinAlgError, RuntimeError) as exc:
-            diagnostics['error'] = str(exc)
-            return self._finish(self._fallback(), 'solver_failed', diagnostics,
-                                measurements.ranges, start)
+        if not self._solver.enough_information(measurements):
+            return self._reject('insufficient_data', diagnostics, measurements, start)
+        solved = self._solve(measurements, warm=self._warm is not None)
+        if isinstance(solved, str):
+            diagnostics['error'] = solved
+            return self._reject('solver_failed', diagnostics, measurements, start)
+        joints, info = solved
+        verdict = self._judge(joints, measurements, stamp)
+        if verdict.lost and self._warm is not None and self._due_for_search():
+            fresh = self._solve(measurements, warm=False)
+            if not isinstance(fresh, str):
+                fresh_verdict = self._judge(fresh[0], measurements, stamp)
+                if fresh_verdict.valid:
+                    (joints, info), verdict = fresh, fresh_verdict
+                    diagnostics['reacquired'] = True
         diagnostics.update(info)
-        if not np.all(np.isfinite(joints)):
-            return self._finish(self._fallback(), 'solver_failed', diagnostics,
-                                measurements.ranges, start)
-        self._previous = joints.copy()
-        return self._finish(joints, 'ok', diagnostics, measurements.ranges, start)
+        diagnostics.update(verdict.values, estimate=joints)
+        diagnostics.update(level=verdict.level, message=verdict.message)
+        if not verdict.lost:            # it fits the frame: the next frame's start
+            self._warm = joints.copy()
+        if not verdict.valid:
+            return self._reject(verdict.status, diagnostics, measurements, start, joints)
+        self._previous = (joints.copy(), stamp, verdict.values['joint_std'])
+        self._failures = 0
+        return self._finish(joints, 'ok', diagnostics, measurements, start)
 
-    def _finish(self, joints, status, diagnostics, ranges, start):
+    def _frame_time(self, stamp):
+        """The frame's time, seconds: the stamp, or one frame period after the last."""
+        if stamp is None:
+            previous = -self.integrity.limits.frame_period if self._stamp is None \
+                else self._stamp
+            stamp = previous + self.integrity.limits.frame_period
+        self._stamp = float(stamp)
+        return self._stamp
+
+    def _judge(self, joints, measurements, stamp):
+        if self._previous is None:
+            return self.integrity.judge(joints, measurements)
+        reference, then, reference_std = self._previous
+        return self.integrity.judge(joints, measurements, reference, max(stamp - then, 0.0),
+                                    reference_std)
+
+    def _due_for_search(self):
+        """Whether this rejected frame gets a fresh solve: the first few in a run, then
+        every tenth, so that a stream of garbage does not cost a search per frame."""
+        failures = self._failures + 1
+        return failures & (failures - 1) == 0 or failures % 10 == 0
+
+    def _solve(self, measurements, warm):
+        """The method's (joints, info) from the warm start or a cold one; why not if not."""
+        prior = self._warm if warm else None
+        if prior is None and self._solver.prior != 'unused':
+            prior = cold_start_guess(self.model, measurements.ranges)
+        if prior is None and self._solver.prior == 'required':
+            return 'no tag could be located for a start'
+        try:
+            joints, info = self._solver.solve(measurements, prior, warm=warm)
+        except (np.linalg.LinAlgError, RuntimeError) as exc:
+            return str(exc)
+        if not np.all(np.isfinite(joints)):
+            return 'the solver returned non-finite positions'
+        return joints, info
+
+    def _reject(self, status, diagnostics, measurements, start, joints=None):
+        """Report an invalid frame; the warm start is dropped after too many in a row.
+
+        A frame that fitted but did not determine the posture (ambiguous, unobservable)
+        does not count: its fit is a good start for the next frame.
+        """
+        if status not in ('ambiguous', 'unobservable'):
+            self._failures += 1
+        diagnostics.setdefault('level', ERROR)
+        diagnostics.setdefault('message', f'no estimate: {status}')
+        if self._failures >= self.reset_after_failures:
+            self._previous = self._warm = None
+            self._failures = 0
+            diagnostics['cold_restart'] = True
+        estimate = self._fallback() if joints is None else joints
+        self._finish(estimate, status, diagnostics, measurements, start)
+        return self._fallback()
+
+    def _finish(self, joints, status, diagnostics, measurements, start):
         lengths = self.model.section_lengths(joints)
-        residual = self.model.ranges(joints) - ranges
+        residual = self.model.ranges(joints) - measurements.ranges
         valid = np.isfinite(residual)
         diagnostics.update(
             status=status, valid=status == 'ok', section_lengths=lengths,
@@ -408,5 +547,7 @@ class PostureEstimator:
             range_residual_rms=float(np.sqrt(np.mean(residual[valid] ** 2))) if valid.any()
             else float('nan'),
             solve_time=time.perf_counter() - start)
+        diagnostics.setdefault('level', OK)
+        diagnostics.setdefault('message', 'tracking')
         self.last_diagnostics = diagnostics
         return joints

@@ -223,11 +223,3 @@ class Residuals:
                                 joint_jacobian[self._near] - joint_jacobian[self._far]])
         rows = np.concatenate([np.einsum('nc,ncq->nq', units, moved), self._angle_rows])
         return rows / self.sigma[:, None]
-
-    def link_flags(self, rows):
-        """Split a boolean over the ranged rows into (p, m) links and (p, p) tag links."""
-        links = np.zeros_like(self.link_mask)
-        tag_links = np.zeros_like(self.tag_mask)
-        links[self._tag, self._anchor] = rows[:self._tag.size]
-        tag_links[self._near, self._far] = rows[self._tag.size:self.n_ranged]
-        return links, tag_links

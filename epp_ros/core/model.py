@@ -27,6 +27,27 @@ def _as_finite_array(value, field, ndim):
     return array
 
 
+#: Metres: anchors closer than this to each other, or all this close to one line, give the
+#: ranges no geometry to locate a tag from (a configuration mistake, not a set-up).
+ANCHOR_SEPARATION = 0.01
+
+
+def _check_anchor_geometry(anchors):
+    """Refuse coincident anchors, and anchors all on one line (rotation about it is free)."""
+    gaps = np.linalg.norm(anchors[:, None] - anchors[None, :], axis=-1)
+    gaps[np.diag_indices(len(anchors))] = np.inf
+    first, second = np.unravel_index(np.argmin(gaps), gaps.shape)
+    if gaps[first, second] < ANCHOR_SEPARATION:
+        raise ValueError(f'anchors {min(first, second)} and {max(first, second)} are at the '
+                         f'same point {anchors[first].tolist()}')
+    centred = anchors - anchors.mean(axis=0)
+    direction = np.linalg.svd(centred, full_matrices=False)[2][0]
+    off_line = np.linalg.norm(centred - np.outer(centred @ direction, direction), axis=1)
+    if off_line.max() < ANCHOR_SEPARATION:
+        raise ValueError('anchors all lie on one line: they cannot tell a tag from its '
+                         'rotation about it; place at least one off that line')
+
+
 class BoomModel:
     """Geometry of a slewing, luffing boom and its UWB anchors.
 
@@ -67,6 +88,7 @@ class BoomModel:
             raise ValueError(f'pivot_offset must be a number, got {pivot_offset!r}') from exc
         if not np.isfinite(pivot_offset):
             raise ValueError(f'pivot_offset must be finite, got {pivot_offset!r}')
+        _check_anchor_geometry(anchors)
         self.arm_lengths = arm_lengths
         self.base = base
         self.pivot_offset = pivot_offset

@@ -12,12 +12,16 @@ the range frame's stamp:
 - ``arm_posture`` (``geometry_msgs/PoseArray``): the base pivot, then joints 1..p; pose k's
   x-axis along section k, z-axis up in the boom's vertical plane;
 - ``arm_posture/markers`` (``visualization_msgs/MarkerArray``) for RViz;
-- ``/diagnostics`` at 1 Hz: section lengths and errors, range residual, iterations, solve
-  time, missing links, counters; level: the worst frame's since the last report (from the
-  thresholds), STALE when no frame came for 1 s.
+- ``/diagnostics`` at 1 Hz: section lengths and errors, range residual and chi-square,
+  predicted uncertainty, iterations, solve time, missing links, counters (frames rejected,
+  by reason); level: the worst frame's since the last report, STALE when no frame came for
+  1 s.
 
-A frame that cannot be solved publishes no pose; after ``reset_after_failures`` such frames
-in a row the estimator starts cold. Frames whose stamp is not newer than the last one are
+What is published is the estimator's decision (``core.integrity``): a frame that cannot be
+solved, whose residuals the configured noise cannot explain, whose posture it does not
+determine, or which puts the boom where it cannot be, publishes no pose and is counted by
+reason; after ``reset_after_failures`` frames in a row that could not be solved or did not
+fit, the estimator starts cold. Frames whose stamp is not newer than the last one are
 ignored and counted; a stamp more than 1 s older than the last is taken as a clock jump and
 the estimator starts over. Topic names are relative: ``-r __ns:=/pump7`` runs one per pump.
 """
@@ -34,14 +38,38 @@ from visualization_msgs.msg import MarkerArray
 
 from epp_ros.angles import AngleSamples
 from epp_ros.core import METHODS, RANGE_METHODS, PostureEstimator
-from epp_ros.core.estimators import accepted_options
-from epp_ros.core.nlos import NlosMixture
-from epp_ros.health import Thresholds, assess, grade
+from epp_ros.core.integrity import IntegrityLimits, Thresholds
+from epp_ros.health import assess, grade
 from epp_ros.nodes.common import (POSTURE_QOS, RANGES_INPUT_QOS, StartupError, declare,
                                   declare_pump_parameters, posture_message, posture_markers,
                                   run_node, to_seconds, to_time)
 
 BACKWARD_JUMP = 1.0      # s: an older stamp by more than this is a clock jump, not disorder
+#: Health thresholds: parameter -> (default, description); metres.
+THRESHOLDS = {
+    'arm_length_warn': (0.05, 'Section length error for WARN, m.'),
+    'arm_length_error': (0.5, 'Section length error for ERROR (not published), m.'),
+    'residual_warn': (0.5, 'Range residual RMS for WARN, m.'),
+    'residual_error': (2.0, 'Range residual RMS for ERROR (not published), m.'),
+    'predicted_rmse_warn': (0.5, 'Predicted RMSE (Cramer-Rao bound) for WARN, m.'),
+    'predicted_rmse_error': (2.0, 'Predicted RMSE for ERROR (not published), m.'),
+}
+#: What the estimator is told about the noise: option -> (parameter, default, description).
+NOISE = {
+    'sigma': ('range_sigma', 0.1, 'UWB range standard deviation, m.'),
+    'nlos_fraction': ('nlos_fraction', 0.1, 'Prior probability that a range is NLOS.'),
+    'nlos_gamma': ('nlos_gamma', 1.0, 'Mean NLOS excess, m.'),
+    'tag_sigma': ('tag_sigma', 0.1, 'Tag-tag range standard deviation, m.'),
+    'pitch_sigma': ('pitch_sigma', math.radians(0.5), 'Inclinometer standard deviation, rad.'),
+    'slew_sigma': ('slew_sigma', math.radians(0.5), 'Slew encoder standard deviation, rad.'),
+    'lowest_joint': ('lowest_joint', -0.5, 'No joint is below this height, m (ground z = 0).'),
+}
+
+
+def _parameter_name(message):
+    """An estimator error names its option; say the node parameter instead."""
+    option = message.split(':', 1)[0]
+    return message.replace(option, NOISE[option][0], 1) if option in NOISE else message
 LEVELS = {0: DiagnosticStatus.OK, 1: DiagnosticStatus.WARN, 2: DiagnosticStatus.ERROR}
 
 
@@ -57,43 +85,30 @@ class PostureEstimatorNode(Node):
         if method not in RANGE_METHODS:
             raise StartupError(f'method: {method!r} is not one of {RANGE_METHODS} (the node '
                                'receives UWB ranges only)')
-        self.reset_after = declare(self, 'reset_after_failures', 10,
-                                   'Unsolvable frames in a row before a cold start.')
-        self.thresholds = Thresholds(
-            declare(self, 'arm_length_warn', 0.05, 'Section length error for WARN, m.'),
-            declare(self, 'arm_length_error', 0.5, 'Section length error for ERROR, m.'),
-            declare(self, 'residual_warn', 0.5, 'Range residual RMS for WARN, m.'),
-            declare(self, 'residual_error', 2.0, 'Range residual RMS for ERROR, m.'))
+        reset_after = declare(self, 'reset_after_failures', 10,
+                              'Frames in a row that cannot be solved or do not fit before the '
+                              'estimator starts cold.')
         self.publish_markers = declare(self, 'publish_markers', True,
                                        'Also publish arm_posture/markers for RViz.')
-        if self.reset_after < 1:
-            raise StartupError('reset_after_failures: must be >= 1')
-        noise = {'sigma': declare(self, 'range_sigma', 0.1,
-                                  'UWB range standard deviation, m (methods that weigh it).'),
-                 'nlos_fraction': declare(self, 'nlos_fraction', 0.1,
-                                          'Prior probability that a range is NLOS (chain).'),
-                 'nlos_gamma': declare(self, 'nlos_gamma', 1.0, 'Mean NLOS excess, m (chain).'),
-                 'tag_sigma': declare(self, 'tag_sigma', 0.1,
-                                      'Tag-tag range standard deviation, m (chain).'),
-                 'pitch_sigma': declare(self, 'pitch_sigma', math.radians(0.5),
-                                        'Inclinometer standard deviation, rad (chain).'),
-                 'slew_sigma': declare(self, 'slew_sigma', math.radians(0.5),
-                                       'Slew encoder standard deviation, rad (chain).')}
-        for name, parameter in (('sigma', 'range_sigma'), ('tag_sigma', 'tag_sigma'),
-                                ('pitch_sigma', 'pitch_sigma'), ('slew_sigma', 'slew_sigma')):
-            if not noise[name] > 0:
-                raise StartupError(f'{parameter}: must be > 0, got {noise[name]}')
         try:
-            NlosMixture(noise['nlos_fraction'], noise['nlos_gamma'])   # checked for every method
+            thresholds = Thresholds(**{name: declare(self, name, default, description)
+                                       for name, (default, description) in THRESHOLDS.items()})
+            integrity = IntegrityLimits(max_angular_rate=declare(
+                self, 'max_angular_rate', IntegrityLimits.max_angular_rate,
+                'Fastest slew or pitch rate of the boom, rad/s: rules out jumps and folds.'))
         except ValueError as exc:
             raise StartupError(str(exc)) from None
+        told = {name: declare(self, parameter, default, description)
+                for name, (parameter, default, description) in NOISE.items()}
         self.model = self.config.model()
         try:
-            self.estimator = PostureEstimator(self.model, method, **{
-                name: value for name, value in noise.items()
-                if name in accepted_options(method)})
+            self.estimator = PostureEstimator(self.model, method, integrity=integrity,
+                                              thresholds=thresholds,
+                                              reset_after_failures=reset_after, **told)
         except ImportError as exc:
             raise StartupError(f'method: {exc}') from None
+        except ValueError as exc:
+            raise StartupError(_parameter_name(str(exc))) from None
         self.angles = self._angle_input(method)
         self.lengths = self.model.arm_lengths
         self.posture = self.create_publisher(PoseArray, 'arm_posture', POSTURE_QOS)
@@ -105,7 +120,6 @@ class PostureEstimatorNode(Node):
                                      RANGES_INPUT_QOS)
         self.create_timer(1.0, self.publish_diagnostics)
         self.counts = Counter()
-        self.failures_in_a_row = 0
         self.last_stamp = None
         self.last_frame_time = None
         self.worst = None               # worst (level, message) since the last report
@@ -165,19 +179,17 @@ class PostureEstimatorNode(Node):
         self.last_frame_time = time.monotonic()
         slew, pitches = (None, None) if self.angles is None else self.angles.at(stamp)
         joints = self.estimator.update(ranges, tag_ranges=tag_ranges, pitches=pitches,
-                                       slew=slew)
-        level, summary = grade(self.estimator.last_diagnostics, self.thresholds, self.lengths)
+                                       slew=slew, stamp=stamp)
+        diagnostics = self.estimator.last_diagnostics
+        level, summary = grade(diagnostics)
         if self.worst is None or level > self.worst[0]:
             self.worst = (level, summary)
-        if not self.estimator.last_diagnostics['valid']:
+        self.counts['cold_restarts'] += diagnostics.get('cold_restart', False)
+        self.counts['reacquired'] += diagnostics.get('reacquired', False)
+        if not diagnostics['valid']:        # the publishing policy is the estimator's
             self.counts['unsolved'] += 1
-            self.failures_in_a_row += 1
-            if self.failures_in_a_row >= self.reset_after:
-                self.estimator.reset()
-                self.counts['cold_restarts'] += 1
-                self.failures_in_a_row = 0
+            self.counts[f'rejected {diagnostics["status"]}'] += 1
             return
-        self.failures_in_a_row = 0
         self.counts['published'] += 1
         frame_id = message.header.frame_id or self.config.frame_id
         stamp = message.header.stamp                 # the frame's, exactly
@@ -196,7 +208,7 @@ class PostureEstimatorNode(Node):
             status.level, status.message = DiagnosticStatus.WARN, 'waiting for uwb/ranges'
             values = {'method': self.estimator.method}
         else:
-            level, message, values = assess(diagnostics, self.thresholds, self.lengths)
+            level, message, values = assess(diagnostics, self.lengths)
             if silent > 1.0:
                 status.level = DiagnosticStatus.STALE
                 status.message = f'no uwb/ranges for {silent:.1f} s'
@@ -204,7 +216,9 @@ class PostureEstimatorNode(Node):
                 level, status.message = self.worst or (level, message)
                 status.level = LEVELS[level]
         self.worst = None
-        values.update({f'frames {key}': str(value) for key, value in self.counts.items()})
+        values.update({f'frames {key}': str(value) for key, value in self.counts.items()
+                       if key != 'frames'})
+        values['frames received'] = str(self.counts['frames'])
         if self.angles is not None:
             values.update({f'boom_angles {key}': str(value)
                            for key, value in self.angles.counts.items()})

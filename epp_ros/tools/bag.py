@@ -93,10 +93,12 @@ def run_eval(args):
     config = load_pump_config(args.config)
     result = bags.evaluate(args.bag, config, args.method, out=args.out)
     joints = ' '.join(f'{e:.3f}' for e in result['joint_rmse_m']) or '-'
-    print(f'{args.bag}: {result["frames"]} frames, {result["solved"]} solved by '
-          f'{result["method"]}; RMSE {result["rmse_m"]:.3f} m (per joint {joints}); '
-          f'max arm-length error {result["max_arm_length_error_m"]:.2e} m; '
-          f'{result["ms_per_frame"]:.2f} ms/frame')
+    rejected = ', '.join(f'{count} {reason}' for reason, count
+                         in sorted(result['rejected'].items())) or 'none'
+    print(f'{args.bag}: {result["frames"]} frames, {result["solved"]} published by '
+          f'{result["method"]} (not published: {rejected}); RMSE {result["rmse_m"]:.3f} m '
+          f'(per joint {joints}); max arm-length error '
+          f'{result["max_arm_length_error_m"]:.2e} m; {result["ms_per_frame"]:.2f} ms/frame')
     if args.plot and result['stamps_ns']:
         import matplotlib
         matplotlib.use('Agg')

@@ -28,7 +28,8 @@ from epp_ros.core.metrics import pooled_rmse
 from epp_ros.core.simulate import (AngleNoise, RangeNoise, observe, random_posture,
                                    truck_pump, xie3dim)
 
-from .bench import commit, markdown, run_frames, summarize, tracking_suite, xie3dim_suite
+from .bench import (commit, markdown, method_estimate, run_frames, summarize, tracking_suite,
+                    xie3dim_suite)
 
 #: Table 1 of the paper: absolute arm-length error per segment (as printed, its segment 1
 #: may be the tip: it numbers points from the tip) and CPU seconds (MATLAB).
@@ -152,7 +153,7 @@ def target_cases(runs, seed, sigma=0.1):
                         continue        # the links do not determine the posture
                     estimator.reset()
                     start = time.perf_counter()
-                    estimate = estimator.update(**frame)
+                    estimate = method_estimate(estimator, frame)
                     times.append(time.perf_counter() - start)
                     residuals = Residuals(model, Measurements.ranges_only(frame['ranges']),
                                           reference.noise)

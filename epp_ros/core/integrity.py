@@ -1,0 +1,460 @@
+"""Integrity: whether an estimated posture may be published, and if not, why.
+
+The posture feeds collision avoidance. A wrong posture flagged as wrong is safe; a wrong
+posture reported as good is the worst outcome. Every estimate, whatever method made it, is
+judged here on what its frame can show, so that the node and ``epp_bag eval`` agree:
+
+- consistency: the range residuals must be explained by the noise the estimator was told
+  (Gaussian errors, and an always-positive excess on a fraction of blocked links). Links
+  more likely blocked than not are set aside; the rest must pass a chi-square test, overall
+  and tag by tag, and the number set aside a binomial test;
+- observability: the Cramér–Rao bound at the estimate, from the links kept, must be finite
+  and small, and no joint may fold to another position that fits its ranges about as well,
+  unless the boom could not have got there since the last accepted posture;
+- plausibility: no joint below ``lowest_joint``, section lengths as configured, no jump
+  faster than the boom moves.
+
+Levels follow ``diagnostic_msgs``: a frame at ERROR is never published.
+"""
+import math
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+from scipy.special import betainc, gammaincc, gammainccinv
+
+from .bounds import bound_from_information
+from .chain import angles_from_joints
+from .measurements import Measurements, Residuals, wrap_angle
+
+__all__ = ['OK', 'WARN', 'ERROR', 'Thresholds', 'IntegrityLimits', 'Verdict', 'Integrity',
+           'fold_alternatives']
+
+OK, WARN, ERROR = 0, 1, 2
+
+#: Tip positions scanned for its other well-fitting pitches.
+TIP_CANDIDATES = 72
+
+
+def _chi_square_limit(alpha, dof):
+    """Upper ``alpha`` quantile of chi-square with ``dof`` degrees of freedom (scipy.special:
+    a per-frame cost, where scipy.stats' generic machinery is ten times slower)."""
+    return 2.0 * gammainccinv(0.5 * np.asarray(dof, dtype=float), alpha)
+
+
+def _binomial_tail(count, trials, fraction):
+    """P(K >= count) for K ~ Binomial(trials, fraction); 1 where count is 0."""
+    count = np.asarray(count, dtype=float)
+    trials = np.asarray(trials, dtype=float)
+    safe = np.maximum(count, 1.0)
+    tail = betainc(safe, np.maximum(trials - safe + 1.0, 1e-300), fraction)
+    return np.where(count > 0, np.where(count <= trials, tail, 0.0), 1.0)
+
+
+def _excess_tail(total, count, gamma):
+    """P(S >= total) for S the sum of ``count`` exponential excesses of mean ``gamma``."""
+    count = np.asarray(count, dtype=float)
+    tail = gammaincc(np.maximum(count, 1.0), np.maximum(total, 0.0) / gamma)
+    return np.where(count > 0, tail, 1.0)
+
+
+def _check_positive(instance):
+    for item in fields(instance):
+        value = getattr(instance, item.name)
+        if not (isinstance(value, (int, float, np.floating, np.integer))
+                and math.isfinite(value) and value > 0):
+            raise ValueError(f'{item.name}: must be a finite number > 0, got {value!r}')
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """Limits of a good estimate, metres: above ``*_warn`` WARN, above ``*_error`` ERROR."""
+
+    arm_length_warn: float = 0.05       #: worst section-length error
+    arm_length_error: float = 0.5
+    residual_warn: float = 0.5          #: range residual RMS
+    residual_error: float = 2.0
+    predicted_rmse_warn: float = 0.5    #: Cramér–Rao bound of the joints' RMSE
+    predicted_rmse_error: float = 2.0
+
+    def __post_init__(self):
+        _check_positive(self)
+        for name in ('arm_length', 'residual', 'predicted_rmse'):
+            warn, error = getattr(self, f'{name}_warn'), getattr(self, f'{name}_error')
+            if warn > error:
+                raise ValueError(f'{name}_warn ({warn}) must not exceed {name}_error ({error})')
+
+
+@dataclass(frozen=True)
+class IntegrityLimits:
+    """How the consistency and observability checks decide.
+
+    Attributes
+    ----------
+    false_alarm : float
+        Probability that a frame consistent with the noise fails one residual test.
+    ambiguity_odds : float
+        Another position of a joint is ruled out when it is this many times less likely
+        than the estimate's, given the frame's ranges.
+    ambiguity_distance : float
+        Metres; alternatives closer to the estimate than this, or than three times the
+        joint's predicted standard deviation, do not matter.
+    max_angular_rate : float
+        Radians per second that neither the slew nor any section's pitch exceeds: how far
+        each joint can have moved since the last accepted posture rules out alternatives
+        and jumps (:meth:`Integrity.reach`). Hydraulic booms turn at up to about 0.2 rad/s.
+    frame_period : float
+        Seconds between frames when no stamps are given.
+    """
+
+    false_alarm: float = 1e-4
+    ambiguity_odds: float = 1000.0
+    ambiguity_distance: float = 1.0
+    max_angular_rate: float = 0.35
+    frame_period: float = 0.1
+
+    def __post_init__(self):
+        _check_positive(self)
+        if not self.false_alarm < 0.5:
+            raise ValueError(f'false_alarm: must be < 0.5, got {self.false_alarm}')
+        if not self.ambiguity_odds > 1:
+            raise ValueError(f'ambiguity_odds: must be > 1, got {self.ambiguity_odds}')
+
+
+@dataclass
+class Verdict:
+    """The integrity of one estimate.
+
+    Attributes
+    ----------
+    level : int
+        OK, WARN or ERROR; ERROR is never published.
+    status : str
+        ``"ok"``, or why the posture is not published: ``"inconsistent"`` (residuals the
+        noise cannot explain), ``"ambiguous"`` (a joint could fold), ``"unobservable"``
+        (infinite or too large predicted uncertainty), ``"implausible"`` (below ground,
+        wrong section lengths, or a jump faster than the boom moves).
+    message : str
+        One line for a person.
+    values : dict
+        The statistics behind it (for diagnostics).
+    """
+
+    level: int
+    status: str
+    message: str
+    values: dict = field(default_factory=dict)
+
+    @property
+    def valid(self):
+        """Whether the posture may be published."""
+        return self.level < ERROR
+
+    @property
+    def lost(self):
+        """Whether a fresh (cold) solve of the frame could do better than this estimate."""
+        return self.status in ('inconsistent', 'implausible')
+
+
+def fold_alternatives(model, joints):
+    """Each inner joint reflected across the line through its neighbours.
+
+    Reflection keeps both adjacent section lengths and, for a boom in a vertical plane,
+    the plane: the other solution when the joint's own ranges are few or weak.
+
+    Returns
+    -------
+    alternatives : ndarray, shape (p - 1, 3)
+        Row k: joint k (0-based, k < p - 1) folded; the others stay.
+    """
+    chain = np.vstack([model.pivot_of(joints), joints])
+    inner, outer = chain[:-2], chain[2:]
+    axis = outer - inner
+    axis /= np.maximum(np.linalg.norm(axis, axis=1), 1e-12)[:, None]
+    offset = chain[1:-1] - inner
+    foot = inner + np.sum(offset * axis, axis=1)[:, None] * axis
+    return 2.0 * foot - chain[1:-1]
+
+
+class Integrity:
+    """Judges estimated postures for one boom and one noise model.
+
+    Parameters
+    ----------
+    model : BoomModel
+    noise : SensorNoise
+        What the estimator is told about the measurement noise.
+    nlos : NlosMixture
+        Prior fraction of blocked links and their mean excess.
+    eta : float
+        Multiplicative range noise: a range r has sigma ``sqrt(sigma^2 + (eta r)^2)``.
+    lowest_joint : float
+        No joint is below this height, metres.
+    limits : IntegrityLimits
+    thresholds : Thresholds
+    """
+
+    def __init__(self, model, noise, nlos, eta=0.0, lowest_joint=-0.5,
+                 limits=IntegrityLimits(), thresholds=Thresholds()):
+        self.model = model
+        self.noise = noise
+        self.nlos = nlos
+        self.eta = float(eta)
+        self.lowest_joint = float(lowest_joint)
+        self.limits = limits
+        self.thresholds = thresholds
+
+    # -- the pieces -----------------------------------------------------------------------
+    def link_sigma(self, measurements):
+        """Standard deviation of each tag-anchor range (p, m), metres."""
+        sigma = np.broadcast_to(np.asarray(self.noise.range_sigma, dtype=float),
+                                measurements.ranges.shape)
+        if self.eta:
+            sigma = np.hypot(sigma, self.eta * np.nan_to_num(measurements.ranges))
+        return sigma
+
+    def _excess(self, joints, measurements):
+        """Range excesses in sigmas: tag-anchor (p, m) and tag-tag (p, p), NaN unmeasured."""
+        predicted = self.model.ranges(joints)
+        links = (measurements.ranges - predicted) / self.link_sigma(measurements)
+        between = np.linalg.norm(joints[:, None] - joints[None, :], axis=-1)
+        tag_links = (measurements.tag_ranges - between) / self.noise.tag_sigma
+        return links, tag_links
+
+    def _blocked(self, excess, sigma):
+        """Boolean: links more likely NLOS than not (none for a Gaussian model)."""
+        if self.nlos.fraction == 0.0:
+            return np.zeros(excess.shape, bool)
+        return self.nlos.loss(excess, sigma)[2] > 0.5
+
+    def _joint_cost(self, k, positions, measurements, joints, slew):
+        """Loss of what sees joint ``k`` if it were at each of ``positions`` (n, 3).
+
+        Its tag's ranges (NLOS mixture), its tag-tag ranges, and the inclinometers of the
+        two sections it ends and starts, the other joints staying where they are.
+        """
+        valid = np.isfinite(measurements.ranges[k])
+        sigma = self.link_sigma(measurements)[k, valid]
+        distance = np.linalg.norm(positions[:, None, :] - self.model.anchors[valid], axis=-1)
+        cost = self.nlos.loss((measurements.ranges[k, valid] - distance) / sigma, sigma)[0]
+        total = cost.sum(axis=-1)
+        for other in range(self.model.n_sections):
+            for measured in (measurements.tag_ranges[k, other],
+                             measurements.tag_ranges[other, k]):
+                if other != k and np.isfinite(measured):
+                    gap = np.linalg.norm(positions - joints[other], axis=-1)
+                    total = total + 0.5 * ((measured - gap) / self.noise.tag_sigma) ** 2
+        along = np.array([np.cos(slew), np.sin(slew), 0.0])
+        inner = joints[k - 1] if k else self.model.pivot(slew)
+        for section, steps in ((k, positions - inner),
+                               (k + 1, joints[min(k + 1, len(joints) - 1)] - positions)):
+            if section < self.model.n_sections and np.isfinite(measurements.pitches[section]):
+                pitch = np.arctan2(steps[:, 2], steps @ along)
+                error = wrap_angle(pitch - measurements.pitches[section])
+                total = total + 0.5 * (error / self.noise.pitch_sigma) ** 2
+        return total
+
+    def consistency(self, joints, measurements):
+        """Chi-square and binomial tests of the residuals; (failures, values, kept links).
+
+        Returns
+        -------
+        failures : list of str
+        values : dict
+        kept : (ndarray, ndarray)
+            The tag-anchor (p, m) and tag-tag (p, p) links taken as line-of-sight.
+        """
+        alpha = self.limits.false_alarm
+        links, tag_links = self._excess(joints, measurements)
+        measured, tag_measured = np.isfinite(links), np.isfinite(tag_links)
+        sigma = self.link_sigma(measurements)
+        blocked = measured & self._blocked(np.nan_to_num(links), sigma)
+        tag_blocked = tag_measured & self._blocked(np.nan_to_num(tag_links),
+                                                   self.noise.tag_sigma)
+        kept, tag_kept = measured & ~blocked, tag_measured & ~tag_blocked
+        p = self.model.n_sections
+        statistic = float(np.sum(links[kept] ** 2) + np.sum(tag_links[tag_kept] ** 2))
+        dof = max(int(kept.sum() + tag_kept.sum()) - (p + 1), 1)
+        limit = float(_chi_square_limit(alpha, dof))
+        n_links = int(measured.sum() + tag_measured.sum())
+        n_blocked = int(blocked.sum() + tag_blocked.sum())
+        failures = []
+        if statistic > limit:
+            failures.append(f'range residuals chi-square {statistic:.1f} > {limit:.1f}')
+        if _binomial_tail(n_blocked, n_links, self.nlos.fraction) < alpha:
+            failures.append(f'{n_blocked} of {n_links} links look blocked')
+        # Blocked links: as many, and as long, as the NLOS prior makes believable.
+        metres = np.where(blocked, np.nan_to_num(links) * sigma, 0.0)
+        tag_metres = np.where(tag_blocked, np.nan_to_num(tag_links) * self.noise.tag_sigma, 0.0)
+        total = float(metres.sum() + tag_metres.sum())
+        if _excess_tail(total, n_blocked, self.nlos.gamma) < alpha:
+            failures.append(f'blocked links {total:.1f} m too long in all')
+        tag_statistic = np.sum(np.where(kept, links, 0.0) ** 2, axis=1)
+        tag_limit = _chi_square_limit(alpha / p, np.maximum(kept.sum(axis=1), 1))
+        blocked_count = blocked.sum(axis=1)
+        tag_tail = np.minimum(
+            _binomial_tail(blocked_count, measured.sum(axis=1), self.nlos.fraction),
+            _excess_tail(metres.sum(axis=1), blocked_count, self.nlos.gamma))
+        bad_tags = np.flatnonzero((tag_statistic > tag_limit) | (tag_tail < alpha / p))
+        if bad_tags.size:
+            failures.append('ranges of joint(s) ' + ', '.join(str(k + 1) for k in bad_tags)
+                            + ' not explained by the noise')
+        values = {'chi_square': statistic, 'chi_square_limit': limit, 'links': n_links,
+                  'nlos_links': blocked, 'nlos_tag_links': tag_blocked,
+                  'tag_chi_square': tag_statistic}
+        return failures, values, (kept, tag_kept)
+
+    def bound(self, joints, measurements, kept, angles):
+        """Cramér–Rao bound at the estimate from the line-of-sight links and the angles.
+
+        ``angles``: the estimate's (slew, pitches), radians.
+        """
+        slew, pitches = angles
+        ranges, tag_ranges = kept
+        used = Measurements(np.where(ranges, measurements.ranges, np.nan),
+                            np.where(tag_ranges, measurements.tag_ranges, np.nan),
+                            measurements.pitches, measurements.slew)
+        noise = self.noise
+        if self.eta:
+            noise = type(noise)(self.link_sigma(measurements), noise.tag_sigma,
+                                noise.pitch_sigma, noise.slew_sigma)
+        jacobian = Residuals(self.model, used, noise).jacobian(np.r_[slew, pitches])
+        return bound_from_information(self.model, slew, pitches, jacobian.T @ jacobian)
+
+    def reach(self, reference, elapsed, reference_std):
+        """How far each joint can have moved in ``elapsed`` seconds from ``reference``.
+
+        Every angle turning at ``max_angular_rate`` moves joint k by at most the rate times
+        its lever: its distance from the slew axis, plus its distance from each joint at or
+        inside it (pivot included). Plus three times the reference's own standard
+        deviation ``reference_std`` (p,). Shape (p,), metres.
+        """
+        chain = np.vstack([self.model.pivot_of(reference), reference])
+        radius = np.linalg.norm(reference[:, :2] - self.model.base[:2], axis=1)
+        levers = np.array([np.linalg.norm(chain[k + 1] - chain[:k + 1], axis=1).sum()
+                           for k in range(self.model.n_sections)])
+        return (self.limits.max_angular_rate * elapsed * (radius + levers)
+                + 3.0 * np.asarray(reference_std))
+
+    def ambiguous_joints(self, joints, measurements, joint_std, slew, reach=None):
+        """Joints (0-based) with another position about as likely, and one such position.
+
+        A fold of an inner joint, or the tip at another pitch, counts when its ranges make
+        it no more than ``ambiguity_odds`` times less likely than the estimate, when it is
+        further than ``ambiguity_distance`` and three predicted standard deviations
+        ``joint_std`` (p,) away, and, given how far each joint can have moved since the
+        last accepted posture (``reach``: that posture and the distances, see
+        :meth:`reach`), when it could have got there.
+        """
+        near = np.maximum(self.limits.ambiguity_distance,
+                          3.0 * np.nan_to_num(joint_std, posinf=0.0))
+        log_odds = math.log(self.limits.ambiguity_odds)
+        found = {}
+        candidates = [(k, position[None]) for k, position
+                      in enumerate(fold_alternatives(self.model, joints))]
+        candidates.append((self.model.n_sections - 1, self._tip_circle(joints, slew)))
+        for k, positions in candidates:
+            far = np.linalg.norm(positions - joints[k], axis=1) > near[k]
+            if reach is not None:
+                far &= np.linalg.norm(positions - reach[0][k], axis=1) <= reach[1][k]
+            if not far.any():
+                continue
+            costs = self._joint_cost(k, np.vstack([joints[k:k + 1], positions[far]]),
+                                     measurements, joints, slew)
+            rivals = np.flatnonzero(costs[1:] - costs[0] < log_odds)
+            if rivals.size:
+                found[k] = positions[far][rivals[np.argmin(costs[1:][rivals])]]
+        return found
+
+    def _tip_circle(self, joints, slew):
+        """Positions of the tip at pitches all round its hinge, in the boom's plane."""
+        p = self.model.n_sections
+        hinge = joints[-2] if p > 1 else self.model.pivot(slew)
+        grid = np.linspace(-np.pi, np.pi, TIP_CANDIDATES, endpoint=False)
+        return hinge + self.model.arm_lengths[-1] * (
+            np.cos(grid)[:, None] * [np.cos(slew), np.sin(slew), 0.0]
+            + np.sin(grid)[:, None] * [0.0, 0.0, 1.0])
+
+    # -- the verdict ----------------------------------------------------------------------
+    def judge(self, joints, measurements, reference=None, elapsed=None, reference_std=None):
+        """The :class:`Verdict` on an estimate of one frame.
+
+        Parameters
+        ----------
+        joints : ndarray, shape (p, 3)
+            The estimate, metres.
+        measurements : Measurements
+            The frame it was estimated from.
+        reference : ndarray, shape (p, 3), optional
+            The last accepted posture, ``elapsed`` seconds before, with its predicted
+            joint standard deviations ``reference_std`` (p,): what the boom could have
+            reached since rules out alternatives and jumps.
+        elapsed : float, optional
+        reference_std : ndarray, shape (p,), optional
+
+        Returns
+        -------
+        Verdict
+        """
+        checks = []                 # (level, status, message), worst kept
+        values = {}
+        reach = None if reference is None else (
+            reference, self.reach(reference, elapsed, reference_std))
+        angles = angles_from_joints(self.model, joints)
+        self._plausibility(joints, angles[0], reach, elapsed, checks, values)
+        failures, found, kept = self.consistency(joints, measurements)
+        values.update(found)
+        if failures:
+            checks.append((ERROR, 'inconsistent', '; '.join(failures)))
+        bound = self.bound(joints, measurements, kept, angles)
+        values.update(predicted_rmse=bound.rmse, joint_std=bound.joint_std)
+        t = self.thresholds
+        if not math.isfinite(bound.rmse) or bound.rmse > t.predicted_rmse_error:
+            checks.append((ERROR, 'unobservable', f'predicted RMSE {bound.rmse:.2f} m'))
+        elif bound.rmse > t.predicted_rmse_warn:
+            checks.append((WARN, 'ok', f'predicted RMSE {bound.rmse:.2f} m'))
+        ambiguous = self.ambiguous_joints(joints, measurements, bound.joint_std, angles[0],
+                                          reach)
+        values['ambiguous_joints'] = sorted(k + 1 for k in ambiguous)
+        if ambiguous:
+            checks.append((ERROR, 'ambiguous', 'joint(s) ' + ', '.join(
+                str(k + 1) for k in sorted(ambiguous)) + ' could fold either way'))
+        if not checks:
+            return Verdict(OK, 'ok', 'tracking', values)
+        level = max(level for level, _, _ in checks)
+        worst = [check for check in checks if check[0] == level]
+        return Verdict(level, worst[0][1], '; '.join(message for _, _, message in worst),
+                       values)
+
+    def _across_plane(self, joints, slew):
+        """Signed distances (p,) of the joints from the vertical plane of ``slew``."""
+        pivot = self.model.pivot(slew)
+        return (joints[:, :2] - pivot[:2]) @ np.array([-np.sin(slew), np.cos(slew)])
+
+    def _plausibility(self, joints, slew, reach, elapsed, checks, values):
+        """Ground, section lengths, the boom's plane and speed, appended to ``checks``."""
+        t = self.thresholds
+        lowest = float(joints[:, 2].min())
+        if lowest < self.lowest_joint:
+            checks.append((ERROR, 'implausible',
+                           f'a joint {lowest:.2f} m high, below lowest_joint'))
+        length_error = float(np.max(np.abs(self.model.section_lengths(joints)
+                                           - self.model.arm_lengths)))
+        if length_error > t.arm_length_error:
+            checks.append((ERROR, 'implausible', f'a section {length_error:.2f} m off length'))
+        elif length_error > t.arm_length_warn:
+            checks.append((WARN, 'ok', f'a section {length_error:.3f} m off length'))
+        # The boom is in one vertical plane through the slew axis (the paper's Feature II);
+        # the 3-D methods do not impose it, and off it the ranges see little.
+        off_plane = float(np.max(np.abs(self._across_plane(joints, slew))))
+        values['off_plane'] = off_plane
+        if off_plane > t.arm_length_error:
+            checks.append((ERROR, 'implausible', f'a joint {off_plane:.2f} m off the boom plane'))
+        elif off_plane > t.arm_length_warn:
+            checks.append((WARN, 'ok', f'a joint {off_plane:.3f} m off the boom plane'))
+        if reach is not None:
+            moved = np.linalg.norm(joints - reach[0], axis=1)
+            values['moved'] = float(moved.max())
+            jumped = np.flatnonzero(moved > reach[1])
+            if jumped.size:
+                checks.append((ERROR, 'implausible', f'joint {jumped[0] + 1} moved '
+                               f'{moved[jumped[0]]:.1f} m in {elapsed:.2f} s'))
