@@ -68,14 +68,16 @@ def crlb(model, slew, pitches, sigma, measured=None):
 
 def bound_from_information(model, slew, pitches, information):
     """The :class:`Bound` at a posture from the Fisher information (p + 1, p + 1) of psi."""
+    p = model.n_sections
     try:
-        covariance = np.linalg.inv(information)
-        if not np.all(np.isfinite(covariance)) or np.linalg.cond(information) > 1e14:
-            raise np.linalg.LinAlgError
+        # One symmetric eigendecomposition gives both the conditioning and the inverse.
+        eigenvalues, vectors = np.linalg.eigh(information)
     except np.linalg.LinAlgError:
-        p = model.n_sections
+        eigenvalues = np.zeros(p + 1)
+    if not np.all(np.isfinite(eigenvalues)) or eigenvalues[0] <= 1e-14 * eigenvalues[-1]:
         infinite = np.full((p + 1, p + 1), np.inf)
         return Bound(infinite, np.full((p, 3, 3), np.inf), float('inf'))
+    covariance = (vectors / eigenvalues) @ vectors.T
     jacobian = model.joint_jacobian(slew, pitches)
     joint_covariance = np.einsum('kcq,qr,kdr->kcd', jacobian, covariance, jacobian)
     rmse = float(np.sqrt(np.trace(joint_covariance, axis1=-2, axis2=-1).sum()

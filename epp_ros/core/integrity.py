@@ -57,6 +57,16 @@ def _excess_tail(total, count, gamma):
     return np.where(count > 0, tail, 1.0)
 
 
+def _norm(vectors):
+    """Euclidean norms over the last axis (np.linalg.norm's overhead dominates here)."""
+    return np.sqrt(np.einsum('...i,...i->...', vectors, vectors))
+
+
+def _zero_nan(values):
+    """A copy with NaN as 0 (the measured mask is kept aside)."""
+    return np.where(np.isnan(values), 0.0, values)
+
+
 def _check_positive(instance):
     for item in fields(instance):
         value = getattr(instance, item.name)
@@ -169,7 +179,7 @@ def fold_alternatives(model, joints):
     chain = np.vstack([model.pivot_of(joints), joints])
     inner, outer = chain[:-2], chain[2:]
     axis = outer - inner
-    axis /= np.maximum(np.linalg.norm(axis, axis=1), 1e-12)[:, None]
+    axis /= np.maximum(_norm(axis), 1e-12)[:, None]
     offset = chain[1:-1] - inner
     foot = inner + np.sum(offset * axis, axis=1)[:, None] * axis
     return 2.0 * foot - chain[1:-1]
@@ -202,6 +212,10 @@ class Integrity:
         self.lowest_joint = float(lowest_joint)
         self.limits = limits
         self.thresholds = thresholds
+        # The mixture's per-link constants, bound once where the sigmas are fixed.
+        fixed = np.ndim(noise.range_sigma) == 0 and not self.eta
+        self._link_loss = nlos.bind(np.asarray(noise.range_sigma, float)) if fixed else None
+        self._tag_loss = nlos.bind(np.asarray(noise.tag_sigma, float))
 
     # -- the pieces -----------------------------------------------------------------------
     def link_sigma(self, measurements):
@@ -216,41 +230,43 @@ class Integrity:
         """Range excesses in sigmas: tag-anchor (p, m) and tag-tag (p, p), NaN unmeasured."""
         predicted = self.model.ranges(joints)
         links = (measurements.ranges - predicted) / self.link_sigma(measurements)
-        between = np.linalg.norm(joints[:, None] - joints[None, :], axis=-1)
+        between = _norm(joints[:, None] - joints[None, :])
         tag_links = (measurements.tag_ranges - between) / self.noise.tag_sigma
         return links, tag_links
 
-    def _blocked(self, excess, sigma):
-        """Boolean: links more likely NLOS than not (none for a Gaussian model)."""
-        if self.nlos.fraction == 0.0:
-            return np.zeros(excess.shape, bool)
-        return self.nlos.loss(excess, sigma)[2] > 0.5
+    def _mixture(self, excess, sigma):
+        """NLOS mixture (cost, slope, posterior) of tag-anchor excesses in sigmas."""
+        if self._link_loss is not None:
+            return self._link_loss(excess)
+        return self.nlos.loss(excess, sigma)
 
-    def _joint_cost(self, k, positions, measurements, joints, slew):
-        """Loss of what sees joint ``k`` if it were at each of ``positions`` (n, 3).
+    def _joint_cost(self, which, positions, measurements, joints, slew):
+        """Loss of what sees joint ``which[i]`` if it were at ``positions[i]`` (n, 3).
 
         Its tag's ranges (NLOS mixture), its tag-tag ranges, and the inclinometers of the
-        two sections it ends and starts, the other joints staying where they are.
+        two sections it ends and starts, the other joints staying where they are. Shape (n,).
         """
-        valid = np.isfinite(measurements.ranges[k])
-        sigma = self.link_sigma(measurements)[k, valid]
-        distance = np.linalg.norm(positions[:, None, :] - self.model.anchors[valid], axis=-1)
-        cost = self.nlos.loss((measurements.ranges[k, valid] - distance) / sigma, sigma)[0]
-        total = cost.sum(axis=-1)
-        for other in range(self.model.n_sections):
-            for measured in (measurements.tag_ranges[k, other],
-                             measurements.tag_ranges[other, k]):
-                if other != k and np.isfinite(measured):
-                    gap = np.linalg.norm(positions - joints[other], axis=-1)
-                    total = total + 0.5 * ((measured - gap) / self.noise.tag_sigma) ** 2
+        p = self.model.n_sections
+        ranges = measurements.ranges[which]
+        valid = np.isfinite(ranges)
+        sigma = self.link_sigma(measurements)[which]
+        distance = _norm(positions[:, None, :] - self.model.anchors)
+        excess = np.where(valid, (ranges - distance) / sigma, 0.0)
+        total = np.sum(np.where(valid, self._mixture(excess, sigma)[0], 0.0), axis=1)
+        gaps = _norm(positions[:, None, :] - joints[None, :, :])   # (n, p)
+        for measured in (measurements.tag_ranges[which], measurements.tag_ranges[:, which].T):
+            seen = np.isfinite(measured) & (np.arange(p) != which[:, None])
+            error = np.where(seen, (measured - gaps) / self.noise.tag_sigma, 0.0)
+            total = total + 0.5 * np.sum(error ** 2, axis=1)
         along = np.array([np.cos(slew), np.sin(slew), 0.0])
-        inner = joints[k - 1] if k else self.model.pivot(slew)
-        for section, steps in ((k, positions - inner),
-                               (k + 1, joints[min(k + 1, len(joints) - 1)] - positions)):
-            if section < self.model.n_sections and np.isfinite(measurements.pitches[section]):
-                pitch = np.arctan2(steps[:, 2], steps @ along)
-                error = wrap_angle(pitch - measurements.pitches[section])
-                total = total + 0.5 * (error / self.noise.pitch_sigma) ** 2
+        chain = np.vstack([self.model.pivot(slew), joints, joints[-1:]])
+        for section, steps in ((which, positions - chain[which]),
+                               (which + 1, chain[which + 2] - positions)):
+            inside = section < p
+            measured = measurements.pitches[np.minimum(section, p - 1)]
+            seen = inside & np.isfinite(measured)
+            error = wrap_angle(np.arctan2(steps[:, 2], steps @ along) - _zero_nan(measured))
+            total = total + np.where(seen, 0.5 * (error / self.noise.pitch_sigma) ** 2, 0.0)
         return total
 
     def consistency(self, joints, measurements):
@@ -267,9 +283,10 @@ class Integrity:
         links, tag_links = self._excess(joints, measurements)
         measured, tag_measured = np.isfinite(links), np.isfinite(tag_links)
         sigma = self.link_sigma(measurements)
-        blocked = measured & self._blocked(np.nan_to_num(links), sigma)
-        tag_blocked = tag_measured & self._blocked(np.nan_to_num(tag_links),
-                                                   self.noise.tag_sigma)
+        blocked = measured & (self._mixture(_zero_nan(links), sigma)[2] > 0.5)
+        tag_blocked = tag_measured.copy()
+        if tag_measured.any():
+            tag_blocked &= self._tag_loss(_zero_nan(tag_links))[2] > 0.5
         kept, tag_kept = measured & ~blocked, tag_measured & ~tag_blocked
         p = self.model.n_sections
         statistic = float(np.sum(links[kept] ** 2) + np.sum(tag_links[tag_kept] ** 2))
@@ -283,8 +300,8 @@ class Integrity:
         if _binomial_tail(n_blocked, n_links, self.nlos.fraction) < alpha:
             failures.append(f'{n_blocked} of {n_links} links look blocked')
         # Blocked links: as many, and as long, as the NLOS prior makes believable.
-        metres = np.where(blocked, np.nan_to_num(links) * sigma, 0.0)
-        tag_metres = np.where(tag_blocked, np.nan_to_num(tag_links) * self.noise.tag_sigma, 0.0)
+        metres = np.where(blocked, _zero_nan(links) * sigma, 0.0)
+        tag_metres = np.where(tag_blocked, _zero_nan(tag_links) * self.noise.tag_sigma, 0.0)
         total = float(metres.sum() + tag_metres.sum())
         if _excess_tail(total, n_blocked, self.nlos.gamma) < alpha:
             failures.append(f'blocked links {total:.1f} m too long in all')
@@ -329,9 +346,9 @@ class Integrity:
         deviation ``reference_std`` (p,). Shape (p,), metres.
         """
         chain = np.vstack([self.model.pivot_of(reference), reference])
-        radius = np.linalg.norm(reference[:, :2] - self.model.base[:2], axis=1)
-        levers = np.array([np.linalg.norm(chain[k + 1] - chain[:k + 1], axis=1).sum()
-                           for k in range(self.model.n_sections)])
+        radius = _norm(reference[:, :2] - self.model.base[:2])
+        inside = np.tril(_norm(chain[:, None] - chain[None, :]), k=-1)   # joint k: row k + 1
+        levers = inside[1:].sum(axis=1)
         return (self.limits.max_angular_rate * elapsed * (radius + levers)
                 + 3.0 * np.asarray(reference_std))
 
@@ -347,22 +364,24 @@ class Integrity:
         """
         near = np.maximum(self.limits.ambiguity_distance,
                           3.0 * np.nan_to_num(joint_std, posinf=0.0))
-        log_odds = math.log(self.limits.ambiguity_odds)
+        p = self.model.n_sections
+        tip = self._tip_circle(joints, slew)
+        positions = np.vstack([fold_alternatives(self.model, joints), tip])
+        which = np.r_[np.arange(p - 1), np.full(len(tip), p - 1)]
+        keep = _norm(positions - joints[which]) > near[which]
+        if reach is not None:
+            keep &= _norm(positions - reach[0][which]) <= reach[1][which]
+        if not keep.any():
+            return {}
+        positions, which = positions[keep], which[keep]
+        joint_index = np.arange(p)
+        costs = self._joint_cost(np.r_[joint_index, which], np.vstack([joints, positions]),
+                                 measurements, joints, slew)
+        margin = costs[p:] - costs[which]
         found = {}
-        candidates = [(k, position[None]) for k, position
-                      in enumerate(fold_alternatives(self.model, joints))]
-        candidates.append((self.model.n_sections - 1, self._tip_circle(joints, slew)))
-        for k, positions in candidates:
-            far = np.linalg.norm(positions - joints[k], axis=1) > near[k]
-            if reach is not None:
-                far &= np.linalg.norm(positions - reach[0][k], axis=1) <= reach[1][k]
-            if not far.any():
-                continue
-            costs = self._joint_cost(k, np.vstack([joints[k:k + 1], positions[far]]),
-                                     measurements, joints, slew)
-            rivals = np.flatnonzero(costs[1:] - costs[0] < log_odds)
-            if rivals.size:
-                found[k] = positions[far][rivals[np.argmin(costs[1:][rivals])]]
+        for k in np.unique(which[margin < math.log(self.limits.ambiguity_odds)]):
+            rivals = np.flatnonzero(which == k)
+            found[int(k)] = positions[rivals[np.argmin(margin[rivals])]]
         return found
 
     def _tip_circle(self, joints, slew):
@@ -452,7 +471,7 @@ class Integrity:
         elif off_plane > t.arm_length_warn:
             checks.append((WARN, 'ok', f'a joint {off_plane:.3f} m off the boom plane'))
         if reach is not None:
-            moved = np.linalg.norm(joints - reach[0], axis=1)
+            moved = _norm(joints - reach[0])
             values['moved'] = float(moved.max())
             jumped = np.flatnonzero(moved > reach[1])
             if jumped.size:

@@ -66,6 +66,13 @@ def _with_estimator(method, work):
         estimator.wait(10)
 
 
+#: Frames are 10 Hz samples of a motion; a frame stamped t shows the boom at t (held
+#: between samples), so that faster feeds do not make the boom jump (which the estimator
+#: would rightly refuse).
+FRAME_RATE = 10.0
+_EPOCH = time.time()
+
+
 def _feed(feeder, frames, rate, count):
     """Publish ``count`` frames at ``rate``, then wait for the answers; return lost count."""
     start = time.perf_counter()
@@ -75,7 +82,8 @@ def _feed(feeder, frames, rate, count):
         while time.perf_counter() < target:
             rclpy.spin_once(feeder, timeout_sec=max(0.0, min(0.001, target -
                                                              time.perf_counter())))
-        feeder.publish(frames[i % len(frames)], base + i / rate)
+        stamp = base + i / rate
+        feeder.publish(frames[int((stamp - _EPOCH) * FRAME_RATE) % len(frames)], stamp)
     deadline = time.perf_counter() + 3.0
     while len(feeder.answered) < len(feeder.sent) and time.perf_counter() < deadline:
         rclpy.spin_once(feeder, timeout_sec=0.01)
