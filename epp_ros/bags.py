@@ -16,6 +16,7 @@ from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from epp_ros.core import PostureEstimator
+from epp_ros.core.frame_policy import ADMIT, CLOCK_JUMP, FramePolicy
 from epp_ros.core.metrics import frame_rmse, joint_errors, pooled_rmse
 from epp_ros.core.poses import boom_quaternions
 from epp_ros.core.simulate import RangeNoise, working_cycle
@@ -260,7 +261,8 @@ def evaluate(path, config, method='cepp', out=None, **options):
     -------
     dict
         ``frames``, ``solved`` (published by the node's policy), ``rejected`` (frames not
-        published, by reason), ``published_stamps_ns``, ``rmse_m`` (NaN without truth), ``joint_rmse_m`` (p,),
+        published, by reason), ``ignored`` (frames the stamp rules skip, by reason:
+        ``core.frame_policy``), ``published_stamps_ns``, ``rmse_m`` (NaN without truth), ``joint_rmse_m`` (p,),
         ``max_arm_length_error_m``, ``ms_per_frame``, ``method``, and the per-frame series
         ``stamps_ns``, ``frame_rmse_m`` for plotting.
     """
@@ -269,8 +271,15 @@ def evaluate(path, config, method='cepp', out=None, **options):
     model = config.model()
     estimator = PostureEstimator(model, method, **options)
     postures, rmses, squared, stamps, length_errors, elapsed = [], [], [], [], [], 0.0
-    rejected = {}
+    rejected, ignored = {}, {}
+    policy = FramePolicy()                  # the node's stamp rules
     for stamp, ranges, tag_ranges in frames:
+        decision = policy.admit(stamp * 1e-9)
+        if decision not in (ADMIT, CLOCK_JUMP):
+            ignored[decision] = ignored.get(decision, 0) + 1
+            continue
+        if decision == CLOCK_JUMP:
+            estimator.reset()
         start = time.perf_counter()
         joints = estimator.update(ranges, tag_ranges=tag_ranges, stamp=stamp * 1e-9)
         elapsed += time.perf_counter() - start
@@ -287,7 +296,8 @@ def evaluate(path, config, method='cepp', out=None, **options):
     if out is not None:
         _copy_with_postures(path, out, postures, config, model)
     return {'frames': len(frames), 'solved': len(postures), 'method': method,
-            'rejected': rejected, 'published_stamps_ns': [stamp for stamp, _ in postures],
+            'rejected': rejected, 'ignored': ignored,
+            'published_stamps_ns': [stamp for stamp, _ in postures],
             'rmse_m': pooled_rmse(rmses),
             'joint_rmse_m': np.sqrt(np.mean(squared, axis=0)).tolist() if squared else [],
             'max_arm_length_error_m': max(length_errors, default=float('nan')),

@@ -5,8 +5,8 @@ from scipy.stats import binom, chi2
 
 from epp_ros.core import PostureEstimator
 from epp_ros.core.bounds import crlb
-from epp_ros.core.integrity import (IntegrityLimits, _binomial_tail, _chi_square_limit,
-                                    fold_alternatives)
+from epp_ros.core.integrity import (IntegrityLimits, Thresholds, _binomial_tail,
+                                    _chi_square_limit, fold_alternatives)
 from epp_ros.core.measurements import Measurements
 from epp_ros.core.simulate import RangeNoise, random_posture, truck_pump, working_cycle
 
@@ -201,3 +201,17 @@ def test_limits_are_checked():
             IntegrityLimits(**bad)
     with pytest.raises(ValueError, match='reset_after_failures'):
         PostureEstimator(MODEL, 'cepp', reset_after_failures=0)
+
+
+def test_reconfigure_keeps_the_warm_start_and_refuses_bad_settings():
+    joints = MODEL.forward_kinematics(0.3, np.radians([50.0, 20.0, 0.0, -20.0, -40.0]))
+    estimator = PostureEstimator(MODEL, 'chain')
+    estimator.update(MODEL.ranges(joints), stamp=0.0)
+    with pytest.raises(ValueError, match='sigma'):
+        estimator.reconfigure(sigma=-1.0)
+    assert estimator.integrity.noise.range_sigma == 0.1          # unchanged
+    estimator.reconfigure(sigma=0.3, thresholds=Thresholds(predicted_rmse_warn=0.01))
+    assert estimator.integrity.noise.range_sigma == 0.3
+    estimator.update(MODEL.ranges(joints), stamp=0.1)
+    diagnostics = estimator.last_diagnostics
+    assert not diagnostics['cold_start'] and diagnostics['level'] == 1     # WARN now

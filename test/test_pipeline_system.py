@@ -207,15 +207,19 @@ def hostile_stream(seconds=20.0, rate=10.0, seed=3):
             frames[index][-1] = frames[index][-1] * rng.uniform(0.0, 3.0, frames[index][-1].shape)
         else:
             frames[index] = np.full_like(frames[index], 0.1 if kind == 'tenth' else 0.0)
+    for index in range(160, 172):          # 1.2 s unheard: the estimator starts cold
+        frames[index] = np.full_like(frames[index], np.nan)
     start = time.time_ns()
     stamps = [start + int(round(1e9 * t)) for t in trajectory.times]
+    stamps[180] = stamps[179]               # a repeated stamp: ignored by both
     return stamps, frames, sorted(bad)
 
 
 def test_hostile_frames_are_not_published_and_eval_decides_the_same(listener, processes,
                                                                       tmp_path):
     """The node refuses corrupted and absurd frames and recovers; ``epp_bag eval`` on the
-    same frames publishes exactly the same ones and rejects the rest for the same reasons."""
+    same frames publishes exactly the same ones and rejects the rest for the same reasons,
+    through a run of unsolved frames (a cold restart) and a repeated stamp."""
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     from epp_ros import bags
     stamps, frames, bad = hostile_stream()
@@ -254,11 +258,77 @@ def test_hostile_frames_are_not_published_and_eval_decides_the_same(listener, pr
     bags.write_frames(bag, CONFIG, zip(stamps, frames))
     result = bags.evaluate(bag, CONFIG, 'cepp')
     assert counts['frames published'] == str(result['solved'])
+    assert result['rejected']['insufficient_data'] >= 12 and int(counts['frames cold_restarts'])
     for reason, count in result['rejected'].items():
         assert counts[f'frames rejected {reason}'] == str(count)
+    assert result['ignored'] == {'out_of_order': 1} and counts['frames out_of_order'] == '1'
     published = {round(s * 1e-9, 6) for s in result['published_stamps_ns']}
     assert {round(s, 6) for s in received} <= published
     for index in bad:                  # refused, and a good frame published within 2 s
         assert round(stamps[index] * 1e-9, 6) not in published
         later = [round(s * 1e-9, 6) in published for s in stamps[index + 1:index + 21]]
         assert any(later)
+
+
+def set_parameters(node, target, **values):
+    """Call ``target``'s SetParameters service; a list of (successful, reason)."""
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.parameter import Parameter
+    client = node.create_client(SetParameters, f'{target}/set_parameters')
+    try:
+        assert client.wait_for_service(timeout_sec=20)
+        request = SetParameters.Request(parameters=[
+            Parameter(name, value=value).to_parameter_msg() for name, value in values.items()])
+        future = client.call_async(request)
+        assert node.spin_until(future.done, 20)
+        return [(r.successful, r.reason) for r in future.result().results]
+    finally:
+        node.destroy_client(client)
+
+
+def test_parameters_are_applied_live_or_refused(listener, processes):
+    """Over the real SetParameters service: valid changes apply from the next frame (a new
+    method starting cold), invalid ones are refused with the reason, read-only ones too."""
+    processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML)])
+    publisher = listener.create_publisher(JointState, 'uwb/ranges', RANGES_QOS)
+    model = CONFIG.model()
+    joints = model.forward_kinematics(0.3, np.radians([50.0, 20.0, 0.0, -20.0, -40.0]))
+    sent = [time.time()]
+
+    def publish():
+        sent[0] += 0.1
+        message = JointState(name=CONFIG.link_names,
+                             position=[float(v) for v in model.ranges(joints).ravel()])
+        message.header.stamp = to_time(sent[0])
+        publisher.publish(message)
+
+    def reported(key):
+        """The newest value of ``key`` in the estimator's diagnostics, after a new report."""
+        seen = len(listener.statuses('posture_estimator'))
+        assert listener.spin_until(
+            lambda: len(listener.statuses('posture_estimator')) > seen + 1, 10)
+        values = {kv.key: kv.value for kv in listener.statuses('posture_estimator')[-1].values}
+        return values.get(key)
+    try:
+        assert listener.spin_until(lambda: publisher.get_subscription_count() >= 2, 10)
+        publish()
+        assert listener.spin_until(lambda: len(listener.postures) >= 1, 10)
+        before = float(reported('predicted RMSE [m]'))
+        refused = {'method': 'nonsense', 'range_sigma': -1.0, 'reset_after_failures': 0,
+                   'residual_warn': 5.0, 'arm_lengths': [1.0] * 5, 'slew_name': 'turret'}
+        for name, value in refused.items():
+            [(successful, reason)] = set_parameters(listener, '/posture_estimator',
+                                                    **{name: value})
+            assert not successful and reason, name
+        assert set_parameters(listener, '/posture_estimator', range_sigma=0.3) == [(True, '')]
+        publish()
+        assert listener.spin_until(lambda: len(listener.postures) >= 2, 10)
+        after = float(reported('predicted RMSE [m]'))
+        assert after == pytest.approx(3 * before, rel=1e-3)      # the bound scales with sigma
+        assert set_parameters(listener, '/posture_estimator', method='chain') == [(True, '')]
+        publish()
+        assert listener.spin_until(lambda: len(listener.postures) >= 3, 10)
+        assert reported('method') == 'chain' and reported('frames method_changes') == '1'
+        np.testing.assert_allclose(poses_to_joints(listener.postures[-1]), joints, atol=1e-4)
+    finally:
+        listener.destroy_publisher(publisher)

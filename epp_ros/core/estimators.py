@@ -379,6 +379,34 @@ class PostureEstimator:
                  thresholds=Thresholds(), reset_after_failures=10, **options):
         if method not in METHODS:
             raise ValueError(f'method must be one of {sorted(METHODS)}, got {method!r}')
+        self.model = model
+        self.method = method
+        self._settings = {}
+        self._configure(integrity=integrity, thresholds=thresholds,
+                        reset_after_failures=reset_after_failures, options=options)
+        self._limits = plausible_limits(model)
+        self._previous = None           # (joints, stamp, joint_std) last accepted
+        self._warm = None               # the last estimate that fitted its frame
+        self._stamp = None
+        self._failures = 0
+        self.last_diagnostics = {}
+
+    def reconfigure(self, *, integrity=None, thresholds=None, reset_after_failures=None,
+                    **options):
+        """Change settings from the next frame on, keeping the warm start.
+
+        Takes the constructor's keywords; those not given keep their values. Raises
+        ValueError, leaving the estimator as it was, when the new settings are invalid.
+        """
+        changes = {'integrity': integrity, 'thresholds': thresholds,
+                   'reset_after_failures': reset_after_failures}
+        settings = {**self._settings, **{k: v for k, v in changes.items() if v is not None}}
+        settings['options'] = {**self._settings['options'], **options}
+        self._configure(**settings)
+
+    def _configure(self, integrity, thresholds, reset_after_failures, options):
+        """Validate the settings and build the method and the integrity checks from them."""
+        method = self.method
         unknown = set(options) - accepted_options(method)
         if unknown:
             raise ValueError(f'method {method!r} takes no option {sorted(unknown)}; it takes '
@@ -387,20 +415,16 @@ class PostureEstimator:
                 reset_after_failures, (int, np.integer)) or reset_after_failures < 1:
             raise ValueError(f'reset_after_failures: must be an integer >= 1, got '
                              f'{reset_after_failures!r}')
-        self.model = model
-        self.method = method
         told = _told(options)
-        self.integrity = _integrity(model, told, integrity, thresholds)
+        checks = _integrity(self.model, told, integrity, thresholds)
         own = _constructor_names(method)
-        self._solver = METHODS[method](model, **{name: value for name, value
-                                                 in {**options, **told}.items() if name in own})
+        solver = METHODS[method](self.model, **{name: value for name, value
+                                                in {**options, **told}.items() if name in own})
+        self.integrity, self._solver = checks, solver
         self.reset_after_failures = int(reset_after_failures)
-        self._limits = plausible_limits(model)
-        self._previous = None           # (joints, stamp, joint_std) last accepted
-        self._warm = None               # the last estimate that fitted its frame
-        self._stamp = None
-        self._failures = 0
-        self.last_diagnostics = {}
+        self._settings = {'integrity': integrity, 'thresholds': thresholds,
+                          'reset_after_failures': reset_after_failures,
+                          'options': dict(options)}
 
     def reset(self):
         """Forget the warm start: the next frame is solved from scratch."""

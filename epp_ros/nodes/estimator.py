@@ -21,56 +21,131 @@ What is published is the estimator's decision (``core.integrity``): a frame that
 solved, whose residuals the configured noise cannot explain, whose posture it does not
 determine, or which puts the boom where it cannot be, publishes no pose and is counted by
 reason; after ``reset_after_failures`` frames in a row that could not be solved or did not
-fit, the estimator starts cold. Frames whose stamp is not newer than the last one are
-ignored and counted; a stamp more than 1 s older than the last is taken as a clock jump and
-the estimator starts over. Topic names are relative: ``-r __ns:=/pump7`` runs one per pump.
+fit, the estimator starts cold. Which frames are solved at all is ``core.frame_policy``'s:
+a stamp not newer than the last is ignored and counted, one more than 1 s older is a clock
+jump and the estimator starts over, a zero stamp is malformed. Topic names are relative:
+``-r __ns:=/pump7`` runs one per pump.
+
+Parameters (``SETTINGS``) are live: a change is checked as at start (refused with the
+reason otherwise) and applies from the next frame; a new ``method`` starts cold, which
+``/diagnostics`` counts. The pump's description and the angle sensors' names are read-only.
 """
 import math
 import sys
-import time
 from collections import Counter
+from dataclasses import dataclass
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseArray
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
 from epp_ros.angles import AngleSamples
+from epp_ros.config import PUMP_PARAMETERS
 from epp_ros.core import METHODS, RANGE_METHODS, PostureEstimator
+from epp_ros.core.frame_policy import ADMIT, CLOCK_JUMP, FramePolicy
 from epp_ros.core.integrity import IntegrityLimits, Thresholds
 from epp_ros.health import assess, grade
 from epp_ros.nodes.common import (POSTURE_QOS, RANGES_INPUT_QOS, StartupError, declare,
                                   declare_pump_parameters, posture_message, posture_markers,
                                   run_node, to_seconds, to_time)
 
-BACKWARD_JUMP = 1.0      # s: an older stamp by more than this is a clock jump, not disorder
-#: Health thresholds: parameter -> (default, description); metres.
-THRESHOLDS = {
-    'arm_length_warn': (0.05, 'Section length error for WARN, m.'),
-    'arm_length_error': (0.5, 'Section length error for ERROR (not published), m.'),
-    'residual_warn': (0.5, 'Range residual RMS for WARN, m.'),
-    'residual_error': (2.0, 'Range residual RMS for ERROR (not published), m.'),
-    'predicted_rmse_warn': (0.5, 'Predicted RMSE (Cramer-Rao bound) for WARN, m.'),
-    'predicted_rmse_error': (2.0, 'Predicted RMSE for ERROR (not published), m.'),
+LEVELS = {0: DiagnosticStatus.OK, 1: DiagnosticStatus.WARN, 2: DiagnosticStatus.ERROR}
+STALE_AFTER = 1.0           # s without a frame: the diagnostics say STALE
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One node parameter: its default, what it means, whether it can change while running,
+    and its range (inclusive, shown by ``ros2 param describe`` and enforced by ROS)."""
+
+    default: object
+    description: str
+    live: bool = True
+    low: float = None
+    high: float = None
+
+    def descriptor(self):
+        """Keyword arguments of the ParameterDescriptor."""
+        extra = {'read_only': not self.live}
+        if self.low is None:
+            return extra
+        if isinstance(self.default, int):
+            extra['integer_range'] = [IntegerRange(from_value=self.low, to_value=self.high,
+                                                   step=1)]
+        else:
+            extra['floating_point_range'] = [FloatingPointRange(from_value=float(self.low),
+                                                                to_value=float(self.high))]
+        return extra
+
+
+def _metres(description, default):
+    return Setting(default, description, True, 1e-6, 1e3)
+
+
+#: The node's parameters. Thresholds are metres; a frame at ERROR is not published.
+SETTINGS = {
+    'method': Setting('cepp', f'Estimator: {", ".join(RANGE_METHODS)}; a change starts cold.'),
+    'reset_after_failures': Setting(10, 'Frames in a row that cannot be solved or do not fit '
+                                        'before the estimator starts cold.', True, 1, 100000),
+    'publish_markers': Setting(True, 'Also publish arm_posture/markers for RViz.'),
+    'arm_length_warn': _metres('Section length or plane error for WARN, m.', 0.05),
+    'arm_length_error': _metres('Section length or plane error for ERROR, m.', 0.5),
+    'residual_warn': _metres('Range residual RMS for WARN, m.', 0.5),
+    'residual_error': _metres('Range residual RMS for ERROR, m.', 2.0),
+    'predicted_rmse_warn': _metres('Predicted RMSE (Cramer-Rao bound) for WARN, m.', 0.5),
+    'predicted_rmse_error': _metres('Predicted RMSE for ERROR, m.', 2.0),
+    'range_sigma': Setting(0.1, 'UWB range standard deviation, m.', True, 1e-6, 100.0),
+    'nlos_fraction': Setting(0.1, 'Prior probability that a range is NLOS.', True, 0.0, 0.99),
+    'nlos_gamma': Setting(1.0, 'Mean NLOS excess, m.', True, 1e-3, 100.0),
+    'tag_sigma': Setting(0.1, 'Tag-tag range standard deviation, m.', True, 1e-6, 100.0),
+    'pitch_sigma': Setting(math.radians(0.5), 'Inclinometer standard deviation, rad.', True,
+                           1e-6, 1.0),
+    'slew_sigma': Setting(math.radians(0.5), 'Slew encoder standard deviation, rad.', True,
+                          1e-6, 1.0),
+    'lowest_joint': Setting(-0.5, 'No joint is below this height, m (ground z = 0).', True,
+                            -1e3, 1e3),
+    'max_angular_rate': Setting(IntegrityLimits.max_angular_rate, 'Fastest slew or pitch '
+                                'rate of the boom, rad/s: rules out jumps and folds.', True,
+                                1e-4, 100.0),
+    'slew_name': Setting('slew', 'boom_angles joint name of the slew encoder.', False),
+    'pitch_names': Setting([], 'boom_angles joint names of the inclinometers, base outward '
+                               '(default pitch1..pitchp).', False),
+    'angle_max_age': Setting(0.2, 'Largest stamp difference between a range frame and its '
+                                  'angles, s.', True, 1e-3, 60.0),
 }
-#: What the estimator is told about the noise: option -> (parameter, default, description).
-NOISE = {
-    'sigma': ('range_sigma', 0.1, 'UWB range standard deviation, m.'),
-    'nlos_fraction': ('nlos_fraction', 0.1, 'Prior probability that a range is NLOS.'),
-    'nlos_gamma': ('nlos_gamma', 1.0, 'Mean NLOS excess, m.'),
-    'tag_sigma': ('tag_sigma', 0.1, 'Tag-tag range standard deviation, m.'),
-    'pitch_sigma': ('pitch_sigma', math.radians(0.5), 'Inclinometer standard deviation, rad.'),
-    'slew_sigma': ('slew_sigma', math.radians(0.5), 'Slew encoder standard deviation, rad.'),
-    'lowest_joint': ('lowest_joint', -0.5, 'No joint is below this height, m (ground z = 0).'),
-}
+#: Estimator options told by parameters of another name.
+OPTION_OF = {'range_sigma': 'sigma', 'nlos_fraction': 'nlos_fraction',
+             'nlos_gamma': 'nlos_gamma', 'tag_sigma': 'tag_sigma', 'pitch_sigma': 'pitch_sigma',
+             'slew_sigma': 'slew_sigma', 'lowest_joint': 'lowest_joint'}
 
 
 def _parameter_name(message):
     """An estimator error names its option; say the node parameter instead."""
     option = message.split(':', 1)[0]
-    return message.replace(option, NOISE[option][0], 1) if option in NOISE else message
-LEVELS = {0: DiagnosticStatus.OK, 1: DiagnosticStatus.WARN, 2: DiagnosticStatus.ERROR}
+    names = {option_name: parameter for parameter, option_name in OPTION_OF.items()}
+    return message.replace(option, names[option], 1) if option in names else message
+
+
+def estimator_settings(values):
+    """Keyword arguments of PostureEstimator from the node's parameter values.
+
+    Raises
+    ------
+    ValueError
+        Naming the parameter, when a value cannot be used.
+    """
+    method = values['method']
+    if method not in RANGE_METHODS:
+        raise ValueError(f'method: {method!r} is not one of {RANGE_METHODS} (the node '
+                         'receives UWB ranges only)')
+    thresholds = Thresholds(**{name: values[name] for name in Thresholds.__dataclass_fields__})
+    integrity = IntegrityLimits(max_angular_rate=values['max_angular_rate'])
+    return dict(method=method, integrity=integrity, thresholds=thresholds,
+                reset_after_failures=values['reset_after_failures'],
+                **{OPTION_OF[name]: values[name] for name in OPTION_OF})
 
 
 class PostureEstimatorNode(Node):
@@ -81,74 +156,98 @@ class PostureEstimatorNode(Node):
     def __init__(self):
         super().__init__(self.node_name)
         self.config = declare_pump_parameters(self)
-        method = declare(self, 'method', 'cepp', f'Estimator: {", ".join(RANGE_METHODS)}.')
-        if method not in RANGE_METHODS:
-            raise StartupError(f'method: {method!r} is not one of {RANGE_METHODS} (the node '
-                               'receives UWB ranges only)')
-        reset_after = declare(self, 'reset_after_failures', 10,
-                              'Frames in a row that cannot be solved or do not fit before the '
-                              'estimator starts cold.')
-        self.publish_markers = declare(self, 'publish_markers', True,
-                                       'Also publish arm_posture/markers for RViz.')
-        try:
-            thresholds = Thresholds(**{name: declare(self, name, default, description)
-                                       for name, (default, description) in THRESHOLDS.items()})
-            integrity = IntegrityLimits(max_angular_rate=declare(
-                self, 'max_angular_rate', IntegrityLimits.max_angular_rate,
-                'Fastest slew or pitch rate of the boom, rad/s: rules out jumps and folds.'))
-        except ValueError as exc:
-            raise StartupError(str(exc)) from None
-        told = {name: declare(self, parameter, default, description)
-                for name, (parameter, default, description) in NOISE.items()}
         self.model = self.config.model()
+        self.lengths = self.model.arm_lengths
+        self.values = {name: declare(self, name, self._default(name), setting.description,
+                                     **setting.descriptor())
+                       for name, setting in SETTINGS.items()}
         try:
-            self.estimator = PostureEstimator(self.model, method, integrity=integrity,
-                                              thresholds=thresholds,
-                                              reset_after_failures=reset_after, **told)
+            settings = estimator_settings(self.values)
+            self.estimator = PostureEstimator(self.model, **settings)
+            self.angle_samples = self._angle_samples(self.values)
         except ImportError as exc:
             raise StartupError(f'method: {exc}') from None
         except ValueError as exc:
             raise StartupError(_parameter_name(str(exc))) from None
-        self.angles = self._angle_input(method)
-        self.lengths = self.model.arm_lengths
         self.posture = self.create_publisher(PoseArray, 'arm_posture', POSTURE_QOS)
         self.markers = self.create_publisher(MarkerArray, 'arm_posture/markers', POSTURE_QOS)
         self.diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(JointState, 'uwb/ranges', self.on_ranges, RANGES_INPUT_QOS)
-        if self.angles is not None:
-            self.create_subscription(JointState, 'boom_angles', self.on_angles,
-                                     RANGES_INPUT_QOS)
+        self.angles_subscription = None
+        self._subscribe_angles()
+        self.add_on_set_parameters_callback(self._check_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
         self.create_timer(1.0, self.publish_diagnostics)
+        self.frame_policy = FramePolicy()
         self.counts = Counter()
-        self.last_stamp = None
         self.last_frame_time = None
         self.worst = None               # worst (level, message) since the last report
         self.status_name = f'{self.get_fully_qualified_name()}'
-        self.get_logger().info(f'{method} on {self.model.n_sections} sections, '
-                               f'{self.model.n_anchors} anchors'
-                               + (', with boom_angles' if self.angles is not None else ''))
+        self.get_logger().info(f'{self.estimator.method} on {self.model.n_sections} '
+                               f'sections, {self.model.n_anchors} anchors')
 
-    def _angle_input(self, method):
-        """Angle sensors for a method that fuses them (else None); their names and age."""
-        if 'pitches' not in METHODS[method].inputs:
-            return None
-        p = self.model.n_sections
-        slew_name = declare(self, 'slew_name', 'slew',
-                            'boom_angles joint name of the slew encoder.')
-        pitch_names = declare(self, 'pitch_names', [f'pitch{k}' for k in range(1, p + 1)],
-                              'boom_angles joint names of the inclinometers, base outward.')
-        max_age = declare(self, 'angle_max_age', 0.2,
-                          'Largest stamp difference between a range frame and its angles, s.')
-        if len(pitch_names) != p:
-            raise StartupError(f'pitch_names: needs one name per section ({p}), '
-                               f'got {list(pitch_names)}')
+    def _default(self, name):
+        if name == 'pitch_names':
+            return [f'pitch{k}' for k in range(1, self.model.n_sections + 1)]
+        return SETTINGS[name].default
+
+    @property
+    def angles(self):
+        """The angle samples, when the method fuses angle sensors (else None)."""
+        return self.angle_samples if 'pitches' in METHODS[self.estimator.method].inputs \
+            else None
+
+    def _angle_samples(self, values):
+        pitch_names = list(values['pitch_names'])
+        if len(pitch_names) != self.model.n_sections:
+            raise ValueError(f'pitch_names: needs one name per section '
+                             f'({self.model.n_sections}), got {pitch_names}')
+        return AngleSamples(values['slew_name'], pitch_names, values['angle_max_age'])
+
+    def _subscribe_angles(self):
+        if self.angles is not None and self.angles_subscription is None:
+            self.angles_subscription = self.create_subscription(
+                JointState, 'boom_angles', self.on_angles, RANGES_INPUT_QOS)
+
+    # -- live parameters ------------------------------------------------------------------
+    def _check_parameters(self, parameters):
+        """Refuse what cannot change while running, or what would not start the node."""
+        values = dict(self.values)
+        for parameter in parameters:
+            if parameter.name in PUMP_PARAMETERS:
+                return SetParametersResult(successful=False, reason=(
+                    f'{parameter.name} is read-only: the pump description is fixed at start'))
+            if parameter.name in SETTINGS:
+                values[parameter.name] = parameter.value
         try:
-            return AngleSamples(slew_name, pitch_names, max_age)
+            estimator_settings(values)
+            self._angle_samples(values)
         except ValueError as exc:
-            raise StartupError(str(exc)) from None
+            return SetParametersResult(successful=False, reason=_parameter_name(str(exc)))
+        return SetParametersResult(successful=True)
 
+    def _apply_parameters(self, parameters):
+        """From the next frame on: a new method starts cold, the rest keeps the warm start."""
+        changed = {p.name: p.value for p in parameters if p.name in SETTINGS}
+        if not changed:
+            return
+        self.values.update(changed)
+        settings = estimator_settings(self.values)
+        method = settings.pop('method')
+        if method != self.estimator.method:
+            self.estimator = PostureEstimator(self.model, method, **settings)
+            self.counts['method_changes'] += 1
+            self.get_logger().info(f'method changed to {method}: starting cold')
+        else:
+            self.estimator.reconfigure(**settings)
+        if 'angle_max_age' in changed:
+            self.angle_samples = self._angle_samples(self.values)
+        self._subscribe_angles()
+
+    # -- frames ---------------------------------------------------------------------------
     def on_angles(self, message):
-        self.angles.add(to_seconds(message.header.stamp), message.name, message.position)
+        if self.angles is not None:
+            self.angles.add(to_seconds(message.header.stamp), message.name, message.position)
 
     def on_ranges(self, message):
         try:
@@ -159,13 +258,13 @@ class PostureEstimatorNode(Node):
             self.get_logger().error(f'frame dropped: {exc!r}', throttle_duration_sec=5.0)
 
     def _on_ranges(self, message):
-        self.counts['frames'] += 1
+        self.counts['received'] += 1
         stamp = to_seconds(message.header.stamp)
-        if self.last_stamp is not None and stamp <= self.last_stamp:
-            if self.last_stamp - stamp < BACKWARD_JUMP:
-                self.counts['out_of_order'] += 1
-                return
-            # The clock jumped back (NTP, a restarted driver, a looping bag): start over.
+        decision = self.frame_policy.admit(stamp)
+        if decision not in (ADMIT, CLOCK_JUMP):
+            self.counts[decision] += 1
+            return
+        if decision == CLOCK_JUMP:
             self.counts['clock_jumps'] += 1
             self.estimator.reset()
         try:
@@ -175,56 +274,61 @@ class PostureEstimatorNode(Node):
             self.counts['malformed'] += 1
             return
         self.counts['unknown_links'] += unknown
-        self.last_stamp = stamp
-        self.last_frame_time = time.monotonic()
+        self.last_frame_time = self._now()
         slew, pitches = (None, None) if self.angles is None else self.angles.at(stamp)
         joints = self.estimator.update(ranges, tag_ranges=tag_ranges, pitches=pitches,
                                        slew=slew, stamp=stamp)
-        diagnostics = self.estimator.last_diagnostics
-        level, summary = grade(diagnostics)
-        if self.worst is None or level > self.worst[0]:
-            self.worst = (level, summary)
-        self.counts['cold_restarts'] += diagnostics.get('cold_restart', False)
-        self.counts['reacquired'] += diagnostics.get('reacquired', False)
-        if not diagnostics['valid']:        # the publishing policy is the estimator's
-            self.counts['unsolved'] += 1
-            self.counts[f'rejected {diagnostics["status"]}'] += 1
+        self._count(self.estimator.last_diagnostics)
+        if not self.estimator.last_diagnostics['valid']:   # the estimator's decision
             return
         self.counts['published'] += 1
         frame_id = message.header.frame_id or self.config.frame_id
         stamp = message.header.stamp                 # the frame's, exactly
         pivot = self.model.pivot_of(joints)
         self.posture.publish(posture_message(pivot, joints, stamp, frame_id))
-        if self.publish_markers:
+        if self.values['publish_markers']:
             self.markers.publish(posture_markers(pivot, joints, stamp, frame_id))
+
+    def _count(self, diagnostics):
+        level, summary = grade(diagnostics)
+        if self.worst is None or level > self.worst[0]:
+            self.worst = (level, summary)
+        self.counts['cold_restarts'] += diagnostics.get('cold_restart', False)
+        self.counts['reacquired'] += diagnostics.get('reacquired', False)
+        if not diagnostics['valid']:
+            self.counts['unsolved'] += 1
+            self.counts[f'rejected {diagnostics["status"]}'] += 1
+
+    def _now(self):
+        """The node's time, seconds (simulated under use_sim_time)."""
+        return self.get_clock().now().nanoseconds * 1e-9
 
     def publish_diagnostics(self):
         diagnostics = self.estimator.last_diagnostics
         status = DiagnosticStatus(name=f'posture_estimator: {self.status_name}',
                                   hardware_id=self.config.frame_id)
         silent = (None if self.last_frame_time is None
-                  else time.monotonic() - self.last_frame_time)
+                  else self._now() - self.last_frame_time)
         if not diagnostics:
             status.level, status.message = DiagnosticStatus.WARN, 'waiting for uwb/ranges'
             values = {'method': self.estimator.method}
         else:
             level, message, values = assess(diagnostics, self.lengths)
-            if silent > 1.0:
+            if silent is not None and silent > STALE_AFTER:
                 status.level = DiagnosticStatus.STALE
                 status.message = f'no uwb/ranges for {silent:.1f} s'
             else:                           # the worst frame since the last report
                 level, status.message = self.worst or (level, message)
                 status.level = LEVELS[level]
         self.worst = None
-        values.update({f'frames {key}': str(value) for key, value in self.counts.items()
-                       if key != 'frames'})
-        values['frames received'] = str(self.counts['frames'])
+        values['method'] = self.estimator.method
+        values.update({f'frames {key}': str(value) for key, value in self.counts.items()})
         if self.angles is not None:
             values.update({f'boom_angles {key}': str(value)
                            for key, value in self.angles.counts.items()})
         status.values = [KeyValue(key=key, value=value) for key, value in values.items()]
         array = DiagnosticArray(status=[status])
-        array.header.stamp = to_time(time.time())
+        array.header.stamp = to_time(self._now())
         self.diagnostics.publish(array)
 
 
