@@ -15,10 +15,10 @@ from rosbags.interfaces import QosTime
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from epp_ros import contract
 from epp_ros.core import PostureEstimator
 from epp_ros.core.frame_policy import ADMIT, CLOCK_JUMP, FramePolicy
 from epp_ros.core.metrics import frame_rmse, joint_errors, pooled_rmse
-from epp_ros.core.poses import boom_quaternions
 from epp_ros.core.simulate import RangeNoise, working_cycle
 from epp_ros.uwb.emulation import cycle_lines
 
@@ -26,10 +26,9 @@ __all__ = ['BagError', 'RANGES', 'TRUTH', 'POSTURE', 'RAW', 'TYPES', 'synthesize
            'write_frames',
            'read_frames', 'read_truth', 'evaluate', 'qos_profile', 'read_all', 'write_raw']
 
-RANGES, TRUTH, POSTURE, RAW = ('/uwb/ranges', '/arm_posture/ground_truth', '/arm_posture',
-                               '/uwb/raw')
-TYPES = {RANGES: 'sensor_msgs/msg/JointState', TRUTH: 'geometry_msgs/msg/PoseArray',
-         POSTURE: 'geometry_msgs/msg/PoseArray', RAW: 'std_msgs/msg/String'}
+_TOPICS = (contract.RANGES, contract.TRUTH, contract.POSTURE, contract.RAW)
+RANGES, TRUTH, POSTURE, RAW = (topic.absolute for topic in _TOPICS)
+TYPES = {topic.absolute: topic.type for topic in _TOPICS}
 STORAGES = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
@@ -49,8 +48,7 @@ def qos_profile(depth, reliable=True):
 
 
 #: The QoS each topic is published with (uwb_driver, posture_estimator, uwb_emulator).
-TOPIC_QOS = {RANGES: qos_profile(100), TRUTH: qos_profile(10), POSTURE: qos_profile(10),
-             RAW: qos_profile(100)}
+TOPIC_QOS = {topic.absolute: qos_profile(topic.depth, topic.reliable) for topic in _TOPICS}
 
 
 def _header(stamp_ns, frame_id):
@@ -70,11 +68,10 @@ def _ranges_message(stamp_ns, frame_id, names, ranges):
 
 def _posture_message(stamp_ns, frame_id, base, joints):
     types = TYPESTORE.types
-    poses = []
-    for position, quaternion in zip([base, *joints], boom_quaternions(base, joints)):
-        poses.append(types['geometry_msgs/msg/Pose'](
-            position=types['geometry_msgs/msg/Point'](*(float(v) for v in position)),
-            orientation=types['geometry_msgs/msg/Quaternion'](*(float(v) for v in quaternion))))
+    poses = [types['geometry_msgs/msg/Pose'](
+        position=types['geometry_msgs/msg/Point'](*position),
+        orientation=types['geometry_msgs/msg/Quaternion'](*quaternion))
+        for position, quaternion in contract.posture_poses(base, joints)]
     return types[TYPES[TRUTH]](header=_header(stamp_ns, frame_id), poses=poses)
 
 
@@ -232,8 +229,7 @@ def read_truth(path):
     with _Bag(path) as bag:
         if not any(c.topic == TRUTH for c in bag.reader.connections):
             return {}
-        return {_stamp_ns(m): np.array([[p.position.x, p.position.y, p.position.z]
-                                        for p in m.poses[1:]])
+        return {_stamp_ns(m): contract.joints_of(m)
                 for _, m in bag.messages(TRUTH, TYPES[TRUTH])}
 
 

@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from epp_ros.tools import bench, demo
@@ -82,3 +83,83 @@ def test_bench_paper_writes_tables_json_and_plots(tmp_path, capsys):
 def test_bench_refuses_tpsm_where_no_angles_are_simulated():
     with pytest.raises(SystemExit):
         bench.main(['xie3dim', '--methods', 'tpsm'])
+
+
+def test_bench_integrity_reports_every_case_and_method(capsys):
+    from epp_ros.tools import integrity_bench
+    assert bench.main(['integrity', '--methods', 'chain', 'cepp', '--seconds', '6',
+                       '--json']) == 0
+    out = capsys.readouterr().out
+    assert '### Integrity' in out and '| chain |' in out and '| cepp |' in out
+    report = json.loads(out.strip().splitlines()[-1])['reports'][0]
+    assert report['suite'] == 'integrity' and report['seconds'] == 6.0
+    assert list(report['cases']) == list(integrity_bench.CASES)
+    assert [row['method'] for row in report['rows']] == ['chain', 'cepp']
+    for row in report['rows']:
+        assert isinstance(row['wrong_valid'], int) and 0 <= row['wrong_valid'] <= row['frames']
+        assert 0 <= row['unrecovered'] <= row['events'] and row['events'] >= 5
+        assert 0 <= row['clean_rejected'] <= row['clean_scored'] == 60
+        assert 0 <= row['broken_rejected'] <= row['broken_scored'] < 5 * 60
+        assert 0.0 <= row['false_rejection_clean'] <= 1.0
+        assert 0.0 <= row['false_rejection_broken'] <= 1.0
+        if row['recovery_worst_s'] is not None:
+            assert 0.0 < row['recovery_median_s'] <= row['recovery_worst_s'] <= 6.0
+        assert 0.0 < row['ms_median'] <= row['ms_p99']
+    cases = [row for row in report['case_rows'] if row['method'] == 'chain']
+    assert [row['case'] for row in cases] == list(integrity_bench.CASES)
+    for row in cases:
+        assert 0 <= row['wrong_valid'] <= row['valid'] <= row['frames']
+        assert len(row['wrong_indices']) == row['wrong_valid']
+        assert sum(row['statuses'].values()) == row['frames']
+        assert len(row['recoveries_s']) == row['events']
+        assert row['events'] == 0 or row['case'] in integrity_bench.BROKEN_CASES
+    frames = {row['case']: row['frames'] for row in cases}
+    assert frames['clean'] == 60 and frames['two_anchors'] == 12
+
+
+def test_integrity_streams_break_what_they_say():
+    from epp_ros.tools import integrity_bench as ib
+    streams = {s.case: s for s in ib.build_streams(20.0, 3)}
+    assert streams['clean'].scored.all() and not streams['clean'].events
+    for case in ib.BROKEN_CASES:
+        stream = streams[case]
+        assert stream.events and len(stream.labels) == len(stream.events)
+        broken = np.zeros(len(stream.stamps), bool)
+        for first, last in stream.events:
+            broken[first:last + 1] = True
+            assert first >= ib.LEAD_S * ib.RATE
+        assert np.array_equal(stream.scored, ~broken)
+    tip = streams['corrupt_tip']
+    first = tip.events[0][0]
+    intact = ib.cycle_stream(ib.truck_pump(), 20.0, 3, 'corrupt_tip').ranges[first]
+    same = np.isclose(tip.ranges[first], intact) | np.isnan(intact)
+    assert same[:-1].all() and not same[-1].all()
+    bursts = [last - first + 1 for first, last in streams['garbage_bursts'].events]
+    assert all(ib.BURST_FRAMES[0] <= n <= ib.BURST_FRAMES[1] for n in bursts)
+    assert streams['absurd'].labels[:2] == ['all 0 m', 'all 0.1 m']
+    two = streams['two_anchors']
+    assert two.cold and (np.isfinite(two.ranges).any(axis=1).sum(axis=1) <= 2).all()
+    for shape in ('collinear', 'coincident'):
+        anchors = streams[shape].model.anchors
+        centred = anchors - anchors.mean(axis=0)
+        extent = np.linalg.svd(centred, compute_uv=False)
+        assert extent[1] < 0.1 and (extent[0] < 0.1) == (shape == 'coincident')
+
+
+def test_bench_driver_suite_prints_its_table(capsys):
+    assert bench.main(['driver', '--json']) == 0
+    out = capsys.readouterr().out
+    assert '### UWB driver' in out and 'lines/s' in out
+    report = json.loads(out.strip().splitlines()[-1])['reports'][0]
+    assert report['suite'] == 'driver'
+    assert [row['transport'] for row in report['rows']] == ['tcp', 'pty']
+    assert all(row['complete'] and row['lines'] == 20000 for row in report['rows'])
+
+
+def test_bench_help_lists_the_new_suites(capsys):
+    with pytest.raises(SystemExit):
+        bench.main(['--help'])
+    out = capsys.readouterr().out
+    assert 'integrity' in out and 'driver' in out
+    with pytest.raises(SystemExit):
+        bench.main(['integrity', '--methods', 'tpsm'])

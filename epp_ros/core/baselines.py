@@ -21,6 +21,7 @@ class _PerTagMethod:
 
     prior = 'unused'
     inputs = ('ranges',)
+    holds_chain = False         # each tag alone: each joint's own bound applies
 
     def __init__(self, model):
         self.model = model

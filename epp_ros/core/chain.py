@@ -325,11 +325,12 @@ class ChainMethod:
                 for k in range(1, psi.size)]
 
     def _search(self, measurements, residuals, guess, range_sigma, finish=3, rounds=3):
-        """Global fit from scratch: (psi, cost, iterations).
+        """Global fit from scratch: (psi, cost, iterations, the other fits it tried).
 
         Every start takes a few iterations; the best ``finish`` are fitted to convergence.
         From the best, single-joint folds, single-section reversals and the tip's other fits
-        are tried until none lowers the cost.
+        are tried until none lowers the cost. The fits that lost are returned too: the
+        integrity checks ask whether any fits about as well elsewhere.
         """
         iterations = 0
         screened = []
@@ -343,6 +344,7 @@ class ChainMethod:
             finished.append((cost, psi))
             iterations += used
         cost, psi = min(finished, key=lambda t: t[0])
+        tried = [fit for _, fit in screened + finished]
         for _ in range(rounds):
             improved = False
             for start in (self._folds(psi) + self._reversals(psi)
@@ -351,13 +353,14 @@ class ChainMethod:
                 trial, trial_cost, used = self.fit(start, residuals,
                                                    max_iter=2 * self.screen_iterations)
                 iterations += used
+                tried.append(trial)
                 if trial_cost < cost - 1e-9:
                     trial, trial_cost, used = self.fit(trial, residuals)
                     iterations += used
                     psi, cost, improved = trial, trial_cost, True
             if not improved:
                 break
-        return psi, cost, iterations
+        return psi, cost, iterations, tried
 
     def solve(self, measurements, prior, warm=False):
         """Fit one frame.
@@ -377,13 +380,14 @@ class ChainMethod:
         residuals = Residuals(self.model, measurements, noise)
         total_iterations = 0
         lost = True
+        others = []
         if warm and prior is not None:
             slew, pitches = angles_from_joints(self.model, prior)
             psi, cost, total_iterations = self.fit(np.r_[slew, pitches], residuals)
             lost = cost > 12.5 * residuals.size       # worse than 5 sigma RMS per residual
         if lost:
             range_sigma = np.broadcast_to(noise.range_sigma, measurements.ranges.shape)
-            found, found_cost, iterations = self._search(
+            found, found_cost, iterations, others = self._search(
                 measurements, residuals, None if warm else prior, range_sigma)
             total_iterations += iterations
             if not warm or found_cost < cost:
@@ -391,5 +395,9 @@ class ChainMethod:
         psi = canonical_angles(psi, self.model.pivot_offset)
         joints = self.model.forward_kinematics(psi[0], psi[1:])
         info = {'iterations': total_iterations, 'converged': True, 'slew': float(psi[0]),
-                'pitches': psi[1:].copy()}
+                'pitches': psi[1:].copy(),
+                # the search's runners-up: the integrity checks ask if they fit as well
+                'alternatives': self.model.forward_kinematics(
+                    np.array([o[0] for o in others]), np.array([o[1:] for o in others]))
+                if others else []}
         return joints, info

@@ -184,6 +184,7 @@ class EPP1(_EDMMethod):
     """NEDM posture estimate in 3-D without arm-length constraints (the paper's EPP1)."""
 
     fix_lengths = False
+    holds_chain = False         # joints anywhere in space: each one's own bound applies
 
     def solve(self, measurements, prior, warm=False):
         # A pivot off the slew axis is placed at the prior's slew.
@@ -211,6 +212,7 @@ class CEPP(_EDMMethod):
     """
 
     rank = 2
+    holds_chain = True          # lengths and the vertical plane: the chain's bound applies
     #: Gauss-Newton steps when predicting the slew: from last frame's plane, three converge
     #: it far below what the ranges resolve.
     PREDICTION_STEPS = 3
@@ -487,11 +489,11 @@ class PostureEstimator:
             diagnostics['error'] = solved
             return self._reject('solver_failed', diagnostics, measurements, start)
         joints, info = solved
-        verdict = self._judge(joints, measurements, stamp)
+        verdict = self._judge(solved, measurements, stamp)
         if verdict.lost and self._warm is not None and self._due_for_search():
             fresh = self._solve(measurements, warm=False)
             if not isinstance(fresh, str):
-                fresh_verdict = self._judge(fresh[0], measurements, stamp)
+                fresh_verdict = self._judge(fresh, measurements, stamp)
                 if fresh_verdict.valid:
                     (joints, info), verdict = fresh, fresh_verdict
                     diagnostics['reacquired'] = True
@@ -515,12 +517,15 @@ class PostureEstimator:
         self._stamp = float(stamp)
         return self._stamp
 
-    def _judge(self, joints, measurements, stamp):
+    def _judge(self, solved, measurements, stamp):
+        joints, info = solved
+        known = {'alternatives': info.get('alternatives', ()),
+                 'chain': getattr(self._solver, 'holds_chain', True)}
         if self._previous is None:
-            return self.integrity.judge(joints, measurements)
+            return self.integrity.judge(joints, measurements, **known)
         reference, then, reference_std = self._previous
         return self.integrity.judge(joints, measurements, reference, max(stamp - then, 0.0),
-                                    reference_std)
+                                    reference_std, **known)
 
     def _due_for_search(self):
         """Whether this rejected frame gets a fresh solve: the first few in a run, then

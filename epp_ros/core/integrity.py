@@ -352,6 +352,24 @@ class Integrity:
         return (self.limits.max_angular_rate * elapsed * (radius + levers)
                 + 3.0 * np.asarray(reference_std))
 
+    def point_bound(self, joints, measurements, kept):
+        """Per-joint standard deviations (p,) of joints located each from its own ranges.
+
+        The bound of a method that does not hold the boom to its p + 1 angles (EPP1, EPP2,
+        the per-tag baselines): each joint's 3-D Fisher information from its kept links;
+        infinite for a joint with fewer than three, or with anchors on one line.
+        """
+        units = joints[:, None, :] - self.model.anchors                         # (p, m, 3)
+        units /= np.maximum(_norm(units), 1e-12)[..., None]
+        weights = np.where(kept[0], self.link_sigma(measurements) ** -2.0, 0.0)
+        information = np.einsum('km,kmi,kmj->kij', weights, units, units)
+        std = np.full(self.model.n_sections, np.inf)
+        for k, matrix in enumerate(information):
+            values = np.linalg.eigvalsh(matrix)
+            if values[0] > 1e-12 * max(values[-1], 1e-300):
+                std[k] = math.sqrt(np.sum(1.0 / values))
+        return std
+
     def ambiguous_joints(self, joints, measurements, joint_std, slew, reach=None):
         """Joints (0-based) with another position about as likely, and one such position.
 
@@ -384,6 +402,75 @@ class Integrity:
             found[int(k)] = positions[rivals[np.argmin(margin[rivals])]]
         return found
 
+    def mirrors(self, joints, slew):
+        """The whole boom reflected where the anchors cannot tell it from its image.
+
+        Across the vertical plane through the slew axis that best fits the anchors (a
+        valid posture, slew mirrored), and across the plane that best fits the anchors in
+        space (kept when it stays above ``lowest_joint``). Anchors spread in every
+        direction tell both apart; anchors near one line or plane do not. Shape (k, p, 3).
+        """
+        anchors = self.model.anchors
+        horizontal = anchors[:, :2] - self.model.base[:2]
+        direction = np.linalg.svd(horizontal, full_matrices=False)[2][0]
+        across = np.r_[-direction[1], direction[0], 0.0]
+        centre = np.r_[self.model.base[:2], 0.0]
+        mirrored = [joints - 2.0 * ((joints - centre) @ across)[:, None] * across]
+        centred = anchors - anchors.mean(axis=0)
+        normal = np.linalg.svd(centred, full_matrices=False)[2][-1]
+        image = joints - 2.0 * ((joints - anchors.mean(axis=0)) @ normal)[:, None] * normal
+        if image[:, 2].min() >= self.lowest_joint:
+            mirrored.append(image)
+        return np.array(mirrored)
+
+    def _posture_cost(self, postures, measurements):
+        """Loss of every measurement of the frame at each posture (n, p, 3): shape (n,)."""
+        valid = np.isfinite(measurements.ranges)
+        sigma = self.link_sigma(measurements)
+        distance = _norm(postures[:, :, None, :] - self.model.anchors)         # (n, p, m)
+        excess = np.where(valid, (measurements.ranges - distance) / sigma, 0.0)
+        cost = np.where(valid, self._mixture(excess, sigma)[0], 0.0).sum(axis=(1, 2))
+        tag_valid = np.isfinite(measurements.tag_ranges)
+        if tag_valid.any():
+            gaps = _norm(postures[:, :, None, :] - postures[:, None, :, :])
+            error = np.where(tag_valid, (measurements.tag_ranges - gaps)
+                             / self.noise.tag_sigma, 0.0)
+            cost = cost + 0.5 * np.sum(error ** 2, axis=(1, 2))
+        angles_seen = np.isfinite(measurements.pitches).any() or np.isfinite(measurements.slew)
+        for i, posture in enumerate(postures if angles_seen else []):
+            slew, pitches = angles_from_joints(self.model, posture)
+            pitch_error = wrap_angle(pitches - _zero_nan(measurements.pitches))
+            cost[i] += 0.5 * np.sum(np.where(np.isfinite(measurements.pitches),
+                                             pitch_error / self.noise.pitch_sigma, 0.0) ** 2)
+            if np.isfinite(measurements.slew):
+                cost[i] += 0.5 * (wrap_angle(slew - measurements.slew)
+                                  / self.noise.slew_sigma) ** 2
+        return cost
+
+    def ambiguous_postures(self, joints, measurements, joint_std, slew, reach=None,
+                           alternatives=()):
+        """Joints (0-based) that another whole posture, about as likely, puts elsewhere.
+
+        The candidates are the boom's :meth:`mirrors` and the method's own
+        ``alternatives`` (other fits its search found, (p, 3) each); the rules are those of
+        :meth:`ambiguous_joints`, and with a ``reach`` every joint must be within it.
+        """
+        candidates = [self.mirrors(joints, slew)]
+        candidates += [np.asarray(a, dtype=float)[None] for a in alternatives]
+        candidates = np.concatenate(candidates)
+        near = np.maximum(self.limits.ambiguity_distance,
+                          3.0 * np.nan_to_num(joint_std, posinf=0.0))
+        far = _norm(candidates - joints) > near                               # (n, p)
+        keep = far.any(axis=1)
+        if reach is not None:
+            keep &= np.all(_norm(candidates - reach[0]) <= reach[1], axis=1)
+        if not keep.any():
+            return set()
+        costs = self._posture_cost(np.concatenate([joints[None], candidates[keep]]),
+                                   measurements)
+        rivals = costs[1:] - costs[0] < math.log(self.limits.ambiguity_odds)
+        return set(np.flatnonzero(far[keep][rivals].any(axis=0)).tolist())
+
     def _tip_circle(self, joints, slew):
         """Positions of the tip at pitches all round its hinge, in the boom's plane."""
         p = self.model.n_sections
@@ -394,7 +481,8 @@ class Integrity:
             + np.sin(grid)[:, None] * [0.0, 0.0, 1.0])
 
     # -- the verdict ----------------------------------------------------------------------
-    def judge(self, joints, measurements, reference=None, elapsed=None, reference_std=None):
+    def judge(self, joints, measurements, reference=None, elapsed=None, reference_std=None,
+              alternatives=(), chain=True):
         """The :class:`Verdict` on an estimate of one frame.
 
         Parameters
@@ -409,6 +497,12 @@ class Integrity:
             reached since rules out alternatives and jumps.
         elapsed : float, optional
         reference_std : ndarray, shape (p,), optional
+        alternatives : sequence of ndarray, shape (p, 3)
+            Other postures the method found that fit the frame (its search's runners-up).
+        chain : bool
+            Whether the method holds the boom to its p + 1 angles (the chain's bound is
+            then its uncertainty); else each joint's own 3-D bound is
+            (:meth:`point_bound`).
 
         Returns
         -------
@@ -424,19 +518,24 @@ class Integrity:
         values.update(found)
         if failures:
             checks.append((ERROR, 'inconsistent', '; '.join(failures)))
-        bound = self.bound(joints, measurements, kept, angles)
-        values.update(predicted_rmse=bound.rmse, joint_std=bound.joint_std)
+        joint_std = (self.bound(joints, measurements, kept, angles).joint_std if chain
+                     else self.point_bound(joints, measurements, kept))
+        rmse = float(np.sqrt(np.mean(joint_std ** 2)))
+        values.update(predicted_rmse=rmse, joint_std=joint_std)
         t = self.thresholds
-        if not math.isfinite(bound.rmse) or bound.rmse > t.predicted_rmse_error:
-            checks.append((ERROR, 'unobservable', f'predicted RMSE {bound.rmse:.2f} m'))
-        elif bound.rmse > t.predicted_rmse_warn:
-            checks.append((WARN, 'ok', f'predicted RMSE {bound.rmse:.2f} m'))
-        ambiguous = self.ambiguous_joints(joints, measurements, bound.joint_std, angles[0],
-                                          reach)
+        if not math.isfinite(rmse) or rmse > t.predicted_rmse_error:
+            checks.append((ERROR, 'unobservable', f'predicted RMSE {rmse:.2f} m'))
+        elif rmse > t.predicted_rmse_warn:
+            checks.append((WARN, 'ok', f'predicted RMSE {rmse:.2f} m'))
+        ambiguous = set(self.ambiguous_joints(joints, measurements, joint_std, angles[0],
+                                              reach))
+        ambiguous |= self.ambiguous_postures(joints, measurements, joint_std, angles[0], reach,
+                                             alternatives)
         values['ambiguous_joints'] = sorted(k + 1 for k in ambiguous)
         if ambiguous:
             checks.append((ERROR, 'ambiguous', 'joint(s) ' + ', '.join(
-                str(k + 1) for k in sorted(ambiguous)) + ' could fold either way'))
+                str(k + 1) for k in sorted(ambiguous)) + ' could be elsewhere: another '
+                'posture fits about as well'))
         if not checks:
             return Verdict(OK, 'ok', 'tracking', values)
         level = max(level for level, _, _ in checks)

@@ -44,6 +44,7 @@ from visualization_msgs.msg import MarkerArray
 
 from epp_ros.angles import AngleSamples
 from epp_ros.config import PUMP_PARAMETERS
+from epp_ros.contract import ANGLES, DIAGNOSTICS, MARKERS, POSTURE, RANGES
 from epp_ros.core import METHODS, RANGE_METHODS, PostureEstimator
 from epp_ros.core.frame_policy import ADMIT, CLOCK_JUMP, FramePolicy
 from epp_ros.core.integrity import IntegrityLimits, Thresholds
@@ -169,10 +170,11 @@ class PostureEstimatorNode(Node):
             raise StartupError(f'method: {exc}') from None
         except ValueError as exc:
             raise StartupError(_parameter_name(str(exc))) from None
-        self.posture = self.create_publisher(PoseArray, 'arm_posture', POSTURE_QOS)
-        self.markers = self.create_publisher(MarkerArray, 'arm_posture/markers', POSTURE_QOS)
-        self.diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(JointState, 'uwb/ranges', self.on_ranges, RANGES_INPUT_QOS)
+        self.posture = self.create_publisher(PoseArray, POSTURE.name, POSTURE_QOS)
+        self.markers = self.create_publisher(MarkerArray, MARKERS.name, POSTURE_QOS)
+        self.diagnostics = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name,
+                                                 DIAGNOSTICS.depth)
+        self.create_subscription(JointState, RANGES.name, self.on_ranges, RANGES_INPUT_QOS)
         self.angles_subscription = None
         self._subscribe_angles()
         self.add_on_set_parameters_callback(self._check_parameters)
@@ -207,7 +209,7 @@ class PostureEstimatorNode(Node):
     def _subscribe_angles(self):
         if self.angles is not None and self.angles_subscription is None:
             self.angles_subscription = self.create_subscription(
-                JointState, 'boom_angles', self.on_angles, RANGES_INPUT_QOS)
+                JointState, ANGLES.name, self.on_angles, RANGES_INPUT_QOS)
 
     # -- live parameters ------------------------------------------------------------------
     def _check_parameters(self, parameters):

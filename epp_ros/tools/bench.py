@@ -14,6 +14,10 @@ Suites:
             including the baselines (SDP needs cvxpy): RMSE vs noise with the CRLB,
             Table 1, Table 3 (NLOS), xie3dim, tracking, and the chain's targets. Writes
             paper.md, paper.json and PNG plots into --out. Not part of the default run.
+  integrity Streams with corrupted frames (all tags, one tag), bursts of garbage, two-anchor
+            frames, absurd ranges and degenerate anchor geometries (--seconds each): frames
+            reported valid while wrong, time to recover, good frames rejected. Not default.
+  driver    The UWB driver's read throughput over TCP and a pty (lines/s, CPU). Not default.
 Every table ends with the commit it was measured on. ``--option KEY=VALUE`` passes an
 option to the estimators (e.g. ``anchor_weight=inf``, ``predict_slew=false``).
 """
@@ -29,7 +33,6 @@ import numpy as np
 from epp_ros.core import METHODS, PostureEstimator
 from epp_ros.core.bounds import crlb
 from epp_ros.core.chain import angles_from_joints
-from epp_ros.core.estimators import accepted_options
 from epp_ros.core.measurements import Measurements, SensorNoise
 from epp_ros.core.metrics import frame_rmse, pooled_rmse
 from epp_ros.core.simulate import (XIE3DIM, AngleNoise, RangeNoise, observe, truck_pump,
@@ -82,6 +85,16 @@ def method_inputs(method, frame, fused=False):
             **{key: value for key, value in frame.items() if key in inputs and key != 'ranges'}}
 
 
+def method_estimate(estimator, frame):
+    """The method's estimate of a frame, whether the integrity checks pass it or not.
+
+    The accuracy suites score the methods themselves; ``update`` returns only postures
+    that may be published (``epp_bench integrity`` scores that).
+    """
+    held = estimator.update(**frame)
+    return estimator.last_diagnostics.get('estimate', held)
+
+
 def run_frames(estimator, frames, truths, cold=False, fused=False):
     """Feed frames to an estimator; per-frame RMSE, arm-length error and wall time.
 
@@ -94,7 +107,7 @@ def run_frames(estimator, frames, truths, cold=False, fused=False):
         if cold:
             estimator.reset()
         start = time.perf_counter()
-        estimate = estimator.update(**frame)
+        estimate = method_estimate(estimator, frame)
         times.append(time.perf_counter() - start)
         rmses.append(float(frame_rmse(estimate, truth)))
         length_errors.append(estimator.last_diagnostics['arm_length_error'])
@@ -109,10 +122,8 @@ def summarize(rmses, lengths, times):
 
 
 def method_options(method, options, sigma):
-    """The user's options, plus the suite's range noise for methods that model it."""
-    if 'sigma' in accepted_options(method) and 'sigma' not in options:
-        return dict(options, sigma=sigma)
-    return options
+    """The user's options, plus the suite's range noise (every method is told it)."""
+    return options if 'sigma' in options else dict(options, sigma=sigma)
 
 
 def xie3dim_suite(methods, trials, seed, options):
@@ -212,6 +223,13 @@ def bags_suite(methods, seed):
 
 
 def markdown(report):
+    if report['suite'] == 'integrity':
+        from epp_ros.tools import integrity_bench
+        return integrity_bench.markdown(report)
+    if report['suite'] == 'driver':
+        from epp_ros.tools.driver_bench import format_rows
+        return '\n'.join(['### UWB driver: lines read per second over TCP and a pty', '',
+                          '```', format_rows(report['rows']), '```'])
     if report['suite'] == 'bags':
         lines = [f'### A {report["frames"]}-frame bag: offline eval, and play --fast through '
                  'the estimator node', '',
@@ -265,11 +283,12 @@ def main(argv=None):
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('suites', nargs='*', metavar='suite',
                         help='xie3dim, tracking, latency, bags (default: these four), '
-                             'paper')
+                             'paper, integrity, driver')
     parser.add_argument('--methods', nargs='+', choices=list(METHODS),
                         help=f'default: {" ".join(DEFAULT_METHODS)} (paper: all)')
     parser.add_argument('--trials', type=int, default=200, help='xie3dim trials')
-    parser.add_argument('--seconds', type=float, default=60.0, help='tracking duration')
+    parser.add_argument('--seconds', type=float, default=60.0,
+                        help='tracking duration; integrity: seconds per stream')
     parser.add_argument('--latency-seconds', type=float, default=5.0,
                         help='latency: seconds per rate')
     parser.add_argument('--seed', type=int, default=0)
@@ -282,7 +301,7 @@ def main(argv=None):
                         help='paper: folder for paper.md, paper.json and the plots')
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     default = ['xie3dim', 'tracking', 'latency', 'bags']
-    known = default + ['paper']
+    known = default + ['paper', 'integrity', 'driver']
     suites = args.suites or default
     unknown = sorted(set(suites) - set(known))
     if unknown:
@@ -311,6 +330,12 @@ def main(argv=None):
             reports.append(tracking_suite(methods, args.seconds, args.seed, options))
         elif suite == 'latency':
             reports.append(latency_suite(methods, args.latency_seconds, args.seed))
+        elif suite == 'integrity':
+            from epp_ros.tools import integrity_bench
+            reports.append(integrity_bench.run(methods, args.seconds, args.seed, options))
+        elif suite == 'driver':
+            from epp_ros.tools.driver_bench import run_driver_bench
+            reports.append({'suite': 'driver', 'rows': run_driver_bench()})
         else:
             reports.append(bags_suite(methods, args.seed))
         print(markdown(reports[-1]) + '\n', flush=True)

@@ -23,6 +23,7 @@ from geometry_msgs.msg import PoseArray
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
+from epp_ros import contract
 from epp_ros.config import ConfigError, default_config_path, load_pump_config
 from epp_ros.core import RANGE_METHODS
 from epp_ros.core.metrics import frame_rmse, joint_errors, pooled_rmse
@@ -64,19 +65,16 @@ class Monitor(Node):
         self.posture_stamps = []
         self.last = None                      # (estimate, truth) of the newest posture
         self.level = None
-        self.create_subscription(PoseArray, 'arm_posture', self.on_posture, POSTURE_QOS)
-        self.create_subscription(PoseArray, 'arm_posture/ground_truth', self.on_truth,
+        self.create_subscription(PoseArray, contract.POSTURE.name, self.on_posture,
                                  POSTURE_QOS)
-        self.create_subscription(JointState, 'uwb/ranges', self.on_ranges, RANGES_QOS)
-        self.create_subscription(DiagnosticArray, '/diagnostics', self.on_diagnostics, 10)
-
-    @staticmethod
-    def joints(message):
-        return np.array([[p.position.x, p.position.y, p.position.z] for p in message.poses])
+        self.create_subscription(PoseArray, contract.TRUTH.name, self.on_truth, POSTURE_QOS)
+        self.create_subscription(JointState, contract.RANGES.name, self.on_ranges, RANGES_QOS)
+        self.create_subscription(DiagnosticArray, contract.DIAGNOSTICS.name,
+                                 self.on_diagnostics, contract.DIAGNOSTICS.depth)
 
     def on_truth(self, message):
         self.truth_stamps.append(to_seconds(message.header.stamp))
-        self.truths.append(self.joints(message))
+        self.truths.append(contract.points_of(message))
 
     def on_ranges(self, message):
         self.frame_stamps.append((message.header.stamp.sec, message.header.stamp.nanosec))
@@ -86,7 +84,7 @@ class Monitor(Node):
         stamp = to_seconds(message.header.stamp)
         self.posture_stamps.append((message.header.stamp.sec, message.header.stamp.nanosec))
         self.latencies.append(received - stamp)
-        estimate = self.joints(message)
+        estimate = contract.points_of(message)
         # The truth of a frame is the newest published before the frame was received.
         index = int(np.searchsorted(self.truth_stamps, stamp)) - 1
         if index >= 0 and stamp - self.truth_stamps[index] < 1.0:

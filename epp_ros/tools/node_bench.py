@@ -11,6 +11,7 @@ from geometry_msgs.msg import PoseArray
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
+from epp_ros import contract
 from epp_ros.config import default_config_path, load_pump_config
 from epp_ros.nodes.common import POSTURE_QOS, RANGES_INPUT_QOS, RANGES_QOS, to_time
 
@@ -23,9 +24,10 @@ class _Feeder(Node):
     def __init__(self, names):
         super().__init__('epp_bench_feeder')
         self.names = names
-        self.publisher = self.create_publisher(JointState, 'uwb/ranges', RANGES_QOS)
+        self.publisher = self.create_publisher(JointState, contract.RANGES.name, RANGES_QOS)
         self.sent, self.answered = {}, {}
-        self.create_subscription(PoseArray, 'arm_posture', self._on_posture, POSTURE_QOS)
+        self.create_subscription(PoseArray, contract.POSTURE.name, self._on_posture,
+                                 POSTURE_QOS)
 
     def _on_posture(self, message):
         key = (message.header.stamp.sec, message.header.stamp.nanosec)
@@ -126,11 +128,11 @@ def replay_rate(method, bag, frames):
     """Frames/s and lost frames when ``epp_bag play --fast`` feeds the estimator node."""
     def work(feeder):
         received = []
-        feeder.create_subscription(PoseArray, 'arm_posture',   # keep all: measure, not lose
+        feeder.create_subscription(PoseArray, contract.POSTURE.name,  # keep all: measure
                                    lambda message: received.append(time.perf_counter()),
                                    RANGES_INPUT_QOS)
         player = subprocess.Popen([sys.executable, '-m', 'epp_ros.tools.bag', 'play',
-                                   str(bag), '--fast', '--topics', '/uwb/ranges'],
+                                   str(bag), '--fast', '--topics', contract.RANGES.absolute],
                                   stdout=subprocess.DEVNULL)
         start = time.perf_counter()
         deadline = start + 60.0

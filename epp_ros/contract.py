@@ -1,0 +1,98 @@
+"""The message contract of epp_ros: its topics, their QoS, and the layout of its messages.
+
+One home for what the nodes, the bag tools, the demo and the benchmarks must agree on. No
+ROS imports: the nodes build rclpy profiles and messages from it (``nodes/common.py``), the
+bag tools rosbags ones (``bags.py``), and decoding works on either kind of message.
+
+- ``uwb/ranges`` (``sensor_msgs/JointState``): ``name[i] = "<tag>:<anchor>"`` (then any
+  ``"<tag>:<tag>"``), ``position[i]`` the range in metres, NaN where not reported this cycle;
+  stamped with the receive time of the newest range.
+- ``arm_posture`` and ``arm_posture/ground_truth`` (``geometry_msgs/PoseArray``): the base
+  pivot, then joints 1..p, each pose's x-axis along its section (:func:`posture_poses`).
+- ``arm_posture/markers`` (``visualization_msgs/MarkerArray``), ``boom_angles``
+  (``sensor_msgs/JointState``, radians), ``/diagnostics``, ``uwb/raw`` (``std_msgs/String``).
+
+Names are relative, so a namespace (``-r __ns:=/pump7``) moves a whole pump; bags store the
+absolute names of the root namespace (:attr:`Topic.absolute`).
+"""
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from epp_ros.core.poses import boom_quaternions
+
+__all__ = ['Topic', 'RANGES', 'RANGES_INPUT', 'ANGLES', 'POSTURE', 'MARKERS', 'TRUTH',
+           'DIAGNOSTICS', 'RAW', 'posture_poses', 'points_of', 'joints_of', 'stamp_parts',
+           'stamp_seconds']
+
+
+@dataclass(frozen=True)
+class Topic:
+    """A topic and the QoS it is used with: reliable, keep last ``depth`` (None: keep all)."""
+
+    name: str
+    type: str
+    depth: int = 10
+    reliable: bool = True
+
+    @property
+    def absolute(self):
+        """The name in the root namespace, as bags store it."""
+        return self.name if self.name.startswith('/') else '/' + self.name
+
+
+#: Reliable and deep: serves reliable and best-effort subscribers, and a fast bag replay
+#: loses nothing.
+RANGES = Topic('uwb/ranges', 'sensor_msgs/msg/JointState', depth=100)
+#: The estimator's subscription: keep all, so DDS never overwrites a frame the node has not
+#: taken (a slow node shows as latency, a fast replay is flow-controlled, nothing is lost).
+RANGES_INPUT = replace(RANGES, depth=None)
+ANGLES = Topic('boom_angles', 'sensor_msgs/msg/JointState', depth=None)
+POSTURE = Topic('arm_posture', 'geometry_msgs/msg/PoseArray')
+MARKERS = Topic('arm_posture/markers', 'visualization_msgs/msg/MarkerArray')
+TRUTH = Topic('arm_posture/ground_truth', 'geometry_msgs/msg/PoseArray')
+DIAGNOSTICS = Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray')
+RAW = Topic('uwb/raw', 'std_msgs/msg/String', depth=100)
+
+
+def posture_poses(base, joints):
+    """The poses of a PoseArray posture: (position (3,), quaternion (x, y, z, w)) each.
+
+    Parameters
+    ----------
+    base : ndarray, shape (3,)
+        The boom's pivot, metres.
+    joints : ndarray, shape (p, 3)
+        Joints 1..p, metres.
+
+    Returns
+    -------
+    list of (tuple, tuple)
+        p + 1 poses of floats: the pivot first; pose k's x-axis along section k, its z-axis
+        up in the boom's vertical plane.
+    """
+    return [(tuple(float(v) for v in position), tuple(float(v) for v in quaternion))
+            for position, quaternion in zip([base, *joints], boom_quaternions(base, joints))]
+
+
+def points_of(message):
+    """The pivot then joints 1..p, (p + 1, 3), of a PoseArray posture (rclpy or rosbags)."""
+    return np.array([[pose.position.x, pose.position.y, pose.position.z]
+                     for pose in message.poses], dtype=float).reshape(-1, 3)
+
+
+def joints_of(message):
+    """Joints 1..p (p, 3) of a PoseArray posture (rclpy or rosbags), without the pivot."""
+    return points_of(message)[1:]
+
+
+def stamp_parts(seconds):
+    """``(sec, nanosec)`` of a time in seconds, nanoseconds rounded and kept below 1e9."""
+    sec = math.floor(seconds)
+    return int(sec), min(int(round((seconds - sec) * 1e9)), 999_999_999)
+
+
+def stamp_seconds(stamp):
+    """Seconds of a ``builtin_interfaces/Time`` (rclpy or rosbags)."""
+    return stamp.sec + 1e-9 * stamp.nanosec
