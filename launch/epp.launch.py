@@ -1,28 +1,49 @@
-"""Launch the UWB driver and the posture estimator of one pump.
+"""Launch the UWB driver and the posture estimator of one pump, optionally with RViz.
 
-    ros2 launch epp_ros epp.launch.py [config:=/path/pump.yaml] [namespace:=pump7]
+    ros2 launch epp_ros epp.launch.py [config:=/path/pump.yaml] [namespace:=pump7] [rviz:=true]
 """
 import os
 
-from ament_index_python.packages import get_package_share_directory
+from ament_index_python.packages import get_package_share_directory, PackageNotFoundError
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, LogInfo
+from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 
+def rviz_installed():
+    try:
+        get_package_share_directory('rviz2')
+    except PackageNotFoundError:
+        return False
+    return True
+
+
+def rviz(share, namespace):
+    """rviz2 with the boom view, in the pump's namespace (its topics are relative)."""
+    wanted = IfCondition(LaunchConfiguration('rviz'))
+    if not rviz_installed():     # the nodes still start; say why no window opens
+        return LogInfo(msg='rviz:=true, but rviz2 is not installed', condition=wanted)
+    return Node(package='rviz2', executable='rviz2', name='rviz2', namespace=namespace,
+                arguments=['-d', os.path.join(share, 'rviz', 'epp.rviz')], condition=wanted)
+
+
 def generate_launch_description():
-    default_config = os.path.join(get_package_share_directory('epp_ros'), 'config',
-                                  'pump.yaml')
+    share = get_package_share_directory('epp_ros')
     config = LaunchConfiguration('config')
     namespace = LaunchConfiguration('namespace')
     return LaunchDescription([
-        DeclareLaunchArgument('config', default_value=default_config,
+        DeclareLaunchArgument('config', default_value=os.path.join(share, 'config',
+                                                                   'pump.yaml'),
                               description='Pump description (a ROS parameters file).'),
         DeclareLaunchArgument('namespace', default_value='',
                               description='Namespace of this pump, e.g. pump7.'),
+        DeclareLaunchArgument('rviz', default_value='false',
+                              description='Also start rviz2 with the boom view.'),
         Node(package='epp_ros', executable='uwb_driver', name='uwb_driver',
              namespace=namespace, parameters=[config], output='screen'),
         Node(package='epp_ros', executable='posture_estimator', name='posture_estimator',
              namespace=namespace, parameters=[config], output='screen'),
+        rviz(share, namespace),
     ])

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 import rclpy
+import yaml
 from system import ROOT, Listener, Processes, script, start_emulator
 
 PYTHON = Path(sys.executable)
@@ -52,6 +53,7 @@ def test_install_layout(install):
     assert (prefix / 'share/epp_ros/package.xml').exists()
     assert (prefix / 'share/epp_ros/config/pump.yaml').exists()
     assert (prefix / 'share/epp_ros/launch/epp.launch.py').exists()
+    assert (prefix / 'share/epp_ros/rviz/epp.rviz').exists()
     for executable in ('uwb_driver', 'posture_estimator', 'uwb_emulator', 'epp_demo',
                        'epp_bench', 'epp_bag'):
         assert os.access(prefix / 'lib/epp_ros' / executable, os.X_OK)
@@ -88,11 +90,16 @@ class _Recorder:
         self.args, self.kwargs = args, kwargs
 
 
-def test_launch_file_names_what_exists(monkeypatch):
-    """launch and launch_ros are not installable here: run the file under stand-ins."""
+def load_launch_file(monkeypatch, rviz_share):
+    """The launch file run under stand-ins (launch and launch_ros are not installable here).
+
+    ``rviz_share`` is where get_package_share_directory finds rviz2, None: not installed.
+    """
     modules = {
         'launch': types.SimpleNamespace(LaunchDescription=_Recorder),
-        'launch.actions': types.SimpleNamespace(DeclareLaunchArgument=_Recorder),
+        'launch.actions': types.SimpleNamespace(DeclareLaunchArgument=_Recorder,
+                                                LogInfo=_Recorder),
+        'launch.conditions': types.SimpleNamespace(IfCondition=_Recorder),
         'launch.substitutions': types.SimpleNamespace(LaunchConfiguration=_Recorder),
         'launch_ros': types.SimpleNamespace(),
         'launch_ros.actions': types.SimpleNamespace(Node=_Recorder),
@@ -100,17 +107,60 @@ def test_launch_file_names_what_exists(monkeypatch):
     for name, module in modules.items():
         monkeypatch.setitem(sys.modules, name, module)
     import ament_index_python.packages as packages
-    monkeypatch.setattr(packages, 'get_package_share_directory', lambda name: str(ROOT))
+
+    def share(name):
+        if name == 'epp_ros':
+            return str(ROOT)
+        if name == 'rviz2' and rviz_share is not None:
+            return rviz_share
+        raise packages.PackageNotFoundError(name)
+    monkeypatch.setattr(packages, 'get_package_share_directory', share)
     spec = importlib.util.spec_from_file_location('epp_launch', ROOT / 'launch/epp.launch.py')
     launch_file = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(launch_file)
-    description = launch_file.generate_launch_description()
-    actions = description.args[0]
-    arguments = {a.args[0]: a.kwargs['default_value'] for a in actions if 'default_value'
-                 in a.kwargs}
+    return launch_file.generate_launch_description().args[0]
+
+
+def launch_arguments(actions):
+    return {a.args[0]: a.kwargs['default_value'] for a in actions
+            if 'default_value' in a.kwargs}
+
+
+def test_launch_file_names_what_exists(monkeypatch):
+    actions = load_launch_file(monkeypatch, rviz_share=None)
+    arguments = launch_arguments(actions)
     assert Path(arguments['config']).resolve() == ROOT / 'config/pump.yaml'
     nodes = [a.kwargs for a in actions if 'executable' in a.kwargs]
     assert [n['executable'] for n in nodes] == ['uwb_driver', 'posture_estimator']
     for node in nodes:
         assert node['package'] == 'epp_ros'
         assert Path(script(node['executable'])).exists()
+
+
+def rviz_condition(action):
+    """The launch argument an action's IfCondition reads."""
+    return action.kwargs['condition'].args[0].args[0]
+
+
+def test_launch_file_starts_rviz_on_request_where_installed(monkeypatch, tmp_path):
+    actions = load_launch_file(monkeypatch, rviz_share=str(tmp_path))
+    assert launch_arguments(actions)['rviz'] == 'false'
+    rviz = [a for a in actions if a.kwargs.get('executable') == 'rviz2']
+    assert len(rviz) == 1 and rviz_condition(rviz[0]) == 'rviz'
+    arguments = rviz[0].kwargs['arguments']
+    config = Path(arguments[arguments.index('-d') + 1])
+    assert config.resolve() == ROOT / 'rviz/epp.rviz'
+    view = yaml.safe_load(config.read_text())['Visualization Manager']
+    assert view['Global Options']['Fixed Frame'] == 'pump_base'
+    shown = {d['Class']: d['Topic']['Value'] for d in view['Displays'] if 'Topic' in d}
+    assert shown == {'rviz_default_plugins/MarkerArray': 'arm_posture/markers',
+                     'rviz_default_plugins/PoseArray': 'arm_posture'}
+
+
+def test_launch_file_works_without_rviz(monkeypatch):
+    """rviz2 is not installed here: rviz:=true says so, the nodes start all the same."""
+    actions = load_launch_file(monkeypatch, rviz_share=None)
+    assert not any(a.kwargs.get('executable') == 'rviz2' for a in actions)
+    notes = [a for a in actions if 'msg' in a.kwargs]
+    assert len(notes) == 1 and 'rviz2 is not installed' in notes[0].kwargs['msg']
+    assert rviz_condition(notes[0]) == 'rviz'

@@ -6,11 +6,11 @@ message per ranging cycle, as a stamped, labelled range array: ``name[i] = "<tag
 cycle, then ``"<tag>:<tag>"`` for each tag-tag range reported this cycle (a record whose
 anchor id is another configured tag's), ``header.stamp`` the receive time of the newest
 range, ``velocity`` and ``effort`` empty. It never publishes on ``joint_states``.
-Diagnostics at 1 Hz on ``/diagnostics``.
+Diagnostics at 1 Hz on ``/diagnostics``. Stamps, frame timing and ages are read from the
+node's clock, so ``use_sim_time`` (with ``/clock``) is followed.
 """
 import sys
 import threading
-import time
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -59,9 +59,10 @@ class UwbDriver(Node):
         self.diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.link_names = self.config.link_names
         self._lock = threading.Lock()
-        self._last_frame = time.time()
-        self._started = time.time()
+        self._last_frame = self._now()
         self._previous_counts = {}
+        self._newest_line = {}          # port -> node-clock time of its newest line, s
+        self._closed = False
         self.readers = []
         for source in sources:
             decoder = LineDecoder(source.protocol)
@@ -101,8 +102,15 @@ class UwbDriver(Node):
                 f'anchor_ids: the {names} format carries at most {slots} anchors per tag '
                 f'(ids 0-{slots - 1}); anchors {extra} need another source or another format')
 
+    def _now(self):
+        """The node's clock, seconds: system time, or simulated time with use_sim_time."""
+        return self.get_clock().now().nanoseconds * 1e-9
+
     def _handler(self, source, decoder):
-        def on_line(line, received):
+        def on_line(line, _wall_received):
+            # The source stamps lines with wall time; the node's clock is what ROS time is.
+            received = self._now()
+            self._newest_line[source.port] = received
             records = decoder.decode(line)
             if not records:
                 return
@@ -116,7 +124,7 @@ class UwbDriver(Node):
 
     def _close_stale_frames(self):
         with self._lock:
-            for frame in self.assembler.poll(time.time()):
+            for frame in self.assembler.poll(self._now()):
                 self._publish(frame)
 
     def _publish(self, frame):
@@ -129,10 +137,10 @@ class UwbDriver(Node):
         message.position = ([float(v) for v in frame.ranges.ravel()]
                             + [float(v) for v in frame.tag_ranges[rows, columns]])
         self.publisher.publish(message)
-        self._last_frame = time.time()
+        self._last_frame = self._now()
 
     def _publish_diagnostics(self):
-        now = time.time()
+        now = self._now()
         array = DiagnosticArray()
         array.header.stamp = to_time(now)
         silent = now - self._last_frame
@@ -168,8 +176,8 @@ class UwbDriver(Node):
                 'position lines': decoder.counts['position'],
                 'preamble lines': decoder.counts['preamble'],
                 'input backlog (bytes)': reader.backlog,
-                'newest line age (s)': ('none' if reader.newest_line is None
-                                        else f'{now - reader.newest_line:.3f}'),
+                'newest line age (s)': ('none' if source.port not in self._newest_line
+                                        else f'{now - self._newest_line[source.port]:.3f}'),
                 'clients': reader.clients,
                 'connections': reader.counts['connections'],
                 'dropped implausible': dropped.get('implausible', 0),
@@ -190,6 +198,10 @@ class UwbDriver(Node):
         self.diagnostics.publish(array)
 
     def close(self):
+        """Stop every reader, once: ``run_node`` may call it again while shutting down."""
+        if self._closed:
+            return
+        self._closed = True
         for _, _, reader in self.readers:
             reader.stop()
 

@@ -6,11 +6,12 @@ or to TCP clients (like the ESP8266 WiFi bridge). The first stdout lines say whe
 ``PTY <device path>`` or ``TCP <url>``, one per channel (formats that do not name the tag
 need one channel per tag, formats that name no device one per tag-anchor pair; the ids the
 lines leave out follow). With ``--truth`` the true posture is published as
-``geometry_msgs/PoseArray`` on ``arm_posture/ground_truth`` (base first, then joints 1..p).
+``geometry_msgs/PoseArray`` on ``arm_posture/ground_truth`` (base first, then joints 1..p),
+stamped with the node's clock (simulated time with ``use_sim_time``), which also paces the
+cycles and measures ``--duration``.
 """
 import argparse
 import sys
-import time
 
 import numpy as np
 from geometry_msgs.msg import PoseArray
@@ -19,7 +20,7 @@ from rclpy.utilities import remove_ros_args
 
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core.simulate import RangeNoise, working_cycle
-from epp_ros.nodes.common import POSTURE_QOS, posture_message, run_node
+from epp_ros.nodes.common import POSTURE_QOS, posture_message, run_node, shutdown_on_signals
 from epp_ros.uwb.emulation import PtyOutput, TcpOutput, channel_devices, corrupt, cycle_lines
 from epp_ros.uwb.formats import FORMATS, fits_slots
 
@@ -79,6 +80,12 @@ def open_outputs(args, config):
     return outputs, announcements
 
 
+def close_outputs(outputs):
+    """Close and forget each output: a pty closed twice could close a reused descriptor."""
+    while outputs:
+        outputs.pop().close()
+
+
 class UwbEmulator(Node):
     """Writes one cycle of device lines per timer tick."""
 
@@ -96,19 +103,23 @@ class UwbEmulator(Node):
         self.truth = (self.create_publisher(PoseArray, 'arm_posture/ground_truth', POSTURE_QOS)
                       if args.truth else None)
         self.cycle = 0
-        self.started = time.monotonic()
+        # Taken at the first cycle: with use_sim_time the clock reads 0 until /clock comes.
+        self.started = None
         self.create_timer(1.0 / args.rate, self.step)
 
     def step(self):
+        now = self.get_clock().now()
+        if self.started is None:
+            self.started = now
         if self.args.duration is not None and \
-                time.monotonic() - self.started >= self.args.duration:
+                (now - self.started).nanoseconds * 1e-9 >= self.args.duration:
             raise SystemExit(0)
         # Play the cycle forth and back: the boom never jumps.
         count = len(self.trajectory.times)
         index = self.cycle % (2 * count - 2)
         joints = self.trajectory.joints[index if index < count else 2 * count - 2 - index]
         ranges, _ = self.noise.apply(self.model.ranges(joints), self.rng)
-        stamp = time.time()
+        stamp = now.to_msg()
         ending = '' if self.args.no_newline else '\r\n'
         for channel, line in cycle_lines(self.config, ranges, self.args.protocol, self.cycle):
             data = (line + ending).encode()
@@ -121,11 +132,13 @@ class UwbEmulator(Node):
         self.cycle += 1
 
     def close(self):
-        for output in self.outputs:
-            output.close()
+        """Close the outputs, each once (``main`` closes what is left)."""
+        close_outputs(self.outputs)
 
 
 def main(argv=None):
+    # First: a Ctrl-C while the outputs open must not end in a traceback either.
+    shutdown_on_signals()
     argv = sys.argv if argv is None else argv
     args = parse_args(remove_ros_args(argv)[1:])
     try:
@@ -146,10 +159,10 @@ def main(argv=None):
         return 2
     print('\n'.join(announcements), flush=True)
     try:
-        return run_node(lambda: UwbEmulator(args, config, outputs), argv)
+        return run_node(lambda: UwbEmulator(args, config, outputs), argv,
+                        name=UwbEmulator.node_name)
     finally:
-        for output in outputs:
-            output.close()
+        close_outputs(outputs)
 
 
 if __name__ == '__main__':

@@ -1,9 +1,9 @@
 """epp_bag: synthesise, record, replay, evaluate and describe rosbag2 files.
 
     epp_bag synth OUT [--storage mcap|sqlite3] [--duration S] [--sigma M] [--nlos F]
-                      [--drop F] [--seed N] [--config FILE] [--raw PROTOCOL]
+                      [--drop F] [--seed N] [--config FILE] [--raw PROTOCOL] [--start S]
     epp_bag record OUT [--topics T ...] [--duration S] [--storage ...]
-    epp_bag play BAG [--rate R] [--loop] [--fast] [--topics T ...]
+    epp_bag play BAG [--rate R] [--loop] [--fast] [--topics T ...] [--clock [HZ]]
     epp_bag eval BAG [--method M] [--config FILE] [--out BAG] [--plot FILE.png] [--json]
     epp_bag info BAG
 
@@ -25,6 +25,7 @@ from epp_ros.core import RANGE_METHODS
 from epp_ros.uwb.formats import FORMATS
 
 DEFAULT_RECORD = [bags.RANGES, bags.POSTURE, bags.TRUTH, '/diagnostics']
+CLOCK_HZ = 40.0         # /clock rate of `play --clock`, as ros2 bag play's default
 
 
 def parse_args(argv):
@@ -44,6 +45,9 @@ def parse_args(argv):
     synth.add_argument('--config')
     synth.add_argument('--raw', choices=list(FORMATS),
                        help='also write the device lines on /uwb/raw')
+    synth.add_argument('--start', type=float, metavar='S',
+                       help='time of the first message, seconds since the epoch (default: '
+                            'now); e.g. 1000 for a bag that is plainly simulated time')
     record = commands.add_parser('record', help='record topics until Ctrl-C or --duration')
     record.add_argument('out')
     record.add_argument('--topics', nargs='+', default=DEFAULT_RECORD)
@@ -56,6 +60,10 @@ def parse_args(argv):
     play.add_argument('--fast', action='store_true',
                       help='as fast as the subscribers keep up (reliable, nothing lost)')
     play.add_argument('--topics', nargs='+')
+    play.add_argument('--clock', type=float, nargs='?', const=CLOCK_HZ, metavar='HZ',
+                      help="also publish the bag's time on /clock (rosgraph_msgs/Clock), "
+                           f'at HZ (default {CLOCK_HZ:g}) and with every message, for nodes '
+                           'started with use_sim_time:=true')
     play.add_argument('--subscribers', type=int, metavar='N',
                       help='wait up to 10 s until every topic has N subscribers (without: '
                            'up to 2 s for one)')
@@ -71,13 +79,17 @@ def parse_args(argv):
     args = parser.parse_args(argv)
     if getattr(args, 'rate', 1.0) <= 0:
         parser.error('--rate must be positive')
+    if getattr(args, 'clock', None) is not None and args.clock <= 0:
+        parser.error('--clock must be positive')
     return args
 
 
 def run_synth(args):
     config = load_pump_config(args.config)
+    start_ns = None if args.start is None else int(round(args.start * 1e9))
     counts = bags.synthesize(args.out, config, args.duration, args.rate, args.sigma,
-                             args.nlos, args.drop, args.seed, args.storage, args.raw)
+                             args.nlos, args.drop, args.seed, args.storage, args.raw,
+                             start_ns=start_ns)
     print(f'wrote {args.out}: ' + ', '.join(f'{t} {n}' for t, n in counts.items()))
 
 
@@ -152,12 +164,15 @@ def run_play(args):
         if topic not in publishers:
             publishers[topic] = node.create_publisher(_message_class(msgtype), topic,
                                                       _rclpy_qos(qos, args.fast))
+    # Created with the others, so that subscribers discover it while we wait for them.
+    clock = _Clock(node, args.clock) if args.clock else None
     try:
         # Give subscribers a moment to match, as ros2 bag play does with its delay.
         wanted, patience = (1, 2.0) if args.subscribers is None else (args.subscribers, 10.0)
         deadline = time.monotonic() + patience
-        while time.monotonic() < deadline and not all(
-                p.get_subscription_count() >= wanted for p in publishers.values()):
+        while time.monotonic() < deadline and not (all(
+                p.get_subscription_count() >= wanted for p in publishers.values())
+                and (clock is None or clock.publisher.get_subscription_count() >= 1)):
             rclpy.spin_once(node, timeout_sec=0.05)
         # Our side has matched; give the subscribers' side a moment to match us too, or the
         # first messages can miss a reader that has not yet discovered this writer.
@@ -165,13 +180,7 @@ def run_play(args):
         while time.monotonic() < settle:
             rclpy.spin_once(node, timeout_sec=0.05)
         while True:
-            start, first = time.monotonic(), messages[0][2]
-            for topic, _, t_ns, raw, _ in messages:
-                if not args.fast:
-                    delay = start + (t_ns - first) / 1e9 / args.rate - time.monotonic()
-                    if delay > 0:
-                        time.sleep(delay)
-                publishers[topic].publish(raw)
+            _play_once(messages, publishers, args, clock)
             if not args.loop:
                 break
         time.sleep(0.5)                 # let the last messages leave
@@ -179,6 +188,52 @@ def run_play(args):
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
+
+
+class _Clock:
+    """/clock from the bag's time: with every message and at ``hz`` in between."""
+
+    def __init__(self, node, hz):
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from rosgraph_msgs.msg import Clock
+        self.message = Clock
+        # Best effort, depth 1, as rclpy's TimeSource subscribes (and rosbag2 publishes).
+        self.publisher = node.create_publisher(
+            Clock, '/clock', QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
+        self.period = 1.0 / hz
+
+    def publish(self, t_ns):
+        message = self.message()
+        message.clock.sec, message.clock.nanosec = divmod(int(t_ns), 1_000_000_000)
+        self.publisher.publish(message)
+
+    def sleep_until(self, wall, bag_ns, wall_to_bag):
+        """Sleep until monotonic ``wall``, publishing the bag's time on the way."""
+        while True:
+            left = wall - time.monotonic()
+            if left <= 0:
+                return
+            time.sleep(min(left, self.period))
+            self.publish(min(bag_ns, wall_to_bag(time.monotonic())))
+
+
+def _play_once(messages, publishers, args, clock):
+    """Publish the messages once, with the recorded timing unless ``--fast``."""
+    start, first = time.monotonic(), messages[0][2]
+
+    def wall_to_bag(wall):
+        return first + int((wall - start) * args.rate * 1e9)
+
+    for topic, _, t_ns, raw, _ in messages:
+        if not args.fast:
+            due = start + (t_ns - first) / 1e9 / args.rate
+            if clock is not None:
+                clock.sleep_until(due, t_ns, wall_to_bag)
+            elif due > time.monotonic():
+                time.sleep(due - time.monotonic())
+        if clock is not None:       # the clock reaches a message's time before it arrives
+            clock.publish(t_ns)
+        publishers[topic].publish(raw)
 
 
 def run_record(args):
