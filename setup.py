@@ -25,9 +25,9 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'uwb_driver = epp_ros.nodes.driver:main',
-            'posture_estimator = epp_ros.nodes.estimator:main',
-            'uwb_emulator = epp_ros.nodes.emulator:main',
+            'uwb_driver = epp_ros.nodes.entry:uwb_driver',
+            'posture_estimator = epp_ros.nodes.entry:posture_estimator',
+            'uwb_emulator = epp_ros.nodes.entry:uwb_emulator',
             'epp_demo = epp_ros.tools.demo:main',
             'epp_bench = epp_ros.tools.bench:main',
             'epp_bag = epp_ros.tools.bag:main',

@@ -1,5 +1,4 @@
 """What every epp_ros node shares: parameters, the pump description, messages, main()."""
-import math
 import os
 import re
 import signal
@@ -19,21 +18,24 @@ from rclpy.signals import SignalHandlerOptions
 from visualization_msgs.msg import Marker, MarkerArray
 import yaml
 
+from epp_ros import contract
 from epp_ros.config import PUMP_PARAMETERS, ConfigError, pump_config_from_parameters
-from epp_ros.core.poses import boom_quaternions
+from epp_ros.nodes.stopping import ignore_signals, shutdown_on_signals
 
-#: /uwb/ranges: reliable, deep: serves reliable and best-effort subscribers, and a fast bag
-#: replay loses nothing.
-RANGES_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
-                        history=HistoryPolicy.KEEP_LAST, depth=100)
-#: The estimator's subscription to uwb/ranges: reliable, keep all. DDS then never overwrites
-#: a frame the node has not taken (a keep-last queue would drop silently when it lags):
-#: a slow node shows as latency, and a fast replay is flow-controlled instead of lossy.
-RANGES_INPUT_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
-                              history=HistoryPolicy.KEEP_ALL)
-#: Postures (estimate and ground truth): reliable, keep last 10.
-POSTURE_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
-                         history=HistoryPolicy.KEEP_LAST, depth=10)
+def qos(topic):
+    """The rclpy QoS profile of a :class:`epp_ros.contract.Topic`."""
+    reliability = ReliabilityPolicy.RELIABLE if topic.reliable else \
+        ReliabilityPolicy.BEST_EFFORT
+    if topic.depth is None:
+        return QoSProfile(reliability=reliability, history=HistoryPolicy.KEEP_ALL)
+    return QoSProfile(reliability=reliability, history=HistoryPolicy.KEEP_LAST,
+                      depth=topic.depth)
+
+
+#: The profiles of the message contract (``epp_ros.contract``), by use.
+RANGES_QOS = qos(contract.RANGES)
+RANGES_INPUT_QOS = qos(contract.RANGES_INPUT)
+POSTURE_QOS = qos(contract.POSTURE)
 
 #: rclpy's error type for a failed rcl call (not exported under a public name).
 RCLError = rclpy_implementation.RCLError
@@ -69,7 +71,8 @@ def declare_pump_parameters(node):
     StartupError
         Naming the offending field.
     """
-    values = {name: declare(node, name, default, description, dynamic_typing=True)
+    values = {name: declare(node, name, default, description + ' Read-only.',
+                            dynamic_typing=True, read_only=True)
               for name, (default, description) in PUMP_PARAMETERS.items()}
     try:
         return pump_config_from_parameters(values)
@@ -79,13 +82,12 @@ def declare_pump_parameters(node):
 
 def to_time(seconds):
     """builtin_interfaces/Time from seconds since the epoch."""
-    sec = math.floor(seconds)
-    return Time(sec=int(sec), nanosec=min(int(round((seconds - sec) * 1e9)), 999_999_999))
+    sec, nanosec = contract.stamp_parts(seconds)
+    return Time(sec=sec, nanosec=nanosec)
 
 
-def to_seconds(stamp):
-    """Seconds since the epoch from a builtin_interfaces/Time."""
-    return stamp.sec + 1e-9 * stamp.nanosec
+#: Seconds since the epoch from a builtin_interfaces/Time.
+to_seconds = contract.stamp_seconds
 
 
 def _stamp(stamp):
@@ -100,12 +102,11 @@ def posture_message(base, joints, stamp, frame_id):
     message = PoseArray()
     message.header.stamp = _stamp(stamp)
     message.header.frame_id = frame_id
-    quaternions = boom_quaternions(base, joints)
-    for position, quaternion in zip([base, *joints], quaternions):
+    for position, quaternion in contract.posture_poses(base, joints):
         pose = Pose()
-        pose.position.x, pose.position.y, pose.position.z = (float(v) for v in position)
+        pose.position.x, pose.position.y, pose.position.z = position
         (pose.orientation.x, pose.orientation.y, pose.orientation.z,
-         pose.orientation.w) = (float(v) for v in quaternion)
+         pose.orientation.w) = quaternion
         message.poses.append(pose)
     return message
 
@@ -133,35 +134,6 @@ def posture_markers(base, joints, stamp, frame_id, namespace='boom'):
         marker.header.frame_id = frame_id
         marker.pose.orientation.w = 1.0
     return MarkerArray(markers=[strip, spheres, label])
-
-
-class ShutdownRequest:
-    """Set by SIGINT and SIGTERM, however often and whenever they come; never raises.
-
-    ``ros2 launch`` forwards a terminal's Ctrl-C as a second SIGINT (and SIGTERM after a
-    timeout): a handler that raised (KeyboardInterrupt) would land in the cleanup of the
-    first. A plain attribute, not a threading.Event: a signal handler that takes a lock the
-    interrupted main thread holds would deadlock.
-    """
-
-    requested = False
-    signals = 0
-
-    @classmethod
-    def handle(cls, signum, frame):
-        cls.requested = True
-        cls.signals += 1
-
-
-def shutdown_on_signals():
-    """From now on SIGINT and SIGTERM only request a shutdown; return the request.
-
-    Call it before anything slow: a signal that arrives before it is installed still
-    interrupts the process the Python way.
-    """
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, ShutdownRequest.handle)
-    return ShutdownRequest
 
 
 #: rcl's text for the parameters file it could not read: the path, then its reason.
@@ -296,17 +268,6 @@ def run_node(factory, args=None, name=None):
         _shut_down(node, stop)
         ignore_signals()
     return 0
-
-
-def ignore_signals():
-    """Ignore SIGINT and SIGTERM from now on, for a process that has shut down.
-
-    Python's finalization puts back the default handlers of signals that have Python
-    handlers (not of ignored ones): a second Ctrl-C while rclpy and Fast DDS tear down at
-    exit would otherwise kill the process with status -2 after a clean shutdown.
-    """
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, signal.SIG_IGN)
 
 
 def _shut_down(node, stop):

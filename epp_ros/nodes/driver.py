@@ -9,6 +9,7 @@ range, ``velocity`` and ``effort`` empty. It never publishes on ``joint_states``
 Diagnostics at 1 Hz on ``/diagnostics``. Stamps, frame timing and ages are read from the
 node's clock, so ``use_sim_time`` (with ``/clock``) is followed.
 """
+import functools
 import sys
 import threading
 
@@ -17,6 +18,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
+from epp_ros import contract
 from epp_ros.config import (PROTOCOLS, ConfigError, Source, listen_address,
                             normalise_device_id)
 from epp_ros.nodes.common import (RANGES_QOS, StartupError, declare, declare_pump_parameters,
@@ -35,18 +37,18 @@ class UwbDriver(Node):
     def __init__(self):
         super().__init__(self.node_name)
         self.config = declare_pump_parameters(self)
-        baud = declare(self, 'baud', 115200, 'Baud rate of serial sources.')
-        frame_period = declare(self, 'frame_period', 0.1,
-                               'Longest ranging cycle, s: a frame closes when every pair '
-                               'reported or after this long.')
-        min_range = declare(self, 'min_range', 0.05, 'Shortest plausible range, m.')
-        max_range = declare(self, 'max_range', 200.0, 'Longest plausible range, m.')
-        max_line = declare(self, 'max_line', 4096, 'Longest line kept, bytes.')
-        port = declare(self, 'port', '', 'A single source instead of the configured list.')
-        protocol = declare(self, 'protocol', 'auto', f'Protocol of `port`: {PROTOCOLS}.')
-        tag = declare(self, 'tag', '', 'Tag id on `port` for formats that do not name it.')
-        anchor = declare(self, 'anchor', '', 'Anchor id on `port` for formats that name no '
-                                             'device.')
+        # The sources and their framing are opened at start: every setting is read-only.
+        fixed = functools.partial(declare, self, read_only=True)
+        baud = fixed('baud', 115200, 'Baud rate of serial sources.')
+        frame_period = fixed('frame_period', 0.1, 'Longest ranging cycle, s: a frame closes '
+                             'when every pair reported or after this long.')
+        min_range = fixed('min_range', 0.05, 'Shortest plausible range, m.')
+        max_range = fixed('max_range', 200.0, 'Longest plausible range, m.')
+        max_line = fixed('max_line', 4096, 'Longest line kept, bytes.')
+        port = fixed('port', '', 'A single source instead of the configured list.')
+        protocol = fixed('protocol', 'auto', f'Protocol of `port`: {PROTOCOLS}.')
+        tag = fixed('tag', '', 'Tag id on `port` for formats that do not name it.')
+        anchor = fixed('anchor', '', 'Anchor id on `port` for formats that name no device.')
         sources = self.config.sources
         if port:
             sources = (self._single_source(port, protocol, tag, anchor),)
@@ -55,8 +57,9 @@ class UwbDriver(Node):
             self.assembler = FrameAssembler(self.config, frame_period, min_range, max_range)
         except ValueError as exc:
             raise StartupError(f'frame_period, min_range, max_range: {exc}') from None
-        self.publisher = self.create_publisher(JointState, 'uwb/ranges', RANGES_QOS)
-        self.diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.publisher = self.create_publisher(JointState, contract.RANGES.name, RANGES_QOS)
+        self.diagnostics = self.create_publisher(DiagnosticArray, contract.DIAGNOSTICS.name,
+                                                 contract.DIAGNOSTICS.depth)
         self.link_names = self.config.link_names
         self._lock = threading.Lock()
         self._last_frame = self._now()

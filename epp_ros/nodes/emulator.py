@@ -18,9 +18,11 @@ from geometry_msgs.msg import PoseArray
 from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
 
+from epp_ros import contract
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core.simulate import RangeNoise, working_cycle
-from epp_ros.nodes.common import POSTURE_QOS, posture_message, run_node, shutdown_on_signals
+from epp_ros.nodes.common import POSTURE_QOS, posture_message, run_node
+from epp_ros.nodes.stopping import shutdown_on_signals
 from epp_ros.uwb.emulation import PtyOutput, TcpOutput, channel_devices, corrupt, cycle_lines
 from epp_ros.uwb.formats import FORMATS, fits_slots
 
@@ -100,7 +102,7 @@ class UwbEmulator(Node):
                                         rng=np.random.default_rng(args.seed))
         self.noise = RangeNoise(sigma=args.sigma, nlos_fraction=args.nlos, nlos_gamma=2.0,
                                 dropout=args.drop)
-        self.truth = (self.create_publisher(PoseArray, 'arm_posture/ground_truth', POSTURE_QOS)
+        self.truth = (self.create_publisher(PoseArray, contract.TRUTH.name, POSTURE_QOS)
                       if args.truth else None)
         self.cycle = 0
         # Taken at the first cycle: with use_sim_time the clock reads 0 until /clock comes.

@@ -19,12 +19,12 @@ import time
 
 import numpy as np
 
-from epp_ros import bags
+from epp_ros import bags, contract
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core import RANGE_METHODS
 from epp_ros.uwb.formats import FORMATS
 
-DEFAULT_RECORD = [bags.RANGES, bags.POSTURE, bags.TRUTH, '/diagnostics']
+DEFAULT_RECORD = [bags.RANGES, bags.POSTURE, bags.TRUTH, contract.DIAGNOSTICS.absolute]
 CLOCK_HZ = 40.0         # /clock rate of `play --clock`, as ros2 bag play's default
 
 
