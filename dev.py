@@ -1,5 +1,20 @@
 #!/usr/bin/env python3
-"""Set up the project's own venv if needed, then run the demo or the test suite.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Set up the project's own venv if needed, then run the demo or the test suite.
 
     python3 dev.py demo [epp_demo options]    # live demo on the built-in simulated pump
     python3 dev.py test [pytest options]      # the whole test suite
@@ -11,10 +26,10 @@ Needs nothing but Python >= 3.10.
 """
 import hashlib
 import os
+from pathlib import Path
 import subprocess
 import sys
 import venv
-from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent
 VENV = ROOT / '.venv'

@@ -1,4 +1,19 @@
-"""Angle sensors next to the UWB ranges: a slew encoder and an inclinometer per section.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Angle sensors next to the UWB ranges: a slew encoder and an inclinometer per section.
 
 They arrive as ``sensor_msgs/JointState`` on their own clock and at their own rate, named by
 the configured joint names, in radians: the slew about z from the world x-axis
@@ -13,7 +28,8 @@ __all__ = ['AngleSamples']
 
 
 class AngleSamples:
-    """The newest angle sample, matched to range frames by stamp.
+    """
+    The newest angle sample, matched to range frames by stamp.
 
     Parameters
     ----------
@@ -30,6 +46,7 @@ class AngleSamples:
         ``messages``, ``malformed`` (names and positions differ in length), ``out_of_order``
         (stamp not newer than the sample held), ``unknown_names`` (names not configured),
         ``frames_with_angles``, ``frames_without_fresh_angles`` (once any angles came).
+
     """
 
     def __init__(self, slew_name, pitch_names, max_age):
@@ -48,7 +65,8 @@ class AngleSamples:
         self.counts = Counter()
 
     def add(self, stamp, names, positions):
-        """Take one message's angles, stamped ``stamp`` (s).
+        """
+        Take one message's angles, stamped ``stamp`` (s).
 
         Non-finite values count as not measured. A message that is malformed or not newer
         than the held sample is counted and ignored.
@@ -70,7 +88,8 @@ class AngleSamples:
         self._stamp, self._angles = stamp, angles
 
     def at(self, stamp):
-        """Angles for a range frame stamped ``stamp`` (s).
+        """
+        Angles for a range frame stamped ``stamp`` (s).
 
         Returns
         -------
@@ -79,6 +98,7 @@ class AngleSamples:
         pitches : ndarray, shape (p,), or None
             Radians, NaN where a section's inclinometer was not sent; None without a
             fresh sample.
+
         """
         if self._stamp is None:
             return None, None

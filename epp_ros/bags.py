@@ -1,4 +1,19 @@
-"""rosbag2 files without ROS: synthesise, read, evaluate and describe them (``rosbags``).
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+rosbag2 files without ROS: synthesise, read, evaluate and describe them (``rosbags``).
 
 Bags are standard rosbag2 (metadata version 9, MCAP or sqlite3 storage, explicit QoS per
 topic), so that ``ros2 bag play``/``record`` on a full ROS install read and write the same.
@@ -6,14 +21,8 @@ Topics: ``/uwb/ranges`` (``sensor_msgs/JointState`` exactly as uwb_driver publis
 ``/arm_posture/ground_truth`` and ``/arm_posture`` (``geometry_msgs/PoseArray``), and
 optionally ``/uwb/raw`` (``std_msgs/String``, the devices' lines).
 """
-import time
 from pathlib import Path
-
-import numpy as np
-from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
-from rosbags.interfaces import QosTime
-from rosbags.rosbag2 import Reader, StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore
+import time
 
 from epp_ros import contract
 from epp_ros.core import PostureEstimator
@@ -21,6 +30,11 @@ from epp_ros.core.frame_policy import ADMIT, CLOCK_JUMP, FramePolicy
 from epp_ros.core.metrics import frame_rmse, joint_errors, pooled_rmse
 from epp_ros.core.simulate import RangeNoise, working_cycle
 from epp_ros.uwb.emulation import cycle_lines
+import numpy as np
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
+from rosbags.interfaces import QosTime
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.typesys import get_typestore, Stores
 
 __all__ = ['BagError', 'RANGES', 'TRUTH', 'POSTURE', 'RAW', 'TYPES', 'synthesize', 'info',
            'write_frames',
@@ -38,7 +52,7 @@ class BagError(Exception):
 
 
 def qos_profile(depth, reliable=True):
-    """A fully specified QoS profile to store with a connection."""
+    """Return a fully specified QoS profile to store with a connection."""
     infinite = QosTime(sec=0, nsec=0)
     return Qos(history=QosHistory.KEEP_LAST, depth=depth,
                reliability=QosReliability.RELIABLE if reliable else QosReliability.BEST_EFFORT,
@@ -55,7 +69,7 @@ def _header(stamp_ns, frame_id):
     types = TYPESTORE.types
     return types['std_msgs/msg/Header'](
         stamp=types['builtin_interfaces/msg/Time'](sec=int(stamp_ns // 10 ** 9),
-                                                    nanosec=int(stamp_ns % 10 ** 9)),
+                                                   nanosec=int(stamp_ns % 10 ** 9)),
         frame_id=frame_id)
 
 
@@ -107,7 +121,8 @@ class _BagWriter:
 
 def synthesize(path, config, duration=60.0, rate=10.0, sigma=0.1, nlos=0.0, drop=0.0,
                seed=0, storage='mcap', raw_protocol=None, start_ns=None):
-    """Write a simulated working cycle as a bag.
+    """
+    Write a simulated working cycle as a bag.
 
     Every cycle gives ``/uwb/ranges`` and ``/arm_posture/ground_truth`` with the same stamp
     (and, with ``raw_protocol``, the devices' lines on ``/uwb/raw``).
@@ -116,6 +131,7 @@ def synthesize(path, config, duration=60.0, rate=10.0, sigma=0.1, nlos=0.0, drop
     -------
     dict
         Messages written per topic.
+
     """
     model = config.model()
     rng = np.random.default_rng(seed)
@@ -141,17 +157,25 @@ def synthesize(path, config, duration=60.0, rate=10.0, sigma=0.1, nlos=0.0, drop
 
 
 def write_frames(path, config, frames, storage='mcap'):
-    """Write range frames as ``/uwb/ranges``, exactly as uwb_driver publishes them.
+    """
+    Write range frames as ``/uwb/ranges``, exactly as uwb_driver publishes them.
 
     Parameters
     ----------
+    path : path
+        The bag to create (a directory).
+    config : epp_ros.config.PumpConfig
+        The pump: frame id and link names of the messages.
     frames : iterable of (int, ndarray)
         ``(stamp_ns, ranges)`` with ranges (p, m) in metres, NaN where missing.
+    storage : str
+        ``'mcap'`` or ``'sqlite3'``.
 
     Returns
     -------
     int
         Messages written.
+
     """
     count = 0
     with _BagWriter(path, storage) as bag:
@@ -208,7 +232,8 @@ def _stamp_ns(message):
 
 
 def read_frames(path, config):
-    """(stamp_ns, (p, m) ranges, (p, p) tag ranges) of every ``/uwb/ranges`` message.
+    """
+    (stamp_ns, (p, m) ranges, (p, p) tag ranges) of every ``/uwb/ranges`` message.
 
     Labels are arranged by the config's names (:meth:`PumpConfig.link_matrices`).
     """
@@ -246,10 +271,17 @@ def info(path):
 
 
 def evaluate(path, config, method='cepp', out=None, **options):
-    """Run an estimator over a bag's ``/uwb/ranges``; score it against the truth if any.
+    """
+    Run an estimator over a bag's ``/uwb/ranges``; score it against the truth if any.
 
     Parameters
     ----------
+    path : path
+        The bag to read.
+    config : epp_ros.config.PumpConfig
+        The pump the bag was recorded on.
+    method : str
+        A name in :data:`epp_ros.core.METHODS`.
     out : path, optional
         A copy of the bag with the estimated ``/arm_posture`` added.
 
@@ -258,9 +290,10 @@ def evaluate(path, config, method='cepp', out=None, **options):
     dict
         ``frames``, ``solved`` (published by the node's policy), ``rejected`` (frames not
         published, by reason), ``ignored`` (frames the stamp rules skip, by reason:
-        ``core.frame_policy``), ``published_stamps_ns``, ``rmse_m`` (NaN without truth), ``joint_rmse_m`` (p,),
-        ``max_arm_length_error_m``, ``ms_per_frame``, ``method``, and the per-frame series
-        ``stamps_ns``, ``frame_rmse_m`` for plotting.
+        ``core.frame_policy``), ``published_stamps_ns``, ``rmse_m`` (NaN without truth),
+        ``joint_rmse_m`` (p,), ``max_arm_length_error_m``, ``ms_per_frame``, ``method``, and
+        the per-frame series ``stamps_ns``, ``frame_rmse_m`` for plotting.
+
     """
     frames = read_frames(path, config)
     truth = read_truth(path)

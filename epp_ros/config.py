@@ -1,18 +1,32 @@
-"""The pump description shared by every node and tool (``config/pump.yaml``).
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The pump description shared by every node and tool (``config/pump.yaml``).
 
 One schema, validated in one place: nodes pass their ROS parameter values to
 :func:`pump_config_from_parameters`, plain tools read the YAML with :func:`load_pump_config`.
 A bad description raises :class:`ConfigError` with one line naming the field.
 """
-import re
 from dataclasses import dataclass
 from pathlib import Path
-
-import numpy as np
-import yaml
+import re
 
 from epp_ros.core.model import BoomModel
-from epp_ros.uwb.formats import FORMATS, device_number
+from epp_ros.uwb.formats import device_number, FORMATS
+import numpy as np
+import yaml
 
 __all__ = ['ConfigError', 'Source', 'PumpConfig', 'PUMP_PARAMETERS', 'PROTOCOLS',
            'pump_config_from_parameters', 'load_pump_config', 'default_config_path',
@@ -42,7 +56,7 @@ PUMP_PARAMETERS = {
     'source_protocols': ([''], f'Line protocol of each source: {", ".join(FORMATS)} or '
                                'auto.'),
     'source_tags': ([''], "Tag id on each source for formats that do not name it, else ''."),
-    'source_anchors': ([''], "Anchor id on each source for formats that name no device, else "
+    'source_anchors': ([''], 'Anchor id on each source for formats that name no device, else '
                              "'' (all '' when no source needs one)."),
 }
 
@@ -77,7 +91,7 @@ class PumpConfig:
     pivot_offset: float = 0.0   #: metres from the slew axis to the boom pivot
 
     def model(self):
-        """The :class:`BoomModel` of this pump."""
+        """Return the :class:`BoomModel` of this pump."""
         return BoomModel(self.arm_lengths, self.base, self.anchor_positions, self.pivot_offset)
 
     @property
@@ -90,7 +104,8 @@ class PumpConfig:
         return f'{self.tag_names[row]}:{self.tag_names[column]}'
 
     def link_matrices(self, names, values):
-        """Arrange labelled ranges into the arrays of the estimators.
+        """
+        Arrange labelled ranges into the arrays of the estimators.
 
         Parameters
         ----------
@@ -113,6 +128,7 @@ class PumpConfig:
         ------
         ValueError
             When ``names`` and ``values`` differ in length.
+
         """
         if len(names) != len(values):
             raise ValueError(f'{len(names)} names but {len(values)} ranges')
@@ -145,7 +161,8 @@ class PumpConfig:
             return links
 
     def tag_index(self, device_id):
-        """Joint index (0-based) of a tag device id, or None.
+        """
+        Joint index (0-based) of a tag device id, or None.
 
         Ids compare as the hexadecimal numbers they spell: ``'B82'``, ``'0B82'`` and
         ``'0xb82'`` are the same device.
@@ -167,18 +184,20 @@ class PumpConfig:
 
 
 def normalise_device_id(value):
-    """A device id as written, without surrounding blanks, upper-case (``0x`` kept out)."""
+    """Return a device id as written, without surrounding blanks, upper-case (``0x`` kept out)."""
     text = str(value).strip().upper()
     return text[2:] if text.startswith('0X') and len(text) > 2 else text
 
 
 def listen_address(port):
-    """(host, port) of a ``tcp-listen://host:port`` source, None for other ports.
+    """
+    (host, port) of a ``tcp-listen://host:port`` source, None for other ports.
 
     Raises
     ------
     ConfigError
         For a ``tcp-listen://`` port without an explicit address and a port 1-65535.
+
     """
     if not port.startswith('tcp-listen://'):
         return None
@@ -225,7 +244,8 @@ def _numbers(values, field):
 
 
 def pump_config_from_parameters(values):
-    """Validate a pump description given as parameter values (names of PUMP_PARAMETERS).
+    """
+    Validate a pump description given as parameter values (names of PUMP_PARAMETERS).
 
     Parameters
     ----------
@@ -239,6 +259,7 @@ def pump_config_from_parameters(values):
     Raises
     ------
     ConfigError
+
     """
     unknown = sorted(set(values) - set(PUMP_PARAMETERS))
     if unknown:
@@ -323,7 +344,7 @@ def _source(port, protocol, tag, anchor, tag_ids, anchor_ids):
 
 
 def _known_id(value, ids, field, ids_field, port):
-    """A source's device id (None if empty), ConfigError unless it is one of ``ids``."""
+    """Return a source's device id (None if empty), ConfigError unless it is one of ``ids``."""
     value = normalise_device_id(value) or None
     if value is not None and device_number(value) not in {device_number(i) for i in ids}:
         raise ConfigError(f'{field}: {value!r} for {port} is not in {ids_field} {list(ids)}')
@@ -331,7 +352,7 @@ def _known_id(value, ids, field, ids_field, port):
 
 
 def default_config_path():
-    """The pump description shipped with the package (installed share/ or the checkout)."""
+    """Return the pump description shipped with the package (installed share/ or the checkout)."""
     here = Path(__file__).resolve().parent
     for candidate in (here.parent / 'config' / 'pump.yaml',
                       here.parents[3] / 'share' / 'epp_ros' / 'config' / 'pump.yaml'
@@ -342,7 +363,8 @@ def default_config_path():
 
 
 def load_pump_config(path=None):
-    """Read and validate a pump description from a ROS parameters YAML file.
+    """
+    Read and validate a pump description from a ROS parameters YAML file.
 
     The ``/**`` section holds the description (and node settings, ignored here).
     """

@@ -1,4 +1,19 @@
-"""The message contract of epp_ros: its topics, their QoS, and the layout of its messages.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The message contract of epp_ros: its topics, their QoS, and the layout of its messages.
 
 One home for what the nodes, the bag tools, the demo and the benchmarks must agree on. No
 ROS imports: the nodes build rclpy profiles and messages from it (``nodes/common.py``), the
@@ -15,12 +30,11 @@ bag tools rosbags ones (``bags.py``), and decoding works on either kind of messa
 Names are relative, so a namespace (``-r __ns:=/pump7``) moves a whole pump; bags store the
 absolute names of the root namespace (:attr:`Topic.absolute`).
 """
-import math
 from dataclasses import dataclass, replace
-
-import numpy as np
+import math
 
 from epp_ros.core.poses import boom_quaternions
+import numpy as np
 
 __all__ = ['Topic', 'RANGES', 'RANGES_INPUT', 'ANGLES', 'POSTURE', 'MARKERS', 'TRUTH',
            'DIAGNOSTICS', 'RAW', 'posture_poses', 'points_of', 'joints_of', 'stamp_parts',
@@ -32,13 +46,13 @@ class Topic:
     """A topic and the QoS it is used with: reliable, keep last ``depth`` (None: keep all)."""
 
     name: str
-    type: str
+    type: str  # noqa: A003 (public field mirroring a ROS topic's type; shadows nothing in scope)
     depth: int = 10
     reliable: bool = True
 
     @property
     def absolute(self):
-        """The name in the root namespace, as bags store it."""
+        """Return the name in the root namespace, as bags store it."""
         return self.name if self.name.startswith('/') else '/' + self.name
 
 
@@ -57,7 +71,8 @@ RAW = Topic('uwb/raw', 'std_msgs/msg/String', depth=100)
 
 
 def posture_poses(base, joints):
-    """The poses of a PoseArray posture: (position (3,), quaternion (x, y, z, w)) each.
+    """
+    Return the poses of a PoseArray posture: (position (3,), quaternion (x, y, z, w)) each.
 
     Parameters
     ----------
@@ -71,13 +86,14 @@ def posture_poses(base, joints):
     list of (tuple, tuple)
         p + 1 poses of floats: the pivot first; pose k's x-axis along section k, its z-axis
         up in the boom's vertical plane.
+
     """
     return [(tuple(float(v) for v in position), tuple(float(v) for v in quaternion))
             for position, quaternion in zip([base, *joints], boom_quaternions(base, joints))]
 
 
 def points_of(message):
-    """The pivot then joints 1..p, (p + 1, 3), of a PoseArray posture (rclpy or rosbags)."""
+    """Return the pivot then joints 1..p, (p + 1, 3), of a PoseArray posture (rclpy or rosbags)."""
     return np.array([[pose.position.x, pose.position.y, pose.position.z]
                      for pose in message.poses], dtype=float).reshape(-1, 3)
 

@@ -1,16 +1,31 @@
-"""How healthy an estimate is: the estimator's diagnostics as a level and key values.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+How healthy an estimate is: the estimator's diagnostics as a level and key values.
 
 Shared by the estimator node (``/diagnostics``) and the tools that print or record it.
 """
+from epp_ros.core.integrity import ERROR, OK, Thresholds, WARN
 import numpy as np
-
-from epp_ros.core.integrity import ERROR, OK, WARN, Thresholds
 
 __all__ = ['OK', 'WARN', 'ERROR', 'Thresholds', 'grade', 'report', 'assess']
 
 
 def grade(diagnostics):
-    """Level and message of one frame's ``PostureEstimator.last_diagnostics``.
+    """
+    Level and message of one frame's ``PostureEstimator.last_diagnostics``.
 
     The level is the integrity verdict's (``core.integrity``: thresholds, consistency,
     observability), raised to WARN when the solver stopped before converging. Cheap
@@ -21,12 +36,13 @@ def grade(diagnostics):
     level : int
         OK, WARN or ERROR; a frame at ERROR was not published.
     message : str
+
     """
     if not diagnostics.get('valid', False):
         status = diagnostics.get('status', 'unknown')
         detail = diagnostics.get('message', '')
-        return ERROR, f'no estimate: {status}' + (f' ({detail})' if detail and
-                                                   not detail.startswith('no estimate') else '')
+        shown = detail and not detail.startswith('no estimate')
+        return ERROR, f'no estimate: {status}' + (f' ({detail})' if shown else '')
     level, message = diagnostics.get('level', OK), diagnostics.get('message', 'tracking')
     if not diagnostics.get('converged', True):
         return max(level, WARN), 'solver stopped before converging'
@@ -34,7 +50,7 @@ def grade(diagnostics):
 
 
 def report(diagnostics, lengths):
-    """The key values of one frame's diagnostics, as text for ``/diagnostics``."""
+    """Return the key values of one frame's diagnostics, as text for ``/diagnostics``."""
     estimated = np.asarray(diagnostics.get('section_lengths', np.full(len(lengths), np.nan)))
     values = {'method': diagnostics.get('method', ''), 'status': diagnostics.get('status', ''),
               'range residual RMS [m]': f'{diagnostics.get("range_residual_rms", np.nan):.4f}',

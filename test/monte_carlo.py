@@ -1,10 +1,25 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Statistical checks shared by the estimator tests."""
 import numpy as np
 import pytest
 
 
 def assert_mse_at_bound(squared, bound_rmse, estimator):
-    """Mean squared error of the trials at the bound, within 4 of its own standard errors.
+    """
+    Mean squared error of the trials at the bound, within 4 of its own standard errors.
 
     ``squared`` (trials,) holds each trial's mean squared joint error, m^2; the estimator's
     own predicted RMSE (from its Fisher information) must match the bound within 5 %.

@@ -1,21 +1,34 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Helpers of the multi-process tests: installed executables, a listening node, emulators."""
+from pathlib import Path
 import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
+from diagnostic_msgs.msg import DiagnosticArray
+from epp_ros.config import load_pump_config
+from epp_ros.nodes.common import POSTURE_QOS, RANGES_QOS, to_seconds
+from geometry_msgs.msg import PoseArray
 import numpy as np
 import pytest
 import rclpy
-import yaml
-from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseArray
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-
-from epp_ros.config import load_pump_config
-from epp_ros.nodes.common import POSTURE_QOS, RANGES_QOS, to_seconds
+import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 PUMP_YAML = ROOT / 'config' / 'pump.yaml'
@@ -105,7 +118,7 @@ def channels(protocol, config):
 
 
 def params_with_sources(tmp_path, config, announced, protocol, name='params.yaml'):
-    """A parameters file: the pump description with the emulator's ports as sources."""
+    """Write a parameters file: the pump description with the emulator's ports as sources."""
     document = yaml.safe_load(Path(config).read_text())
     shared = document['/**']['ros__parameters']
     shared['source_ports'] = [a[1] for a in announced]
@@ -122,7 +135,8 @@ def poses_to_joints(message):
 
 
 def truth_window(listener, covering=None, timeout=10.0):
-    """Stamps between which truth was received (earlier truth was published unheard).
+    """
+    Stamps between which truth was received (earlier truth was published unheard).
 
     With ``covering`` (seconds), first wait until truth reaches that stamp: a restarted
     emulator's truth publisher must be discovered again, which under load can take longer

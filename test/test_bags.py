@@ -1,16 +1,29 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """epp_bag and epp_ros.bags: round trips, live replay, and broken bags."""
 import json
 import signal
 import subprocess
 import time
 
-import numpy as np
-import pytest
-from system import PUMP_YAML, script
-
 from epp_ros import bags
 from epp_ros.config import load_pump_config
 from epp_ros.nodes.common import to_seconds
+import numpy as np
+import pytest
+from system import PUMP_YAML, script
 
 CONFIG = load_pump_config(PUMP_YAML)
 pytestmark = pytest.mark.usefixtures('fresh_listener')

@@ -1,12 +1,25 @@
-"""The chain estimator and the Cramér–Rao bound."""
-import numpy as np
-import pytest
-from monte_carlo import assert_mse_at_bound
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
 
+"""The chain estimator and the Cramér–Rao bound."""
 from epp_ros.core import PostureEstimator
 from epp_ros.core.bounds import crlb, fisher_information
 from epp_ros.core.chain import angles_from_joints
-from epp_ros.core.simulate import RangeNoise, random_posture, truck_pump, working_cycle, xie3dim
+from epp_ros.core.simulate import random_posture, RangeNoise, truck_pump, working_cycle, xie3dim
+from monte_carlo import assert_mse_at_bound
+import numpy as np
+import pytest
 
 GEOMETRIES = {'xie3dim': lambda: xie3dim()[0], 'truck': truck_pump}
 

@@ -1,11 +1,24 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 from pathlib import Path
 
+from epp_ros.config import (ConfigError, load_pump_config, pump_config_from_parameters,
+                            PUMP_PARAMETERS, Source)
 import numpy as np
 import pytest
 import yaml
-
-from epp_ros.config import (PUMP_PARAMETERS, ConfigError, Source, load_pump_config,
-                            pump_config_from_parameters)
 
 ROOT = Path(__file__).resolve().parents[1]
 PUMP_YAML = ROOT / 'config' / 'pump.yaml'

@@ -1,26 +1,43 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """uwb_emulator -> pty or TCP -> uwb_driver -> /uwb/ranges, as separate processes over DDS."""
 import signal
 import socket
 import subprocess
 import time
 
-import numpy as np
-import pytest
-import yaml
 from diagnostic_msgs.msg import DiagnosticStatus
-from system import (PUMP_YAML, params_with_sources, poses_to_joints, script,
-                    start_emulator, truth_window)
-
 from epp_ros.config import load_pump_config
 from epp_ros.nodes.common import to_seconds
+import numpy as np
+import pytest
+from system import (params_with_sources, poses_to_joints, PUMP_YAML, script, start_emulator,
+                    truth_window)
+import yaml
 
 pytestmark = pytest.mark.usefixtures('fresh_listener')
 
 
 def check_ranges_against_truth(listener, config, since, tolerance):
-    """Every tag's ranges in every frame must match some true posture's (no noise) within
+    """
+    Check every tag's ranges in every frame against the true postures.
+
+    Every tag's ranges in every frame must match some true posture's (no noise) within
     the format's precision, and frames carry the configured names. (Tags on separate ports
-    are not synchronised: one frame may hold rows of adjacent cycles.)"""
+    are not synchronised: one frame may hold rows of adjacent cycles.)
+    """
     checked = listener.ranges[min(since + 2, len(listener.ranges) - 1)]
     first, last = truth_window(listener, covering=to_seconds(checked.header.stamp))
     model = config.model()
@@ -38,8 +55,6 @@ def check_ranges_against_truth(listener, config, since, tolerance):
             reported = np.isfinite(measured[row])
             errors = np.abs(true_ranges[:, row, reported] - measured[row, reported])
             assert errors.max(axis=1).min() <= tolerance
-
-
 
 
 TREK_YAML = {
@@ -204,7 +219,7 @@ def start_any_emulator(start, protocol, config):
 
 
 def slot_config(tmp_path):
-    """The packaged pump with anchors numbered 0-5, as the 8-slot formats print them."""
+    """Return the packaged pump with anchors numbered 0-5, as the 8-slot formats print them."""
     document = yaml.safe_load(PUMP_YAML.read_text())
     document['/**']['ros__parameters']['anchor_ids'] = ['0', '1', '2', '3', '4', '05']
     path = tmp_path / 'slot_pump.yaml'
@@ -232,8 +247,8 @@ def test_a_wifi_tag_that_connects_to_us_is_read_without_newlines(listener, proce
                         '-p', f'port:=tcp-listen://127.0.0.1:{port}', '-p', 'protocol:=auto',
                         '-p', "tag:='01'"])
     message = ('{"links":[' + ','.join(f'{{"A":"{a}","R":"{2 + i}.5"}}' for i, a in
-                                        enumerate(['1782', '1783', '1784', '1785', '1786',
-                                                   '1787'])) + ']}').encode()
+                                       enumerate(['1782', '1783', '1784', '1785', '1786',
+                                                  '1787'])) + ']}').encode()
     deadline = time.monotonic() + 20
     while True:
         try:

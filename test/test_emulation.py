@@ -1,14 +1,27 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Emulated device lines decode back to the ranges they were made from."""
 import os
 
+from epp_ros.config import load_pump_config, pump_config_from_parameters
+from epp_ros.core.simulate import random_posture, RangeNoise
+from epp_ros.uwb.decoder import LineDecoder
+from epp_ros.uwb.emulation import channel_count, corrupt, cycle_lines, PtyOutput, TcpOutput
+from epp_ros.uwb.frames import FrameAssembler
 import numpy as np
 import pytest
-
-from epp_ros.config import load_pump_config, pump_config_from_parameters
-from epp_ros.core.simulate import RangeNoise, random_posture
-from epp_ros.uwb.decoder import LineDecoder
-from epp_ros.uwb.emulation import PtyOutput, TcpOutput, channel_count, corrupt, cycle_lines
-from epp_ros.uwb.frames import FrameAssembler
 
 CONFIG = load_pump_config()
 PRECISION = {'json': 1e-3, 'lec': 5e-3, 'arduino': 5e-3, 'trek': 1e-3}
@@ -123,7 +136,7 @@ def test_config_validation_is_shared_with_the_emulator():
 
 
 def config_for(protocol):
-    """The packaged pump, with anchors 0-5 (or 0-3) for formats whose anchors are slots."""
+    """Return the packaged pump, with anchors 0-5 (or 0-3) for formats whose anchors are slots."""
     import dataclasses
 
     from epp_ros.uwb.formats import FORMATS

@@ -1,11 +1,24 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 from pathlib import Path
 
+from epp_ros.core import BoomModel, PostureEstimator, RANGE_METHODS
+from epp_ros.core.simulate import random_posture, RangeNoise, truck_pump, working_cycle, xie3dim
 import numpy as np
 import pytest
 import yaml
-
-from epp_ros.core import RANGE_METHODS, BoomModel, PostureEstimator
-from epp_ros.core.simulate import RangeNoise, random_posture, truck_pump, working_cycle, xie3dim
 
 DATA = Path(__file__).parent / 'data'
 GEOMETRIES = {'xie3dim': lambda: xie3dim()[0], 'truck': truck_pump}
@@ -61,7 +74,7 @@ def test_arm_lengths_are_held_under_noise(geometry, method):
 
 
 def estimate_of(estimator, ranges):
-    """The method's estimate of a frame, whether the integrity checks pass it or not."""
+    """Return the method's estimate of a frame, whether the integrity checks pass it or not."""
     estimator.update(ranges)
     return estimator.last_diagnostics['estimate']
 
@@ -191,7 +204,8 @@ def test_default_tolerances_track_to_within_a_centimetre(method):
 
 
 def test_cepp_follows_a_slewing_boom_under_noise():
-    """The paper's plane-from-last-frame locks onto the first plane; our slew update does not.
+    """
+    The paper's plane-from-last-frame locks onto the first plane; our slew update does not.
 
     Through the estimator the integrity checks catch the locked plane (its residuals grow
     as the boom slews) and solve such frames afresh: the paper's rule needs that again and

@@ -1,17 +1,30 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Every device format of the registry: real firmware lines, corruption, fuzzing, detection."""
 import math
 
-import numpy as np
-import pytest
-from hypothesis import given, settings, strategies as st
-
-from epp_ros.config import PROTOCOLS, load_pump_config
+from epp_ros.config import load_pump_config, PROTOCOLS
 from epp_ros.uwb.decoder import LineDecoder
-from epp_ros.uwb.formats import FORMATS, Cycle, detect_format, device_number, recognised
-from epp_ros.uwb.formats.base import ParseResult, RangeRecord, printed_number
+from epp_ros.uwb.formats import Cycle, detect_format, device_number, FORMATS, recognised
+from epp_ros.uwb.formats.base import ParseResult, printed_number, RangeRecord
 from epp_ros.uwb.formats.haoru import format_haoru
 from epp_ros.uwb.formats.mauwb import format_mauwb
 from epp_ros.uwb.protocols import ALL_PARSERS, WHOLE_TAG_LINES
+from hypothesis import given, settings, strategies as st
+import numpy as np
+import pytest
 
 FUZZ = settings(max_examples=150, deadline=None)
 JUNK = bytes(range(256)).decode('utf-8', errors='replace')
@@ -24,7 +37,7 @@ MAUWB = 'AT+RANGE=tid:1,mask:04,seq:63,range:(0,0,30,0,0,0,0,0),rssi:(0,0,-80.50
 
 
 def records(*triples, kind='range'):
-    """RangeRecords of (anchor, tag, metres)."""
+    """Return RangeRecords of (anchor, tag, metres)."""
     return tuple(RangeRecord(anchor, metres, tag, kind) for anchor, tag, metres in triples)
 
 
@@ -280,7 +293,7 @@ NOISE = st.sampled_from([',', ' ', '\t', ':', '[', ']', '=', '(', ')', '{', '}',
 
 @st.composite
 def mutated_lines(draw):
-    """A valid line of any format with a few cuts, insertions, replacements and repeats."""
+    """Draw a valid line of any format with a few cuts, insertions, replacements and repeats."""
     text = draw(st.sampled_from([f.example for f in FORMATS.values()] + [HAORU, LES, NRNG]))
     for _ in range(draw(st.integers(1, 4))):
         start = draw(st.integers(0, len(text)))

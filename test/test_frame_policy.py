@@ -1,10 +1,23 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """The stamp rules shared by the estimator node and epp_bag eval."""
 import math
 
+from epp_ros.core.frame_policy import ADMIT, CLOCK_JUMP, FramePolicy, MALFORMED, OUT_OF_ORDER
 import numpy as np
 import pytest
-
-from epp_ros.core.frame_policy import ADMIT, CLOCK_JUMP, MALFORMED, OUT_OF_ORDER, FramePolicy
 
 
 def test_stamps_must_increase_and_a_large_step_back_is_a_clock_jump():

@@ -1,13 +1,26 @@
-"""Tag-tag ranges and angle sensors fused into the chain least squares; the turntable offset."""
-import numpy as np
-import pytest
-from monte_carlo import assert_mse_at_bound
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
 
+"""Tag-tag ranges and angle sensors fused into the chain least squares; the turntable offset."""
 from epp_ros.core import BoomModel, PostureEstimator
 from epp_ros.core.bounds import crlb, fisher_information
 from epp_ros.core.measurements import Measurements, Residuals, SensorNoise
-from epp_ros.core.simulate import (AngleNoise, RangeNoise, observe, random_posture,
-                                   truck_pump, working_cycle)
+from epp_ros.core.simulate import (AngleNoise, observe, random_posture, RangeNoise, truck_pump,
+                                   working_cycle)
+from monte_carlo import assert_mse_at_bound
+import numpy as np
+import pytest
 
 NOISE = SensorNoise(range_sigma=0.1, tag_sigma=0.05, pitch_sigma=0.01, slew_sigma=0.02)
 
@@ -136,7 +149,7 @@ def test_a_too_long_tag_tag_range_is_flagged_as_nlos():
 
 
 def estimate_of(estimator, ranges):
-    """The method's estimate of a frame, whether the integrity checks pass it or not."""
+    """Return the method's estimate of a frame, whether the integrity checks pass it or not."""
     estimator.update(ranges)
     return estimator.last_diagnostics['estimate']
 

@@ -1,9 +1,22 @@
-import numpy as np
-import pytest
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
 
 from epp_ros.core import PostureEstimator
-from epp_ros.core.simulate import RangeNoise, random_posture, truck_pump
-from epp_ros.health import ERROR, OK, WARN, Thresholds, assess
+from epp_ros.core.simulate import random_posture, RangeNoise, truck_pump
+from epp_ros.health import assess, ERROR, OK, Thresholds, WARN
+import numpy as np
+import pytest
 
 MODEL = truck_pump()
 JOINTS = random_posture(MODEL, np.random.default_rng(0))[2]

@@ -1,14 +1,27 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Integrity: never a confident wrong posture (core.integrity through PostureEstimator)."""
+from epp_ros.core import PostureEstimator
+from epp_ros.core.bounds import crlb
+from epp_ros.core.integrity import (_binomial_tail, _chi_square_limit, fold_alternatives,
+                                    IntegrityLimits, Thresholds)
+from epp_ros.core.measurements import Measurements
+from epp_ros.core.simulate import random_posture, RangeNoise, truck_pump, working_cycle
 import numpy as np
 import pytest
 from scipy.stats import binom, chi2
-
-from epp_ros.core import PostureEstimator
-from epp_ros.core.bounds import crlb
-from epp_ros.core.integrity import (IntegrityLimits, Thresholds, _binomial_tail,
-                                    _chi_square_limit, fold_alternatives)
-from epp_ros.core.measurements import Measurements
-from epp_ros.core.simulate import RangeNoise, random_posture, truck_pump, working_cycle
 
 MODEL = truck_pump()
 RATE = 10.0
@@ -19,7 +32,7 @@ PLANAR = ('chain', 'cepp')
 
 
 def cycle_frames(seed, seconds=60.0):
-    """A working cycle at 10 Hz with sigma = 0.1 m and 5 % dropouts: (frames, truths)."""
+    """Simulate a working cycle at 10 Hz with sigma = 0.1 m and 5 % dropouts: (frames, truths)."""
     trajectory = working_cycle(MODEL, seconds, RATE, rng=np.random.default_rng(seed))
     rng = np.random.default_rng(seed + 100)
     noise = RangeNoise(sigma=0.1, dropout=0.05)
@@ -62,7 +75,8 @@ def test_one_corrupted_frame_is_refused_and_tracking_recovers_within_2_s(method,
 
 @pytest.mark.parametrize('method', ['chain', 'cepp', 'epp2'])
 def test_clean_frames_are_rarely_refused(method):
-    """The tests' false-alarm rate is 1e-4 each: over 600 frames a handful at most.
+    """
+    The tests' false-alarm rate is 1e-4 each: over 600 frames a handful at most.
 
     EPP2 solves in 3-D: a third of its estimates leave the boom's plane by more than
     ``arm_length_error`` and are refused for it, rightly (they are that far off).

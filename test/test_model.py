@@ -1,7 +1,20 @@
-import numpy as np
-import pytest
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
 
 from epp_ros.core import BoomModel
+import numpy as np
+import pytest
 
 ANCHORS = [[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0], [0.0, 0.0, 10.0]]
 
@@ -38,19 +51,19 @@ def test_base_anchor_found():
 
 
 @pytest.mark.parametrize('kwargs, field', [
-    (dict(arm_lengths=[]), 'arm_lengths'),
-    (dict(arm_lengths=[1.0, -2.0]), 'arm_lengths'),
-    (dict(arm_lengths=[1.0, 0.0]), 'arm_lengths'),
-    (dict(arm_lengths=[1.0, np.nan]), 'arm_lengths'),
-    (dict(arm_lengths='long'), 'arm_lengths'),
-    (dict(base=[0.0, 0.0]), 'base'),
-    (dict(base=[0.0, np.inf, 0.0]), 'base'),
-    (dict(anchors=ANCHORS[:2]), 'anchors'),
-    (dict(anchors=[[0.0, 0.0]] * 4), 'anchors'),
-    (dict(anchors=[[0.0, 0.0, np.nan]] * 4), 'anchors'),
+    ({'arm_lengths': []}, 'arm_lengths'),
+    ({'arm_lengths': [1.0, -2.0]}, 'arm_lengths'),
+    ({'arm_lengths': [1.0, 0.0]}, 'arm_lengths'),
+    ({'arm_lengths': [1.0, np.nan]}, 'arm_lengths'),
+    ({'arm_lengths': 'long'}, 'arm_lengths'),
+    ({'base': [0.0, 0.0]}, 'base'),
+    ({'base': [0.0, np.inf, 0.0]}, 'base'),
+    ({'anchors': ANCHORS[:2]}, 'anchors'),
+    ({'anchors': [[0.0, 0.0]] * 4}, 'anchors'),
+    ({'anchors': [[0.0, 0.0, np.nan]] * 4}, 'anchors'),
 ])
 def test_invalid_geometry_names_the_field(kwargs, field):
-    args = dict(arm_lengths=[1.0, 2.0], base=[0.0, 0.0, 0.0], anchors=ANCHORS)
+    args = {'arm_lengths': [1.0, 2.0], 'base': [0.0, 0.0, 0.0], 'anchors': ANCHORS}
     args.update(kwargs)
     with pytest.raises(ValueError, match=field):
         BoomModel(**args)

@@ -1,9 +1,22 @@
-import numpy as np
-import pytest
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
 
 from epp_ros.core.edm import centering_matrix, classical_mds, squared_distances
 from epp_ros.core.nedm import (_constraint_operator, _Projector, nearest_edm,
-                                project_constrained_edm)
+                               project_constrained_edm)
+import numpy as np
+import pytest
 
 
 def noisy_edm(rng, n, dim, noise):
@@ -117,14 +130,14 @@ def test_subproblem_newton_converges_fast():
 
 
 @pytest.mark.parametrize('kwargs, message', [
-    (dict(target=np.zeros((3, 4))), 'square'),
-    (dict(weights=-np.ones((4, 4))), 'weights'),
-    (dict(target=np.full((4, 4), np.nan)), 'finite'),
-    (dict(rank=4), 'rank'),
-    (dict(fixed=np.zeros((3, 3), bool)), 'shape'),
+    ({'target': np.zeros((3, 4))}, 'square'),
+    ({'weights': -np.ones((4, 4))}, 'weights'),
+    ({'target': np.full((4, 4), np.nan)}, 'finite'),
+    ({'rank': 4}, 'rank'),
+    ({'fixed': np.zeros((3, 3), bool)}, 'shape'),
 ])
 def test_invalid_arguments_raise(kwargs, message):
-    args = dict(target=squared_distances(np.eye(4)), rank=2)
+    args = {'target': squared_distances(np.eye(4)), 'rank': 2}
     args.update(kwargs)
     target = args.pop('target')
     with pytest.raises(ValueError, match=message):

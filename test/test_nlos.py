@@ -1,13 +1,26 @@
-"""The NLOS range error model, and the chain's global search under it."""
-import numpy as np
-import pytest
-from scipy.stats import exponnorm, norm
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
 
+"""The NLOS range error model, and the chain's global search under it."""
 from epp_ros.core import PostureEstimator
 from epp_ros.core.chain import ChainMethod
 from epp_ros.core.measurements import Measurements, Residuals
 from epp_ros.core.nlos import NlosMixture
-from epp_ros.core.simulate import RangeNoise, observe, random_posture, truck_pump
+from epp_ros.core.simulate import observe, random_posture, RangeNoise, truck_pump
+import numpy as np
+import pytest
+from scipy.stats import exponnorm, norm
 
 SIGMA, FRACTION, GAMMA = 0.2, 0.2, 2.0
 

@@ -1,16 +1,29 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """emulator -> driver -> posture_estimator -> /arm_posture, as separate processes over DDS."""
 import time
 
-import numpy as np
-import pytest
-import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
-from sensor_msgs.msg import JointState
-from system import PUMP_YAML, Listener, poses_to_joints, script, start_emulator, truth_window
-
 from epp_ros.config import load_pump_config
 from epp_ros.core.metrics import frame_rmse
 from epp_ros.nodes.common import RANGES_QOS, to_seconds, to_time
+import numpy as np
+import pytest
+import rclpy
+from sensor_msgs.msg import JointState
+from system import Listener, poses_to_joints, PUMP_YAML, script, start_emulator, truth_window
 
 pytestmark = pytest.mark.usefixtures('fresh_listener')
 CONFIG = load_pump_config(PUMP_YAML)
@@ -111,7 +124,8 @@ def test_out_of_order_and_duplicate_frames_are_ignored_and_counted(listener, pro
 
 
 def test_chain_fuses_boom_angles_and_tag_tag_ranges(listener, processes):
-    """Without its ranges the tip is found from its inclinometer.
+    """
+    Without its ranges the tip is found from its inclinometer.
 
     A tag-tag range from the tip's hinge joint is always the section's length: it does not
     place the tip, and that frame is refused (the tip could be anywhere on its circle).
@@ -189,7 +203,8 @@ def test_two_pumps_side_by_side_in_namespaces(processes, tmp_path):
 
 
 def hostile_stream(seconds=20.0, rate=10.0, seed=3):
-    """A working cycle with a corrupted frame, a corrupted tip and absurd frames in it.
+    """
+    Build a working cycle with a corrupted frame, a corrupted tip and absurd frames in it.
 
     Returns (stamps_ns, frames, bad indices), the stamps 0.1 s apart from now.
     """
@@ -216,10 +231,14 @@ def hostile_stream(seconds=20.0, rate=10.0, seed=3):
 
 
 def test_hostile_frames_are_not_published_and_eval_decides_the_same(listener, processes,
-                                                                      tmp_path):
-    """The node refuses corrupted and absurd frames and recovers; ``epp_bag eval`` on the
+                                                                    tmp_path):
+    """
+    Check that the node and ``epp_bag eval`` publish and reject the same hostile frames.
+
+    The node refuses corrupted and absurd frames and recovers; ``epp_bag eval`` on the
     same frames publishes exactly the same ones and rejects the rest for the same reasons,
-    through a run of unsolved frames (a cold restart) and a repeated stamp."""
+    through a run of unsolved frames (a cold restart) and a repeated stamp.
+    """
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     from epp_ros import bags
     stamps, frames, bad = hostile_stream()
@@ -287,8 +306,12 @@ def set_parameters(node, target, **values):
 
 
 def test_parameters_are_applied_live_or_refused(listener, processes):
-    """Over the real SetParameters service: valid changes apply from the next frame (a new
-    method starting cold), invalid ones are refused with the reason, read-only ones too."""
+    """
+    Check that parameters are applied live or refused over the real SetParameters service.
+
+    Valid changes apply from the next frame (a new method starting cold), invalid ones are
+    refused with the reason, read-only ones too.
+    """
     processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML)])
     publisher = listener.create_publisher(JointState, 'uwb/ranges', RANGES_QOS)
     model = CONFIG.model()
@@ -303,7 +326,7 @@ def test_parameters_are_applied_live_or_refused(listener, processes):
         publisher.publish(message)
 
     def reported(key):
-        """The newest value of ``key`` in the estimator's diagnostics, after a new report."""
+        """Get the newest value of ``key`` in the estimator's diagnostics, after a new report."""
         seen = len(listener.statuses('posture_estimator'))
         assert listener.spin_until(
             lambda: len(listener.statuses('posture_estimator')) > seen + 1, 10)

@@ -1,10 +1,23 @@
-"""Property tests over random postures and noise."""
-import numpy as np
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
 
-from epp_ros.core import RANGE_METHODS, PostureEstimator
-from epp_ros.core.simulate import RangeNoise, random_posture, truck_pump, xie3dim
+"""Property tests over random postures and noise."""
+from epp_ros.core import PostureEstimator, RANGE_METHODS
+from epp_ros.core.simulate import random_posture, RangeNoise, truck_pump, xie3dim
+from hypothesis import given, HealthCheck, settings
+from hypothesis import strategies as st
+import numpy as np
 
 MODELS = {'xie3dim': xie3dim()[0], 'truck': truck_pump()}
 #: Methods whose estimates keep the arm lengths (the paper's EPP2, CEPP, and chain).

@@ -1,13 +1,25 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """UWB line protocols: example lines, corrupted lines, round trips, fuzzing, detection."""
 import math
 
-import pytest
+from epp_ros.uwb.protocols import (detect_protocol, format_arduino, format_json, format_lec,
+                                   format_trek, FORMATTERS, parse_arduino, parse_json, parse_lec,
+                                   parse_trek, ParseResult, PARSERS, RangeRecord)
 from hypothesis import given, settings, strategies as st
-
-from epp_ros.uwb.protocols import (FORMATTERS, PARSERS, ParseResult, RangeRecord,
-                                   detect_protocol, format_arduino, format_json, format_lec,
-                                   format_trek, parse_arduino, parse_json, parse_lec,
-                                   parse_trek)
+import pytest
 
 TREK_LINE = 'mc 07 000004ec 000008ee 0000087e 00000000 6cc0 0a 00a0642b a0:0'
 TREK_RECORDS = (RangeRecord('0', 1.260, '0'), RangeRecord('1', 2.286, '0'),
@@ -238,7 +250,7 @@ METRES = st.floats(0.0, 2000.0, allow_nan=False, allow_infinity=False)
 
 
 def assert_close_records(records, expected, tolerance):
-    """Records equal to ``expected`` up to the format's precision in the range."""
+    """Assert records equal to ``expected`` up to the format's precision in the range."""
     assert len(records) == len(expected)
     for record, (anchor, metres, tag, kind) in zip(records, expected):
         assert (record.anchor, record.tag, record.kind) == (anchor, tag, kind)
@@ -330,7 +342,7 @@ NOISE = st.sampled_from([',', ' ', '\t', ':', 'AN3', 'POS', 'DIST,', 'mc ', 'ma 
 
 @st.composite
 def mutated_lines(draw):
-    """A valid line of any format with a few cuts, insertions, replacements and repeats."""
+    """Draw a valid line of any format with a few cuts, insertions, replacements and repeats."""
     text = draw(st.sampled_from([*EXAMPLES.values(), LEC_CORRUPTED]))
     for _ in range(draw(st.integers(1, 4))):
         start = draw(st.integers(0, len(text)))

@@ -1,22 +1,36 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """The package as ROS users run it: built with colcon, found through the ament index."""
 import importlib.util
 import os
+from pathlib import Path
 import subprocess
 import sys
 import types
-from pathlib import Path
 
 import pytest
 import rclpy
+from system import Listener, Processes, ROOT, script, start_emulator
 import yaml
-from system import ROOT, Listener, Processes, script, start_emulator
 
 PYTHON = Path(sys.executable)
 
 
 @pytest.fixture(scope='module')
 def install(tmp_path_factory):
-    """A colcon workspace with epp_ros built from this checkout."""
+    """Build a colcon workspace with epp_ros from this checkout."""
     workspace = tmp_path_factory.mktemp('ws')
     colcon = PYTHON.parent / 'colcon'
     result = subprocess.run(
@@ -29,7 +43,7 @@ def install(tmp_path_factory):
 
 
 def ros2_run_path(install, executable, env):
-    """What `ros2 run epp_ros <executable>` executes: package prefix + lib/epp_ros/<exe>."""
+    """Return what `ros2 run epp_ros <executable>` executes: package prefix + lib/epp_ros/<exe>."""
     code = ('from ament_index_python.packages import get_package_prefix; '
             "print(get_package_prefix('epp_ros'))")
     prefix = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
@@ -91,7 +105,8 @@ class _Recorder:
 
 
 def load_launch_file(monkeypatch, rviz_share):
-    """The launch file run under stand-ins (launch and launch_ros are not installable here).
+    """
+    Load the launch file under stand-ins (launch and launch_ros are not installable here).
 
     ``rviz_share`` is where get_package_share_directory finds rviz2, None: not installed.
     """
@@ -138,7 +153,7 @@ def test_launch_file_names_what_exists(monkeypatch):
 
 
 def rviz_condition(action):
-    """The launch argument an action's IfCondition reads."""
+    """Return the launch argument an action's IfCondition reads."""
     return action.kwargs['condition'].args[0].args[0]
 
 

@@ -1,14 +1,31 @@
-"""Biswas-Ye SDP baseline (optional cvxpy). The suite runs with -W error, so a problem
-that is not DPP (cvxpy warns on solve) fails these tests."""
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Biswas-Ye SDP baseline (optional cvxpy).
+
+The suite runs with -W error, so a problem that is not DPP (cvxpy warns on solve) fails
+these tests.
+"""
 import subprocess
 import sys
 from types import SimpleNamespace
 
+from epp_ros.core.sdp import SDPLocalizer
 import numpy as np
 import pytest
 from scipy.spatial import Delaunay
-
-from epp_ros.core.sdp import SDPLocalizer
 
 N_TAGS = 5
 

@@ -1,4 +1,19 @@
-"""Every node ends cleanly (status 0, no traceback) on SIGINT and SIGTERM, however many come.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Every node ends cleanly (status 0, no traceback) on SIGINT and SIGTERM, however many come.
 
 ``ros2 launch`` forwards a terminal's Ctrl-C to nodes that already got it, so a second
 SIGINT follows the first within milliseconds; it escalates to SIGTERM. Each case waits for

@@ -1,16 +1,30 @@
-"""use_sim_time: the nodes stamp with simulated time from /clock (a bag's, or a test's own).
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+use_sim_time: the nodes stamp with simulated time from /clock (a bag's, or a test's own).
 
 The simulated time starts at 1000 s (1970), so that no wall-clock stamp can pass for it.
 """
 import subprocess
 import time
 
+from epp_ros.nodes.common import to_seconds, to_time
 import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from system import PUMP_YAML, script, start_emulator
-
-from epp_ros.nodes.common import to_seconds, to_time
 
 pytestmark = pytest.mark.usefixtures('fresh_listener')
 SIM_START = 1000.0      # s since the epoch: plainly simulated

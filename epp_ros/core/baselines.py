@@ -1,4 +1,19 @@
-"""The paper's baselines behind the estimator interface: SR-LS, SDP and TPSM.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The paper's baselines behind the estimator interface: SR-LS, SDP and TPSM.
 
 - ``srls``: each tag alone from its anchor ranges, SR-LS (Beck, Stoica & Li 2008).
 - ``sdp``: the Biswas–Ye semidefinite relaxation of all tags (``core.sdp``); needs the

@@ -1,4 +1,19 @@
-"""The Cramér–Rao bound of the boom posture from UWB ranges (method notes section 5).
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The Cramér–Rao bound of the boom posture from UWB ranges (method notes section 5).
 
 A pump boom is a chain: psi = (slew, pitch_1..pitch_p) fixes every joint. With independent
 Gaussian range errors of standard deviation sigma_kj, the Fisher information of psi is
@@ -18,15 +33,23 @@ __all__ = ['fisher_information', 'Bound', 'crlb', 'bound_from_information']
 
 
 def fisher_information(model, slew, pitches, sigma, measured=None):
-    """Fisher information of psi, shape (p + 1, p + 1).
+    """
+    Fisher information of psi, shape (p + 1, p + 1).
 
     Parameters
     ----------
+    model : BoomModel
+        The boom and its anchors.
+    slew : float
+        Radians.
+    pitches : ndarray, shape (p,)
+        Section pitches, radians.
     sigma : float, ndarray of shape (p, m), or SensorNoise
         Range standard deviations, metres, or the noise of every sensor.
     measured : ndarray of bool, shape (p, m), or Measurements, optional
         The tag-anchor links measured (all by default), or a frame whose finite entries
         (ranges, tag-tag ranges, inclinometers, slew encoder) say what is measured.
+
     """
     noise = sigma if isinstance(sigma, SensorNoise) else SensorNoise(range_sigma=sigma)
     if not isinstance(measured, Measurements):
@@ -53,7 +76,8 @@ class Bound:
 
 
 def crlb(model, slew, pitches, sigma, measured=None):
-    """Cramér–Rao bound of the joints for a posture, anchor set and sensor noise.
+    """
+    Cramér–Rao bound of the joints for a posture, anchor set and sensor noise.
 
     ``sigma`` and ``measured`` are as in :func:`fisher_information`.
 
@@ -61,13 +85,14 @@ def crlb(model, slew, pitches, sigma, measured=None):
     -------
     Bound
         Infinite entries when the links do not determine the posture.
+
     """
     return bound_from_information(model, slew, pitches,
                                   fisher_information(model, slew, pitches, sigma, measured))
 
 
 def bound_from_information(model, slew, pitches, information):
-    """The :class:`Bound` at a posture from the Fisher information (p + 1, p + 1) of psi."""
+    """Return the :class:`Bound` at a posture from the Fisher information (p + 1, p + 1) of psi."""
     p = model.n_sections
     try:
         # One symmetric eigendecomposition gives both the conditioning and the inverse.

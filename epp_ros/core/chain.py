@@ -1,4 +1,19 @@
-"""Chain estimator: least squares over the boom's p + 1 angles (slew and one pitch each).
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Chain estimator: least squares over the boom's p + 1 angles (slew and one pitch each).
 
 A pump boom has exactly p + 1 degrees of freedom, so both of the paper's features (fixed
 lengths, one vertical plane) hold by construction. Levenberg–Marquardt with the analytic
@@ -47,7 +62,8 @@ def angles_from_joints(model, joints):
 
 
 def canonical_angles(psi, pivot_offset=0.0):
-    """The same chain with its first section pointing outward, angles in [-pi, pi).
+    """
+    Return the same chain with its first section pointing outward, angles in [-pi, pi).
 
     With the pivot on the slew axis, ``(slew, pitch)`` and ``(slew + pi, pi - pitch)``
     describe the same boom; the slew is the direction the first section points. A pivot
@@ -60,7 +76,8 @@ def canonical_angles(psi, pivot_offset=0.0):
 
 
 class ChainMethod:
-    """Levenberg–Marquardt over (slew, pitch_1..pitch_p) on everything measured.
+    """
+    Levenberg–Marquardt over (slew, pitch_1..pitch_p) on everything measured.
 
     Parameters
     ----------
@@ -89,6 +106,7 @@ class ChainMethod:
     lowest_joint : float
         No joint is below this height, metres (world z = 0 is the ground; the default
         leaves room for noise). Lower it for a boom that reaches below grade.
+
     """
 
     prior = 'optional'          # one more start; the cold start finds the global solution
@@ -112,7 +130,11 @@ class ChainMethod:
         self._link_loss = (None, None)      # (Residuals, its ranges' bound NLOS loss)
 
     def enough_information(self, measurements):
-        """p + 1 unknowns; the tip's pitch is seen only by the tip's ranges or inclinometer."""
+        """
+        Judge whether a frame can fix the p + 1 unknowns.
+
+        The tip's pitch is seen only by the tip's ranges or inclinometer.
+        """
         tip_seen = (np.isfinite(measurements.ranges[-1]).any()
                     or np.isfinite(measurements.tag_ranges[-1]).any()
                     or np.isfinite(measurements.tag_ranges[:, -1]).any()
@@ -120,11 +142,12 @@ class ChainMethod:
         return bool(tip_seen) and measurements.count() >= self.model.n_sections + 1
 
     def reset(self):
-        """The chain keeps no state: its warm start is the prior it is given."""
+        """Do nothing: the chain keeps no state; its warm start is the prior it is given."""
 
     # -- the least-squares problem --------------------------------------------------------
     def _loss(self, scaled, residuals):
-        """Cost, its slope in the scaled residuals, Gauss-Newton weights, NLOS probabilities.
+        """
+        Cost, its slope in the scaled residuals, Gauss-Newton weights, NLOS probabilities.
 
         Ranges follow the NLOS mixture (on their excess, ``-scaled``); angles are Gaussian.
         """
@@ -142,7 +165,8 @@ class ChainMethod:
         return float(np.sum(cost)), slope, weights, nlos
 
     def _evaluate(self, psi, residuals):
-        """Cost at ``psi`` and what a step needs: (cost, slope, weights, state).
+        """
+        Cost at ``psi`` and what a step needs: (cost, slope, weights, state).
 
         A joint below ``lowest_joint`` adds a stiff quadratic penalty: the boom is above
         the ground, which a fit must respect rather than be discarded for.
@@ -193,12 +217,13 @@ class ChainMethod:
         return psi, cost, max_iter
 
     def cost(self, psi, residuals):
-        """The fitted loss at angles ``psi`` (p + 1,) on a :class:`Residuals`."""
+        """Return the fitted loss at angles ``psi`` (p + 1,) on a :class:`Residuals`."""
         return self._evaluate(np.asarray(psi, dtype=float), residuals)[0]
 
     # -- starts ---------------------------------------------------------------------------
     def _beam_starts(self, slews, measurements, range_sigma, width=8, candidates=72):
-        """Chains grown section by section for each slew, keeping the ``width`` best so far.
+        """
+        Chains grown section by section for each slew, keeping the ``width`` best so far.
 
         Each section's pitch is taken from a grid (or its inclinometer), scored by the NLOS
         loss of its tag's ranges, with joints below the ground excluded. Keeping several
@@ -208,9 +233,16 @@ class ChainMethod:
         Parameters
         ----------
         slews : ndarray, shape (s,)
+            Slews to grow chains at, radians.
         measurements : Measurements
+            The frame.
         range_sigma : ndarray, shape (p, m)
             Each tag-anchor range's standard deviation, metres.
+        width : int
+            Partial chains kept per slew.
+        candidates : int
+            Pitches of the grid over [-pi, pi) tried for a section without an
+            inclinometer.
 
         Returns
         -------
@@ -218,6 +250,7 @@ class ChainMethod:
             Candidate pitches per slew, best first.
         cost : ndarray, shape (s, width)
             Their loss over the ranges (inf for chains that could not stay above ground).
+
         """
         grid = np.linspace(-np.pi, np.pi, candidates, endpoint=False)
         along = np.stack([np.cos(slews), np.sin(slews), np.zeros_like(slews)], axis=-1)
@@ -255,7 +288,7 @@ class ChainMethod:
         return self.nlos.approximate_loss(excess, sigma).sum(axis=-1)
 
     def _cold_starts(self, measurements, guess, range_sigma, extra=16):
-        """Starting angles: the prior's, each slew's best chain, and the next best overall."""
+        """Return start angles: the prior's, each slew's best chain, and the next best overall."""
         starts = []
         if guess is not None:
             slew, pitches = angles_from_joints(self.model, guess)
@@ -274,7 +307,8 @@ class ChainMethod:
         return starts
 
     def _tip_alternatives(self, psi, measurements, range_sigma, candidates=72, most=2):
-        """The same posture with the tip section at its other well-fitting pitches.
+        """
+        Return the same posture with the tip section at its other well-fitting pitches.
 
         The tip hangs from one joint: its ranges alone place it, and with few of them two
         pitches can fit. Returns the local minima of the tip's loss over a pitch grid, best
@@ -297,7 +331,8 @@ class ChainMethod:
         return [np.r_[psi[:-1], grid[i]] for i in minima]
 
     def _folds(self, psi):
-        """The same posture with one joint folded the other way.
+        """
+        Return the same posture with one joint folded the other way.
 
         Reflecting joint k across the line through its neighbours, in the boom's plane,
         keeps every other joint and all section lengths: a common second fit when joint k
@@ -316,7 +351,8 @@ class ChainMethod:
 
     @staticmethod
     def _reversals(psi):
-        """The same posture with one section pointing the other way (its pitch + pi).
+        """
+        Return the same posture with one section pointing the other way (its pitch + pi).
 
         Its outer joints all move, and the fit re-bends the neighbours: the second fit of a
         section whose two ends have few ranges.
@@ -325,7 +361,8 @@ class ChainMethod:
                 for k in range(1, psi.size)]
 
     def _search(self, measurements, residuals, guess, range_sigma, finish=3, rounds=3):
-        """Global fit from scratch: (psi, cost, iterations, the other fits it tried).
+        """
+        Global fit from scratch: (psi, cost, iterations, the other fits it tried).
 
         Every start takes a few iterations; the best ``finish`` are fitted to convergence.
         From the best, single-joint folds, single-section reversals and the tip's other fits
@@ -363,15 +400,19 @@ class ChainMethod:
         return psi, cost, iterations, tried
 
     def solve(self, measurements, prior, warm=False):
-        """Fit one frame.
+        """
+        Fit one frame.
 
         Parameters
         ----------
         measurements : Measurements
+            The frame.
         prior : ndarray, shape (p, 3), or None
             Warm: the previous posture, fitted from and searched past only when the fit
             is lost. Cold: one more start of the global search.
         warm : bool
+            Whether ``prior`` is a warm start (else a cold one).
+
         """
         noise = self.noise
         if self.eta:

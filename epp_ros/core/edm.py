@@ -1,4 +1,19 @@
-"""Euclidean distance matrix helpers: cone projection, rank penalty, classical MDS, alignment.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Euclidean distance matrix helpers: cone projection, rank penalty, classical MDS, alignment.
 
 An EDM here is a matrix of *squared* distances, ``D[i, j] = ||x_i - x_j||^2``.
 """
@@ -10,7 +25,8 @@ __all__ = ['symmetric_eigh', 'squared_distances', 'centering_matrix', 'double_ce
 
 
 def symmetric_eigh(matrix):
-    """Eigenvalues (ascending) and eigenvectors of a small symmetric matrix (n, n).
+    """
+    Eigenvalues (ascending) and eigenvectors of a small symmetric matrix (n, n).
 
     ``numpy.linalg.eigh`` without its per-call overhead (LAPACK ``dsyevd`` directly), which
     dominates for the n <= ~20 matrices solved thousands of times per posture.
@@ -21,6 +37,7 @@ def symmetric_eigh(matrix):
     ------
     numpy.linalg.LinAlgError
         When LAPACK reports that it failed to converge.
+
     """
     eigenvalues, eigenvectors, info = lapack.dsyevd(matrix)
     if info != 0:
@@ -37,7 +54,8 @@ def squared_distances(points):
 
 
 def centering_matrix(q):
-    """Orthogonal projector ``I - q q^T / q^T q`` onto the complement of ``q`` (n,) -> (n, n).
+    """
+    Orthogonal projector ``I - q q^T / q^T q`` onto the complement of ``q`` (n,) -> (n, n).
 
     ``q = ones(n)`` gives the usual geometric centering matrix J.
     """
@@ -53,7 +71,8 @@ def double_centre(matrix):
 
 
 def project_edm_cone(matrix, q=None):
-    """Project a symmetric matrix onto ``K_-(q) = {Y : Y is NSD on q-perp}``.
+    """
+    Project a symmetric matrix onto ``K_-(q) = {Y : Y is NSD on q-perp}``.
 
     With ``q = ones`` this is the cone ``K^n_-`` of conditionally negative semidefinite
     matrices that, with a zero diagonal, are exactly the EDMs; the projection is closed form
@@ -62,12 +81,14 @@ def project_edm_cone(matrix, q=None):
     Parameters
     ----------
     matrix : ndarray, shape (n, n), symmetric
+        The matrix to project.
     q : ndarray, shape (n,), optional
         Centering direction; ones by default.
 
     Returns
     -------
     ndarray, shape (n, n)
+
     """
     matrix = np.asarray(matrix, dtype=float)
     n = matrix.shape[0]
@@ -79,7 +100,8 @@ def project_edm_cone(matrix, q=None):
 
 
 def rank_penalty(edm, rank):
-    """Rank penalty ``p(D) = sum_{i > r} lambda_i(-J D J)`` and the top-r eigenvectors.
+    """
+    Rank penalty ``p(D) = sum_{i > r} lambda_i(-J D J)`` and the top-r eigenvectors.
 
     Zero iff the points generating ``edm`` (an EDM or near one) span at most ``rank``
     dimensions. It is concave in D: linearising it at D^k gives the majorisation used by
@@ -93,6 +115,7 @@ def rank_penalty(edm, rank):
         Sum of the positive eigenvalues, to turn ``penalty`` into a relative rank error.
     leading : ndarray, shape (n, rank)
         Eigenvectors of the r largest eigenvalues.
+
     """
     gram = -double_centre(edm)
     eigenvalues, eigenvectors = symmetric_eigh(0.5 * (gram + gram.T))
@@ -103,7 +126,8 @@ def rank_penalty(edm, rank):
 
 
 def classical_mds(edm, dim):
-    """Classical multidimensional scaling (Torgerson): points whose EDM is nearest ``edm``.
+    """
+    Classical multidimensional scaling (Torgerson): points whose EDM is nearest ``edm``.
 
     Parameters
     ----------
@@ -117,6 +141,7 @@ def classical_mds(edm, dim):
     points : ndarray, shape (n, dim)
         ``P1 diag(sqrt(lambda_1..r))`` from ``-1/2 J D J = P diag(lambda) P^T``, centred at
         the origin; negative eigenvalues are clipped to zero.
+
     """
     gram = -0.5 * double_centre(edm)
     eigenvalues, eigenvectors = symmetric_eigh(0.5 * (gram + gram.T))
@@ -125,7 +150,8 @@ def classical_mds(edm, dim):
 
 
 def align_to_known(points, known_index, known_positions, pivot=None, up_axis=-1):
-    """Rigidly move an embedding so that its known points land on their true positions.
+    """
+    Rigidly move an embedding so that its known points land on their true positions.
 
     Orthogonal Procrustes with translation, reflections allowed, no scaling (the embedding
     of an EDM is defined only up to a rigid motion and a reflection). With a ``pivot``, that
@@ -151,6 +177,7 @@ def align_to_known(points, known_index, known_positions, pivot=None, up_axis=-1)
     Returns
     -------
     aligned : ndarray, shape (n, d)
+
     """
     points = np.asarray(points, dtype=float)
     known_positions = np.asarray(known_positions, dtype=float)

@@ -1,4 +1,19 @@
-"""Posture estimators behind one interface, chosen by name.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Posture estimators behind one interface, chosen by name.
 
 ``PostureEstimator(model, method)`` turns each frame of tag-anchor ranges (p, m) into joint
 positions (p, 3), keeping the previous estimate as the warm start. Methods:
@@ -19,20 +34,20 @@ import numpy as np
 from .baselines import SDPMethod, SRLSMethod, TPSMMethod
 from .chain import ChainMethod
 from .edm import align_to_known, squared_distances
-from .integrity import ERROR, OK, Integrity, IntegrityLimits, Thresholds
-from .measurements import Measurements, SensorNoise, plausible_limits
+from .integrity import ERROR, Integrity, IntegrityLimits, OK, Thresholds
+from .measurements import Measurements, plausible_limits, SensorNoise
 from .multilateration import intersect_spheres, srls
-from .nlos import NlosMixture
 from .nedm import nearest_edm
-from .plane import (fit_plane_to_ranges, fit_slew, from_plane, project_ranges, slew_step,
-                    to_plane)
+from .nlos import NlosMixture
+from .plane import fit_plane_to_ranges, fit_slew, from_plane, project_ranges, slew_step, to_plane
 
 __all__ = ['PostureEstimator', 'METHODS', 'RANGE_METHODS', 'ESTIMATOR_OPTIONS',
            'accepted_options', 'cold_start_guess']
 
 
 def cold_start_guess(model, ranges):
-    """Joint positions from this frame's ranges alone, to seed a solver without a previous pose.
+    """
+    Joint positions from this frame's ranges alone, to seed a solver without a previous pose.
 
     Each tag is located by SR-LS from its anchor ranges; a tag with too few of them also uses
     its already located neighbours (or the base pivot) as spheres of radius the section
@@ -42,6 +57,7 @@ def cold_start_guess(model, ranges):
     Returns
     -------
     joints : ndarray, shape (p, 3), or None when no tag can be located.
+
     """
     p = model.n_sections
     lengths = model.arm_lengths
@@ -82,7 +98,7 @@ def cold_start_guess(model, ranges):
 
 
 def _locate(centres, radii, allow_three):
-    """A point at the given distances from distinct centres; the upper one if ambiguous."""
+    """Return a point at the given distances from distinct centres; the upper one if ambiguous."""
     _, first = np.unique(np.round(centres, 9), axis=0, return_index=True)
     first = np.sort(first)
     centres, radii = centres[first], radii[first]
@@ -122,7 +138,7 @@ class _EDMMethod:
         return valid.sum(axis=1).min() >= per_tag and valid.sum() >= total
 
     def reset(self):
-        """The EDM methods keep no state of their own."""
+        """Do nothing: the EDM methods keep no state of their own."""
 
     def _known_columns(self, ranges):
         """Ranges (p, k) from each tag to the known points: base first, then other anchors."""
@@ -132,7 +148,8 @@ class _EDMMethod:
         return np.column_stack([base_column, ranges[:, self._other_anchors]])
 
     def _solve_edm(self, known, tag_squared, tag_weights, prior, tag_tag_ranges):
-        """Solve the NEDM for tags given known points (k, d), squared ranges (p, k), prior.
+        """
+        Solve the NEDM for tags given known points (k, d), squared ranges (p, k), prior.
 
         ``tag_tag_ranges`` (p, p), NaN where not measured, replace the prior's tag-tag
         entries of G with weight 1 (both directions measured: their mean square).
@@ -202,7 +219,8 @@ class EPP2(EPP1):
 
 
 class CEPP(_EDMMethod):
-    """EPP2 in the boom's vertical plane (the paper's CEPP).
+    """
+    EPP2 in the boom's vertical plane (the paper's CEPP).
 
     The paper takes the plane from the prior (previous estimate or cold start), so the plane
     never turns. Beyond the paper, the plane is first fitted to this frame's 3-D ranges
@@ -304,7 +322,7 @@ def _constructor_names(method):
 
 
 def _told(options):
-    """The estimator options with their defaults, checked (ValueError naming the option)."""
+    """Return the estimator options with their defaults, checked (ValueError naming the option)."""
     told = {name: options.get(name, default) for name, default in ESTIMATOR_OPTIONS.items()}
     for name, value in told.items():
         if value is not None and not (isinstance(value, (int, float, np.integer, np.floating))
@@ -318,7 +336,7 @@ def _told(options):
 
 
 def _integrity(model, told, limits, thresholds):
-    """The :class:`Integrity` of the noise the estimator is told."""
+    """Return the :class:`Integrity` of the noise the estimator is told."""
     noise = SensorNoise(float(told['sigma']), float(told['tag_sigma']),
                         float(told['pitch_sigma']), float(told['slew_sigma']))
     nlos = NlosMixture(float(told['nlos_fraction']), float(told['nlos_gamma']))
@@ -326,7 +344,8 @@ def _integrity(model, told, limits, thresholds):
 
 
 class PostureEstimator:
-    """Frame-by-frame boom posture from UWB ranges (and, for some methods, angle sensors).
+    """
+    Frame-by-frame boom posture from UWB ranges (and, for some methods, angle sensors).
 
     Every estimate is judged by :class:`~epp_ros.core.integrity.Integrity` before it is
     called valid or kept as the next frame's warm start: a frame whose residuals the noise
@@ -375,6 +394,7 @@ class PostureEstimator:
         ``nlos_links`` (p, m), ``predicted_rmse`` (m), ``joint_std`` (p,),
         ``ambiguous_joints``), the method's ``estimate`` (p, 3) whether valid or not, and
         solver details (``converged``, ...).
+
     """
 
     def __init__(self, model, method='cepp', *, integrity=IntegrityLimits(),
@@ -395,7 +415,8 @@ class PostureEstimator:
 
     def reconfigure(self, *, integrity=None, thresholds=None, reset_after_failures=None,
                     **options):
-        """Change settings from the next frame on, keeping the warm start.
+        """
+        Change settings from the next frame on, keeping the warm start.
 
         Takes the constructor's keywords; those not given keep their values. Raises
         ValueError, leaving the estimator as it was, when the new settings are invalid.
@@ -436,7 +457,7 @@ class PostureEstimator:
 
     @property
     def previous(self):
-        """The last valid estimate (p, 3), or None."""
+        """Return the last valid estimate (p, 3), or None."""
         return None if self._previous is None else self._previous[0].copy()
 
     def _fallback(self):
@@ -446,7 +467,8 @@ class PostureEstimator:
         return self.model.forward_kinematics(0.0, np.zeros(self.model.n_sections))
 
     def update(self, ranges, *, tag_ranges=None, pitches=None, slew=None, stamp=None):
-        """Estimate the joint positions from one frame of measurements.
+        """
+        Estimate the joint positions from one frame of measurements.
 
         Parameters
         ----------
@@ -470,6 +492,7 @@ class PostureEstimator:
         joints : ndarray, shape (p, 3)
             Base outward, tip last. Never NaN: a frame that is not valid returns the last
             valid estimate, and ``last_diagnostics["valid"]`` is False.
+
         """
         start = time.perf_counter()
         stamp = self._frame_time(stamp)
@@ -509,7 +532,7 @@ class PostureEstimator:
         return self._finish(joints, 'ok', diagnostics, measurements, start)
 
     def _frame_time(self, stamp):
-        """The frame's time, seconds: the stamp, or one frame period after the last."""
+        """Return the frame's time, seconds: the stamp, or one frame period after the last."""
         if stamp is None:
             previous = -self.integrity.limits.frame_period if self._stamp is None \
                 else self._stamp
@@ -528,13 +551,17 @@ class PostureEstimator:
                                     reference_std, **known)
 
     def _due_for_search(self):
-        """Whether this rejected frame gets a fresh solve: the first few in a run, then
-        every tenth, so that a stream of garbage does not cost a search per frame."""
+        """
+        Judge whether this rejected frame gets a fresh solve.
+
+        The first few in a run do, then every tenth, so that a stream of garbage does not
+        cost a search per frame.
+        """
         failures = self._failures + 1
         return failures & (failures - 1) == 0 or failures % 10 == 0
 
     def _solve(self, measurements, warm):
-        """The method's (joints, info) from the warm start or a cold one; why not if not."""
+        """Return the method's (joints, info) from the warm start or a cold one; why not if not."""
         prior = self._warm if warm else None
         if prior is None and self._solver.prior != 'unused':
             prior = cold_start_guess(self.model, measurements.ranges)
@@ -549,7 +576,8 @@ class PostureEstimator:
         return joints, info
 
     def _reject(self, status, diagnostics, measurements, start, joints=None):
-        """Report an invalid frame; the warm start is dropped after too many in a row.
+        """
+        Report an invalid frame; the warm start is dropped after too many in a row.
 
         A frame that fitted but did not determine the posture (ambiguous, unobservable)
         does not count: its fit is a good start for the next frame.

@@ -1,4 +1,19 @@
-"""Which range frames reach the estimator, by their stamps: one policy for node and bag tools.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Which range frames reach the estimator, by their stamps: one policy for node and bag tools.
 
 Stamps must increase. A stamp not newer than the last is a repeat or arrived out of order
 (ignored), unless it is more than ``backward_jump`` seconds older: then the clock jumped back
@@ -13,12 +28,14 @@ ADMIT, OUT_OF_ORDER, CLOCK_JUMP, MALFORMED = 'admit', 'out_of_order', 'clock_jum
 
 
 class FramePolicy:
-    """The stamp rules of a stream of range frames.
+    """
+    The stamp rules of a stream of range frames.
 
     Parameters
     ----------
     backward_jump : float
         Seconds: an older stamp by more than this is a clock jump, not disorder.
+
     """
 
     def __init__(self, backward_jump=1.0):
@@ -28,13 +45,15 @@ class FramePolicy:
         self.last_stamp = None
 
     def admit(self, stamp):
-        """Decide on a frame stamped ``stamp`` (seconds).
+        """
+        Decide on a frame stamped ``stamp`` (seconds).
 
         Returns
         -------
         str
             ``ADMIT`` (solve it), ``CLOCK_JUMP`` (solve it from scratch: reset the
             estimator first), ``OUT_OF_ORDER`` or ``MALFORMED`` (ignore it, count it).
+
         """
         if not (isinstance(stamp, (int, float)) and math.isfinite(stamp) and stamp > 0):
             return MALFORMED

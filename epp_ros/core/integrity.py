@@ -1,4 +1,19 @@
-"""Integrity: whether an estimated posture may be published, and if not, why.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Integrity: whether an estimated posture may be published, and if not, why.
 
 The posture feeds collision avoidance. A wrong posture flagged as wrong is safe; a wrong
 posture reported as good is the worst outcome. Every estimate, whatever method made it, is
@@ -16,8 +31,8 @@ judged here on what its frame can show, so that the node and ``epp_bag eval`` ag
 
 Levels follow ``diagnostic_msgs``: a frame at ERROR is never published.
 """
-import math
 from dataclasses import dataclass, field, fields
+import math
 
 import numpy as np
 from scipy.special import betainc, gammaincc, gammainccinv
@@ -36,8 +51,12 @@ TIP_CANDIDATES = 72
 
 
 def _chi_square_limit(alpha, dof):
-    """Upper ``alpha`` quantile of chi-square with ``dof`` degrees of freedom (scipy.special:
-    a per-frame cost, where scipy.stats' generic machinery is ten times slower)."""
+    """
+    Return the upper ``alpha`` quantile of chi-square with ``dof`` degrees of freedom.
+
+    Computed with scipy.special: a per-frame cost, where scipy.stats' generic machinery is
+    ten times slower.
+    """
     return 2.0 * gammainccinv(0.5 * np.asarray(dof, dtype=float), alpha)
 
 
@@ -63,7 +82,7 @@ def _norm(vectors):
 
 
 def _zero_nan(values):
-    """A copy with NaN as 0 (the measured mask is kept aside)."""
+    """Return a copy with NaN as 0 (the measured mask is kept aside)."""
     return np.where(np.isnan(values), 0.0, values)
 
 
@@ -96,7 +115,8 @@ class Thresholds:
 
 @dataclass(frozen=True)
 class IntegrityLimits:
-    """How the consistency and observability checks decide.
+    """
+    How the consistency and observability checks decide.
 
     Attributes
     ----------
@@ -114,6 +134,7 @@ class IntegrityLimits:
         and jumps (:meth:`Integrity.reach`). Hydraulic booms turn at up to about 0.2 rad/s.
     frame_period : float
         Seconds between frames when no stamps are given.
+
     """
 
     false_alarm: float = 1e-4
@@ -132,7 +153,8 @@ class IntegrityLimits:
 
 @dataclass
 class Verdict:
-    """The integrity of one estimate.
+    """
+    The integrity of one estimate.
 
     Attributes
     ----------
@@ -147,6 +169,7 @@ class Verdict:
         One line for a person.
     values : dict
         The statistics behind it (for diagnostics).
+
     """
 
     level: int
@@ -166,7 +189,8 @@ class Verdict:
 
 
 def fold_alternatives(model, joints):
-    """Each inner joint reflected across the line through its neighbours.
+    """
+    Each inner joint reflected across the line through its neighbours.
 
     Reflection keeps both adjacent section lengths and, for a boom in a vertical plane,
     the plane: the other solution when the joint's own ranges are few or weak.
@@ -175,6 +199,7 @@ def fold_alternatives(model, joints):
     -------
     alternatives : ndarray, shape (p - 1, 3)
         Row k: joint k (0-based, k < p - 1) folded; the others stay.
+
     """
     chain = np.vstack([model.pivot_of(joints), joints])
     inner, outer = chain[:-2], chain[2:]
@@ -186,7 +211,8 @@ def fold_alternatives(model, joints):
 
 
 class Integrity:
-    """Judges estimated postures for one boom and one noise model.
+    """
+    Judges estimated postures for one boom and one noise model.
 
     Parameters
     ----------
@@ -201,6 +227,7 @@ class Integrity:
         No joint is below this height, metres.
     limits : IntegrityLimits
     thresholds : Thresholds
+
     """
 
     def __init__(self, model, noise, nlos, eta=0.0, lowest_joint=-0.5,
@@ -219,7 +246,7 @@ class Integrity:
 
     # -- the pieces -----------------------------------------------------------------------
     def link_sigma(self, measurements):
-        """Standard deviation of each tag-anchor range (p, m), metres."""
+        """Return the standard deviation of each tag-anchor range (p, m), metres."""
         sigma = np.broadcast_to(np.asarray(self.noise.range_sigma, dtype=float),
                                 measurements.ranges.shape)
         if self.eta:
@@ -241,7 +268,8 @@ class Integrity:
         return self.nlos.loss(excess, sigma)
 
     def _joint_cost(self, which, positions, measurements, joints, slew):
-        """Loss of what sees joint ``which[i]`` if it were at ``positions[i]`` (n, 3).
+        """
+        Loss of what sees joint ``which[i]`` if it were at ``positions[i]`` (n, 3).
 
         Its tag's ranges (NLOS mixture), its tag-tag ranges, and the inclinometers of the
         two sections it ends and starts, the other joints staying where they are. Shape (n,).
@@ -270,7 +298,8 @@ class Integrity:
         return total
 
     def consistency(self, joints, measurements):
-        """Chi-square and binomial tests of the residuals; (failures, values, kept links).
+        """
+        Chi-square and binomial tests of the residuals; (failures, values, kept links).
 
         Returns
         -------
@@ -278,6 +307,7 @@ class Integrity:
         values : dict
         kept : (ndarray, ndarray)
             The tag-anchor (p, m) and tag-tag (p, p) links taken as line-of-sight.
+
         """
         alpha = self.limits.false_alarm
         links, tag_links = self._excess(joints, measurements)
@@ -321,7 +351,8 @@ class Integrity:
         return failures, values, (kept, tag_kept)
 
     def bound(self, joints, measurements, kept, angles):
-        """Cramér–Rao bound at the estimate from the line-of-sight links and the angles.
+        """
+        Cramér–Rao bound at the estimate from the line-of-sight links and the angles.
 
         ``angles``: the estimate's (slew, pitches), radians.
         """
@@ -338,7 +369,8 @@ class Integrity:
         return bound_from_information(self.model, slew, pitches, jacobian.T @ jacobian)
 
     def reach(self, reference, elapsed, reference_std):
-        """How far each joint can have moved in ``elapsed`` seconds from ``reference``.
+        """
+        How far each joint can have moved in ``elapsed`` seconds from ``reference``.
 
         Every angle turning at ``max_angular_rate`` moves joint k by at most the rate times
         its lever: its distance from the slew axis, plus its distance from each joint at or
@@ -353,7 +385,8 @@ class Integrity:
                 + 3.0 * np.asarray(reference_std))
 
     def point_bound(self, joints, measurements, kept):
-        """Per-joint standard deviations (p,) of joints located each from its own ranges.
+        """
+        Per-joint standard deviations (p,) of joints located each from its own ranges.
 
         The bound of a method that does not hold the boom to its p + 1 angles (EPP1, EPP2,
         the per-tag baselines): each joint's 3-D Fisher information from its kept links;
@@ -371,7 +404,8 @@ class Integrity:
         return std
 
     def ambiguous_joints(self, joints, measurements, joint_std, slew, reach=None):
-        """Joints (0-based) with another position about as likely, and one such position.
+        """
+        Joints (0-based) with another position about as likely, and one such position.
 
         A fold of an inner joint, or the tip at another pitch, counts when its ranges make
         it no more than ``ambiguity_odds`` times less likely than the estimate, when it is
@@ -403,7 +437,8 @@ class Integrity:
         return found
 
     def mirrors(self, joints, slew):
-        """The whole boom reflected where the anchors cannot tell it from its image.
+        """
+        Return the whole boom reflected where the anchors cannot tell it from its image.
 
         Across the vertical plane through the slew axis that best fits the anchors (a
         valid posture, slew mirrored), and across the plane that best fits the anchors in
@@ -449,7 +484,8 @@ class Integrity:
 
     def ambiguous_postures(self, joints, measurements, joint_std, slew, reach=None,
                            alternatives=()):
-        """Joints (0-based) that another whole posture, about as likely, puts elsewhere.
+        """
+        Joints (0-based) that another whole posture, about as likely, puts elsewhere.
 
         The candidates are the boom's :meth:`mirrors` and the method's own
         ``alternatives`` (other fits its search found, (p, 3) each); the rules are those of
@@ -483,7 +519,8 @@ class Integrity:
     # -- the verdict ----------------------------------------------------------------------
     def judge(self, joints, measurements, reference=None, elapsed=None, reference_std=None,
               alternatives=(), chain=True):
-        """The :class:`Verdict` on an estimate of one frame.
+        """
+        Return the :class:`Verdict` on an estimate of one frame.
 
         Parameters
         ----------
@@ -496,7 +533,9 @@ class Integrity:
             joint standard deviations ``reference_std`` (p,): what the boom could have
             reached since rules out alternatives and jumps.
         elapsed : float, optional
+            Seconds since ``reference``.
         reference_std : ndarray, shape (p,), optional
+            Predicted standard deviation of each of ``reference``'s joints, metres.
         alternatives : sequence of ndarray, shape (p, 3)
             Other postures the method found that fit the frame (its search's runners-up).
         chain : bool
@@ -507,6 +546,7 @@ class Integrity:
         Returns
         -------
         Verdict
+
         """
         checks = []                 # (level, status, message), worst kept
         values = {}

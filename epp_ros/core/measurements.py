@@ -1,4 +1,19 @@
-"""One frame of what is measured about the boom, and how each measurement depends on the posture.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+One frame of what is measured about the boom, and how each measurement depends on the posture.
 
 A frame holds the tag-anchor ranges (p, m) and, optionally, tag-tag ranges (p, p),
 inclinometer pitches (p,) and a slew encoder reading, each with its own standard deviation
@@ -55,7 +70,8 @@ def _clean(values, shape, field, limit=None):
 
 
 def plausible_limits(model):
-    """Longest believable tag-anchor (p, m) and tag-tag (p, p) distances, metres.
+    """
+    Longest believable tag-anchor (p, m) and tag-tag (p, p) distances, metres.
 
     Twice the longest the geometry allows plus 10 m: no noise or NLOS excess explains more.
     """
@@ -66,7 +82,8 @@ def plausible_limits(model):
 
 @dataclass(frozen=True)
 class Measurements:
-    """One frame of measurements; NaN marks what was not measured.
+    """
+    One frame of measurements; NaN marks what was not measured.
 
     Attributes
     ----------
@@ -79,6 +96,7 @@ class Measurements:
         Inclinometer pitch of each section above the horizontal, radians.
     slew : float
         Slew encoder angle about z from the world x-axis, radians.
+
     """
 
     ranges: np.ndarray
@@ -88,7 +106,8 @@ class Measurements:
 
     @classmethod
     def clean(cls, model, ranges, tag_ranges=None, pitches=None, slew=None, limits=None):
-        """Validate one frame for ``model``; unusable entries become NaN.
+        """
+        Validate one frame for ``model``; unusable entries become NaN.
 
         NaN, inf and negative distances count as missing, and so do distances beyond
         ``limits`` (default :func:`plausible_limits`; pass them precomputed per frame).
@@ -103,6 +122,7 @@ class Measurements:
         ------
         ValueError
             On a wrong shape or a non-numeric value, naming the input.
+
         """
         p, m = model.n_sections, model.n_anchors
         range_limit, tag_limit = plausible_limits(model) if limits is None else limits
@@ -120,7 +140,7 @@ class Measurements:
 
     @classmethod
     def ranges_only(cls, ranges):
-        """A frame of tag-anchor ranges (p, m) alone (taken as they are)."""
+        """Return a frame of tag-anchor ranges (p, m) alone (taken as they are)."""
         ranges = np.asarray(ranges, dtype=float)
         p = ranges.shape[0]
         return cls(ranges, np.full((p, p), np.nan), np.full(p, np.nan), np.nan)
@@ -130,17 +150,18 @@ class Measurements:
         return [name for name in INPUTS if np.isfinite(getattr(self, name)).any()]
 
     def count(self):
-        """Number of scalar measurements in the frame."""
+        """Return the number of scalar measurements in the frame."""
         return int(sum(np.isfinite(getattr(self, name)).sum() for name in INPUTS))
 
     def with_ranges(self, ranges, tag_ranges=None):
-        """The same frame with other ranges (e.g. with links removed)."""
+        """Return the same frame with other ranges (e.g. with links removed)."""
         return Measurements(ranges, self.tag_ranges if tag_ranges is None else tag_ranges,
                             self.pitches, self.slew)
 
 
 class Residuals:
-    """Scaled residuals ``(predicted - measured) / sigma`` of a frame and their Jacobian.
+    """
+    Scaled residuals ``(predicted - measured) / sigma`` of a frame and their Jacobian.
 
     Rows are stacked as: tag-anchor links (row-major over the measured (k, j)), tag-tag
     links, inclinometers, the slew encoder. Angle residuals are wrapped into [-pi, pi).
@@ -150,6 +171,7 @@ class Residuals:
     model : BoomModel
     measurements : Measurements
     noise : SensorNoise
+
     """
 
     def __init__(self, model, measurements, noise):
@@ -185,7 +207,7 @@ class Residuals:
 
     @property
     def size(self):
-        """Number of residuals."""
+        """Return the number of residuals."""
         return self.measured.size
 
     def ranged(self):
@@ -193,7 +215,8 @@ class Residuals:
         return np.arange(self.size) < self.n_ranged
 
     def predict(self, psi):
-        """Predicted measurements (size,) and the geometry the Jacobian needs.
+        """
+        Predicted measurements (size,) and the geometry the Jacobian needs.
 
         The geometry is ``(offsets, distances, joints)``; ``joints`` (p, 3) at ``psi``.
         """
@@ -205,7 +228,11 @@ class Residuals:
         return predicted, (offsets, distances, joints)
 
     def residuals(self, psi):
-        """Scaled residuals (size,) at ``psi`` (p + 1,), and the geometry for :meth:`jacobian`."""
+        """
+        Return the scaled residuals at ``psi`` (p + 1,) and the geometry for :meth:`jacobian`.
+
+        The scaled residuals have shape (size,).
+        """
         predicted, geometry = self.predict(psi)
         difference = predicted - self.measured
         n = self.n_ranged

@@ -1,3 +1,17 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Scores of estimated postures against the truth, as the paper defines them."""
 import numpy as np
 
@@ -10,7 +24,11 @@ def joint_errors(estimate, truth):
 
 
 def frame_rmse(estimate, truth):
-    """The paper's RMSE of a frame, ``sqrt(sum_k ||w_hat_k - w_k||^2 / p)``: (..., p, 3) -> (...)."""
+    """
+    Return the paper's RMSE of a frame, ``sqrt(sum_k ||w_hat_k - w_k||^2 / p)``.
+
+    Shapes: (..., p, 3) -> (...).
+    """
     return np.sqrt(np.mean(joint_errors(estimate, truth) ** 2, axis=-1))
 
 

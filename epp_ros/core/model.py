@@ -1,4 +1,19 @@
-"""Boom geometry: section lengths, base pivot, anchors, and forward kinematics.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Boom geometry: section lengths, base pivot, anchors, and forward kinematics.
 
 Conventions (REP 103, SI): world frame in metres with z up. Sections are numbered from the
 base outward; section k (k = 1..p) has length ``arm_lengths[k-1]`` and joint k is its distal
@@ -49,7 +64,8 @@ def _check_anchor_geometry(anchors):
 
 
 class BoomModel:
-    """Geometry of a slewing, luffing boom and its UWB anchors.
+    """
+    Geometry of a slewing, luffing boom and its UWB anchors.
 
     Parameters
     ----------
@@ -68,6 +84,7 @@ class BoomModel:
     ------
     ValueError
         Naming the offending field and value.
+
     """
 
     def __init__(self, arm_lengths, base, anchors, pivot_offset=0.0):
@@ -99,12 +116,12 @@ class BoomModel:
 
     @property
     def n_sections(self):
-        """Number of sections (and tags), p."""
+        """Return the number of sections (and tags), p."""
         return self.arm_lengths.size
 
     @property
     def n_anchors(self):
-        """Number of anchors, m."""
+        """Return the number of anchors, m."""
         return self.anchors.shape[0]
 
     @property
@@ -120,13 +137,13 @@ class BoomModel:
         return int(hits[0]) if hits.size else None
 
     def pivot(self, slew):
-        """The boom's pivot for a slew (radians, shape (...)): shape (..., 3), metres."""
+        """Return the boom's pivot for a slew (radians, shape (...)): shape (..., 3), metres."""
         slew = np.asarray(slew, dtype=float)
         return self.base + self.pivot_offset * np.stack(
             [np.cos(slew), np.sin(slew), np.zeros_like(slew)], axis=-1)
 
     def pivot_of(self, joints):
-        """The pivot of an estimated boom (p, 3), at the slew its joints point along."""
+        """Return the pivot of an estimated boom (p, 3), at the slew its joints point along."""
         if self.pivot_offset == 0.0:
             return self.base.copy()
         joints = np.asarray(joints, dtype=float)
@@ -135,7 +152,8 @@ class BoomModel:
         return self.pivot(fit_slew(joints, self.base))
 
     def forward_kinematics(self, slew, pitches):
-        """Joint positions of the boom.
+        """
+        Joint positions of the boom.
 
         Parameters
         ----------
@@ -149,6 +167,7 @@ class BoomModel:
         joints : ndarray, shape (..., p, 3)
             ``w_k = pivot(theta) + sum_{i<=k} L_i (cos phi_i cos theta, cos phi_i sin theta,
             sin phi_i)``.
+
         """
         slew = np.asarray(slew, dtype=float)
         pitches = np.asarray(pitches, dtype=float)
@@ -160,7 +179,8 @@ class BoomModel:
                                      reach * np.sin(slew)[..., None], height], axis=-1)
 
     def joint_jacobian(self, slew, pitches):
-        """Derivatives of the joints with respect to the posture angles.
+        """
+        Return the derivatives of the joints with respect to the posture angles.
 
         Parameters
         ----------
@@ -174,6 +194,7 @@ class BoomModel:
         jacobian : ndarray, shape (p, 3, p + 1)
             ``jacobian[k, :, 0] = dw_k/dslew``, ``jacobian[k, :, 1 + i] = dw_k/dpitch_i``
             (zero for sections beyond joint k).
+
         """
         pitches = np.asarray(pitches, dtype=float)
         p = self.n_sections

@@ -1,4 +1,19 @@
-"""Single-point localisation from anchor ranges: SR-LS (Beck, Stoica & Li, IEEE TSP 56, 2008).
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Single-point localisation from anchor ranges: SR-LS (Beck, Stoica & Li, IEEE TSP 56, 2008).
 
 SR-LS minimises the squared-range residuals ``sum_j (||x - a_j||^2 - r_j^2)^2``. With
 ``y = (x, ||x||^2)`` this is a least-squares problem under one quadratic equality, a
@@ -11,7 +26,8 @@ __all__ = ['srls', 'intersect_spheres']
 
 
 def srls(anchors, ranges, *, tol=1e-12, max_iter=200):
-    """Global minimiser of the squared-range least-squares criterion.
+    """
+    Global minimiser of the squared-range least-squares criterion.
 
     Parameters
     ----------
@@ -19,11 +35,16 @@ def srls(anchors, ranges, *, tol=1e-12, max_iter=200):
         Anchor positions, metres; they must affinely span R^d (m >= d + 1).
     ranges : ndarray, shape (m,)
         Measured distances to the anchors, metres.
+    tol : float
+        Relative tolerance of the constraint and of the bisection on the multiplier.
+    max_iter : int
+        Bisection steps at most.
 
     Returns
     -------
     position : ndarray, shape (d,) or None
         None when the anchors do not span R^d (the problem then has no unique solution).
+
     """
     anchors = np.asarray(anchors, dtype=float)
     ranges = np.asarray(ranges, dtype=float)
@@ -79,18 +100,22 @@ def srls(anchors, ranges, *, tol=1e-12, max_iter=200):
 
 
 def intersect_spheres(centres, radii):
-    """Both intersection points of three spheres (trilateration).
+    """
+    Both intersection points of three spheres (trilateration).
 
     Parameters
     ----------
     centres : ndarray, shape (3, 3)
+        One sphere centre per row, metres.
     radii : ndarray, shape (3,)
+        Their radii, metres.
 
     Returns
     -------
     points : ndarray, shape (2, 3), or None when the centres are collinear
         The two mirror solutions about the centres' plane, the higher z first. Where noise
         keeps the spheres from meeting, both are the point of the plane nearest them.
+
     """
     centres = np.asarray(centres, dtype=float)
     r1, r2, r3 = np.asarray(radii, dtype=float)

@@ -1,4 +1,19 @@
-"""Nearest Euclidean distance matrix with a low embedding dimension (Qi & Yuan 2014).
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Nearest Euclidean distance matrix with a low embedding dimension (Qi & Yuan 2014).
 
 Solves::
 
@@ -53,7 +68,8 @@ class NearestEDMResult:
 
 
 def _constraint_operator(n, pairs):
-    """Rows and columns of the linear constraints ``A(Y) = Y[rows, cols]``.
+    """
+    Rows and columns of the linear constraints ``A(Y) = Y[rows, cols]``.
 
     The diagonal comes first, then the given off-diagonal ``pairs`` (k, 2) with i < j.
     ``<A_s, Y> = Y[i, j]`` with ``A_s = (e_i e_j^T + e_j e_i^T) / 2``.
@@ -64,7 +80,8 @@ def _constraint_operator(n, pairs):
 
 
 class _Projector:
-    """Projection onto ``K_-(q)`` with prescribed entries, for one constraint structure.
+    """
+    Projection onto ``K_-(q)`` with prescribed entries, for one constraint structure.
 
     Holds what does not change between the projections of one ``nearest_edm`` call.
     """
@@ -99,7 +116,8 @@ class _Projector:
         return value, gradient, projection, eigenvalues, eigenvectors
 
     def newton_matrix(self, eigenvalues, eigenvectors, regularisation):
-        """Generalized Hessian ``A V A*`` of the dual (+ regularisation), (k, k).
+        """
+        Generalized Hessian ``A V A*`` of the dual (+ regularisation), (k, k).
 
         Sums over the eigenvector pairs (a, b) run over a <= b only: both factors are
         symmetric in (a, b).
@@ -151,7 +169,8 @@ class _Projector:
 
 def project_constrained_edm(target, q, rows, cols, values, multipliers=None, tol=1e-10,
                             max_iter=50):
-    """Nearest matrix to ``target`` in ``K_-(q)`` with prescribed entries.
+    """
+    Nearest matrix to ``target`` in ``K_-(q)`` with prescribed entries.
 
     Solves ``min 1/2 ||Y - T||^2  s.t.  Y[rows, cols] = values,  J_q Y J_q NSD`` through its
     dual ``min_y theta(y) = 1/2 ||Pi_K(T + A*y)||^2 - <values, y>``, a smooth convex function
@@ -163,6 +182,7 @@ def project_constrained_edm(target, q, rows, cols, values, multipliers=None, tol
     Parameters
     ----------
     target : ndarray, shape (n, n), symmetric
+        T, the matrix to approximate.
     q : ndarray, shape (n,), positive
         Centering direction of the cone (ones for the EDM cone itself).
     rows, cols : ndarray of int, shape (k,)
@@ -173,10 +193,13 @@ def project_constrained_edm(target, q, rows, cols, values, multipliers=None, tol
         Warm start for the dual variables.
     tol : float
         Stop when ``||A(Y) - values|| <= tol * max(1, ||T||)`` (round-off grows with T).
+    max_iter : int
+        Newton steps at most.
 
     Returns
     -------
     ProjectionResult
+
     """
     projector = _Projector(np.asarray(q, dtype=float), np.asarray(rows), np.asarray(cols))
     return projector(np.asarray(target, dtype=float), np.asarray(values, dtype=float),
@@ -186,7 +209,8 @@ def project_constrained_edm(target, q, rows, cols, values, multipliers=None, tol
 def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1e-7,
                 rank_tol=1e-8, max_iter=300, tau=0.1, penalty_parameter=None,
                 inner_tol=1e-9):
-    """Nearest EDM of embedding dimension ``rank`` to a partly known squared-distance matrix.
+    """
+    Nearest EDM of embedding dimension ``rank`` to a partly known squared-distance matrix.
 
     Parameters
     ----------
@@ -226,6 +250,7 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
     -----
     The problem is solved in units where the largest known squared distance is 1; results
     are returned in the units of ``target``.
+
     """
     target = np.asarray(target, dtype=float)
     n = target.shape[0]
@@ -270,7 +295,7 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
     state = {'multipliers': None, 'inner_iterations': 0, 'kkt_residual': 0.0}
 
     def point(edm):
-        """An iterate with its rank penalty, trace and leading eigenvectors (one eigh)."""
+        """Return an iterate with its rank penalty, trace and leading eigenvectors (one eigh)."""
         return edm, rank_penalty(edm, rank)
 
     def mm_step(current, c):
@@ -286,7 +311,8 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
         return point(projected.matrix / q_outer), projected.kkt_residual
 
     def squarem_step(current, c):
-        """One SQUAREM cycle (Varadhan & Roland 2008) on the MM map, never worse than 2 steps.
+        """
+        One SQUAREM cycle (Varadhan & Roland 2008) on the MM map, never worse than 2 steps.
 
         The MM map converges linearly and slowly along weakly determined directions (zero
         or unequal weights); squared extrapolation removes most of that tail.

@@ -1,4 +1,19 @@
-"""Range errors with non-line-of-sight links: a Gaussian, and sometimes an exponential excess.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Range errors with non-line-of-sight links: a Gaussian, and sometimes an exponential excess.
 
 A blocked UWB path is always longer than the straight one. The model of the paper's NLOS
 experiment, and of ``simulate.RangeNoise``: a measured range is ``d + sigma N + X`` where
@@ -26,7 +41,8 @@ _HALF_LOG_2PI = 0.5 * np.log(2.0 * np.pi)
 
 @dataclass(frozen=True)
 class NlosMixture:
-    """Prior NLOS probability of a link and mean NLOS excess (metres).
+    """
+    Prior NLOS probability of a link and mean NLOS excess (metres).
 
     ``fraction=0`` is plain Gaussian least squares.
     """
@@ -41,7 +57,8 @@ class NlosMixture:
             raise ValueError(f'nlos_gamma must be > 0 m, got {self.gamma}')
 
     def loss(self, excess, sigma):
-        """Loss, slope and NLOS probability of range excesses in units of their sigma.
+        """
+        Loss, slope and NLOS probability of range excesses in units of their sigma.
 
         Parameters
         ----------
@@ -59,6 +76,7 @@ class NlosMixture:
             Its derivative with respect to ``excess``, zero at zero.
         nlos : ndarray, shape (...)
             Posterior probability that each link is NLOS.
+
         """
         s = np.asarray(excess, dtype=float)
         return self.bind(np.broadcast_to(np.asarray(sigma, dtype=float), s.shape))(s)
@@ -68,7 +86,8 @@ class NlosMixture:
         return LinkLoss(self, sigma)
 
     def approximate_loss(self, excess, sigma):
-        """A cheap stand-in for :meth:`loss` (cost only), for scoring many candidates.
+        """
+        Return a cheap stand-in for :meth:`loss` (cost only), for scoring many candidates.
 
         The larger of the two mixture terms instead of their sum, and the blocked one only
         for too-long ranges and without its Gaussian tail: the loss less ``-log(1 - fraction)``
@@ -84,7 +103,8 @@ class NlosMixture:
 
 
 class LinkLoss:
-    """:meth:`NlosMixture.loss` for links of given sigmas, called on their excesses.
+    """
+    :meth:`NlosMixture.loss` for links of given sigmas, called on their excesses.
 
     Per-link constants (and the loss's value and slope at zero) are computed once, which
     matters inside an iterative fit where the same links are evaluated many times.

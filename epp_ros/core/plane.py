@@ -1,4 +1,19 @@
-"""The boom's vertical plane (the paper's Feature II) for CEPP.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The boom's vertical plane (the paper's Feature II) for CEPP.
 
 All sections of a pump boom lie in the vertical plane through the base pivot along the slew
 direction ``u = (cos theta, sin theta, 0)``. In-plane coordinates of a point x are
@@ -11,7 +26,8 @@ __all__ = ['fit_slew', 'fit_plane_to_ranges', 'slew_step', 'to_plane', 'from_pla
 
 
 def fit_slew(points, base):
-    """Slew angle of the vertical plane through ``base`` that best fits ``points``.
+    """
+    Slew angle of the vertical plane through ``base`` that best fits ``points``.
 
     Total least squares on the horizontal projections (the principal direction of their
     scatter about the base), which, unlike the paper's fitted slope ``K``, is defined for
@@ -21,11 +37,14 @@ def fit_slew(points, base):
     Parameters
     ----------
     points : ndarray, shape (k, 3)
+        Points to fit, metres.
     base : ndarray, shape (3,)
+        The boom base the plane passes through, metres.
 
     Returns
     -------
     slew : float, radians in [-pi, pi)
+
     """
     horizontal = np.asarray(points, dtype=float)[:, :2] - np.asarray(base, dtype=float)[:2]
     _, _, vt = np.linalg.svd(horizontal, full_matrices=False)
@@ -53,7 +72,8 @@ def from_plane(coords, base, slew):
 
 
 def project_ranges(ranges, anchors, base, slew):
-    """Exact squared ranges, within the plane, from in-plane tags to projected anchors.
+    """
+    Exact squared ranges, within the plane, from in-plane tags to projected anchors.
 
     A tag in the plane and an anchor at perpendicular distance ``d`` from it satisfy
     ``delta_plane^2 = delta^2 - d^2``. (The paper's formula uses the tag's own previous
@@ -65,8 +85,11 @@ def project_ranges(ranges, anchors, base, slew):
     ranges : ndarray, shape (p, m)
         Measured tag-anchor distances, NaN where missing.
     anchors : ndarray, shape (m, 3)
+        Anchor positions, metres.
     base : ndarray, shape (3,)
+        The boom base the plane passes through, metres.
     slew : float
+        The plane's slew, radians.
 
     Returns
     -------
@@ -74,6 +97,7 @@ def project_ranges(ranges, anchors, base, slew):
         In-plane squared ranges (NaN where missing).
     clipped : ndarray of bool, shape (p, m)
         Where noise made the projection negative.
+
     """
     normal = np.array([-np.sin(slew), np.cos(slew)])
     offset = (np.asarray(anchors, dtype=float)[:, :2] - np.asarray(base, dtype=float)[:2]) @ normal
@@ -84,7 +108,8 @@ def project_ranges(ranges, anchors, base, slew):
 
 
 def slew_step(coords, ranges, anchors, base, slew):
-    """Gauss-Newton step on the slew for fixed in-plane coordinates, radians.
+    """
+    Gauss-Newton step on the slew for fixed in-plane coordinates, radians.
 
     Minimises ``sum (||w_k(theta) - a_j|| - delta_kj)^2`` over the valid ranges, where
     ``w_k(theta) = from_plane(coords[k], base, theta)``.
@@ -92,11 +117,16 @@ def slew_step(coords, ranges, anchors, base, slew):
     Parameters
     ----------
     coords : ndarray, shape (p, 2)
+        In-plane tag positions (reach, z), metres.
     ranges : ndarray, shape (p, m)
         Metres, NaN where missing.
     anchors : ndarray, shape (m, 3)
+        Anchor positions, metres.
     base : ndarray, shape (3,)
+        The boom base the plane passes through, metres.
     slew : float
+        Current slew, radians.
+
     """
     joints = from_plane(coords, base, slew)
     difference = joints[:, None, :] - np.asarray(anchors, dtype=float)[None, :, :]
@@ -112,7 +142,8 @@ def slew_step(coords, ranges, anchors, base, slew):
 
 def fit_plane_to_ranges(coords, ranges, anchors, base, slew, pivot=None, arm_lengths=None,
                         max_iter=5, tol=1e-9):
-    """Slew and in-plane tag positions that best fit 3-D ranges, by Gauss-Newton.
+    """
+    Slew and in-plane tag positions that best fit 3-D ranges, by Gauss-Newton.
 
     Least squares ``sum (||w_k - a_j|| - delta_kj)^2`` over the valid ranges, where
     ``w_k = from_plane(coords[k], base, slew)``, plus, given ``arm_lengths``, the squared
@@ -126,13 +157,17 @@ def fit_plane_to_ranges(coords, ranges, anchors, base, slew, pivot=None, arm_len
     ranges : ndarray, shape (p, m)
         Measured tag-anchor distances, metres, NaN where missing.
     anchors : ndarray, shape (m, 3)
+        Anchor positions, metres.
     base : ndarray, shape (3,)
+        The boom base the plane passes through, metres.
     slew : float
         Starting slew, radians.
     pivot : ndarray, shape (2,), optional
         In-plane position of the boom's pivot; required with ``arm_lengths``.
     arm_lengths : ndarray, shape (p,), optional
+        Section lengths, metres.
     max_iter : int
+        Gauss-Newton iterations at most.
     tol : float
         Stop when the slew step is below this, radians.
 
@@ -141,6 +176,7 @@ def fit_plane_to_ranges(coords, ranges, anchors, base, slew, pivot=None, arm_len
     slew : float
         Radians (not wrapped).
     coords : ndarray, shape (p, 2)
+
     """
     if arm_lengths is not None and pivot is None:
         raise ValueError('pivot: required with arm_lengths')

@@ -1,4 +1,19 @@
-"""Orientations of the boom's sections, for publishing a posture as poses.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Orientations of the boom's sections, for publishing a posture as poses.
 
 Pose 0 is the base pivot, pose k (k = 1..p) joint k. Pose k's x-axis points along section k
 (from joint k-1 to joint k) and its z-axis lies in the section's vertical plane, pointing up;
@@ -12,12 +27,15 @@ __all__ = ['boom_frames', 'rotation_to_quaternion', 'boom_quaternions']
 
 
 def boom_frames(base, joints):
-    """Rotation matrices of the base and each section.
+    """
+    Rotation matrices of the base and each section.
 
     Parameters
     ----------
     base : ndarray, shape (3,)
+        Base pivot of the boom, metres.
     joints : ndarray, shape (p, 3)
+        Joint positions 1..p, metres.
 
     Returns
     -------
@@ -26,6 +44,7 @@ def boom_frames(base, joints):
         section, y horizontal (``z_world x x``), z = x cross y, which has a non-negative
         vertical component. The base, and any vertical section, use the slew fitted to the
         joints (``plane.fit_slew``) for their horizontal axes.
+
     """
     base = np.asarray(base, dtype=float)
     joints = np.asarray(joints, dtype=float)
@@ -47,7 +66,7 @@ def boom_frames(base, joints):
 
 
 def rotation_to_quaternion(rotations):
-    """Unit quaternions (x, y, z, w) of rotation matrices (..., 3, 3), w >= 0."""
+    """Return unit quaternions (x, y, z, w) of rotation matrices (..., 3, 3), w >= 0."""
     r = np.asarray(rotations, dtype=float)
     trace = np.trace(r, axis1=-2, axis2=-1)
     candidates = np.stack([

@@ -1,4 +1,19 @@
-"""SDP relaxation of range-only sensor localisation (Biswas-Ye).
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+SDP relaxation of range-only sensor localisation (Biswas-Ye).
 
 P. Biswas and Y. Ye, "Semidefinite programming for ad hoc wireless sensor network
 localization", IPSN 2004; P. Biswas, T.-C. Lian, T.-C. Wang and Y. Ye, "Semidefinite
@@ -29,7 +44,8 @@ _SOLVED = ('optimal', 'optimal_inaccurate')
 
 
 class SDPLocalizer:
-    """Biswas-Ye SDP localiser for ``n_tags`` tags ranged by fixed anchors.
+    """
+    Biswas-Ye SDP localiser for ``n_tags`` tags ranged by fixed anchors.
 
     One parametrised (DPP) cvxpy problem is built here, so repeated :meth:`solve`
     calls only update parameter values and do not recompile it.
@@ -47,6 +63,7 @@ class SDPLocalizer:
     ------
     ImportError
         When cvxpy is not installed.
+
     """
 
     def __init__(self, anchors, n_tags, solver='CLARABEL'):
@@ -76,7 +93,8 @@ class SDPLocalizer:
         self._problem = cp.Problem(cp.Minimize(objective), [z[:3, :3] == np.eye(3)])
 
     def solve(self, ranges):
-        """Estimate the tag positions from one frame of ranges.
+        """
+        Estimate the tag positions from one frame of ranges.
 
         Parameters
         ----------
@@ -95,6 +113,7 @@ class SDPLocalizer:
         ------
         RuntimeError
             When the solver does not reach an (inaccurate) optimum.
+
         """
         ranges = np.asarray(ranges, dtype=float)
         if ranges.shape != self._weights.shape:

@@ -1,4 +1,19 @@
-"""Simulated pumps: geometries, postures, range noise and working-cycle trajectories.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Simulated pumps: geometries, postures, range noise and working-cycle trajectories.
 
 Everything takes an explicit ``numpy.random.Generator`` so that runs are reproducible.
 """
@@ -24,12 +39,14 @@ XIE3DIM = {
 
 
 def xie3dim():
-    """The authors' geometry: model with the arm lengths implied by its joints, and the joints.
+    """
+    Return the authors' geometry: model with the arm lengths implied by its joints, and joints.
 
     Returns
     -------
     model : BoomModel
     true_joints : ndarray, shape (5, 3)
+
     """
     joints = np.array(XIE3DIM['true_joints'])
     base = np.array(XIE3DIM['base'])
@@ -38,7 +55,8 @@ def xie3dim():
 
 
 def truck_pump(arm_lengths=(9.0, 7.0, 7.0, 9.0, 9.0), base_height=3.5, n_anchors=6):
-    """A truck-mounted pump with anchors on the turret, chassis and outriggers.
+    """
+    Return a truck-mounted pump with anchors on the turret, chassis and outriggers.
 
     The truck's x-axis points forward, the slew axis is at the origin. Anchors, in order
     of preference: the base pivot on the turret, the four outrigger feet, the cab roof,
@@ -52,6 +70,7 @@ def truck_pump(arm_lengths=(9.0, 7.0, 7.0, 9.0, 9.0), base_height=3.5, n_anchors
         Height of the base pivot above the ground, metres.
     n_anchors : int
         How many of the anchors above to use, 3 to 7.
+
     """
     candidates = np.array([
         [0.0, 0.0, base_height],        # turret, at the base pivot
@@ -68,7 +87,8 @@ def truck_pump(arm_lengths=(9.0, 7.0, 7.0, 9.0, 9.0), base_height=3.5, n_anchors
 
 
 def random_posture(model, rng, min_height=0.5, max_tries=10000):
-    """A random working posture with every joint at least ``min_height`` above the ground.
+    """
+    Draw a random working posture with every joint at least ``min_height`` above the ground.
 
     Slew uniform in [-pi, pi); first section pitched 10..85 deg, the others -70..70 deg.
 
@@ -77,6 +97,7 @@ def random_posture(model, rng, min_height=0.5, max_tries=10000):
     slew : float
     pitches : ndarray, shape (p,)
     joints : ndarray, shape (p, 3)
+
     """
     p = model.n_sections
     low = np.radians(np.r_[10.0, np.full(p - 1, -70.0)])
@@ -92,7 +113,8 @@ def random_posture(model, rng, min_height=0.5, max_tries=10000):
 
 @dataclass
 class RangeNoise:
-    """Range error model of the paper and of real UWB links.
+    """
+    Range error model of the paper and of real UWB links.
 
     A measured range is ``d (1 + eta N1) + sigma N2 + NLOS``, clipped at zero, where N1, N2
     are standard normal, ``NLOS ~ Exponential(mean=nlos_gamma)`` on a random fraction
@@ -107,7 +129,8 @@ class RangeNoise:
     dropout: float = 0.0        #: probability that a link is missing
 
     def apply(self, ranges, rng):
-        """Noisy copy of true ``ranges`` (any shape).
+        """
+        Noisy copy of true ``ranges`` (any shape).
 
         Returns
         -------
@@ -115,6 +138,7 @@ class RangeNoise:
             Same shape, NaN where dropped.
         nlos : ndarray of bool
             Where an NLOS excess was added.
+
         """
         ranges = np.asarray(ranges, dtype=float)
         noisy = ranges * (1.0 + self.eta * rng.standard_normal(ranges.shape))
@@ -129,7 +153,8 @@ class RangeNoise:
 
 @dataclass
 class AngleNoise:
-    """Errors of the paper's TPSM angle sensors.
+    """
+    Errors of the paper's TPSM angle sensors.
 
     The slew encoder reads the slew plus a turntable error uniform in
     ``[-slew_error, slew_error]`` (the paper: +-0.5 deg); each inclinometer reads its
@@ -141,7 +166,7 @@ class AngleNoise:
 
     @property
     def slew_sigma(self):
-        """Standard deviation of the slew error, radians."""
+        """Return the standard deviation of the slew error, radians."""
         return self.slew_error / np.sqrt(3.0)
 
     def apply(self, slew, pitches, rng):
@@ -152,14 +177,19 @@ class AngleNoise:
 
 
 def observe(model, slew, pitches, rng, range_noise, tag_noise=None, angle_noise=None):
-    """One simulated frame of a posture, as keyword arguments of ``PostureEstimator.update``.
+    """
+    One simulated frame of a posture, as keyword arguments of ``PostureEstimator.update``.
 
     Parameters
     ----------
     model : BoomModel
+        The boom and its anchors.
     slew : float
+        Radians.
     pitches : ndarray, shape (p,)
+        Section pitches, radians.
     rng : numpy.random.Generator
+        Draws the noise.
     range_noise : RangeNoise
         Of the tag-anchor ranges.
     tag_noise : RangeNoise, optional
@@ -174,6 +204,7 @@ def observe(model, slew, pitches, rng, range_noise, tag_noise=None, angle_noise=
         ``slew``.
     nlos : ndarray of bool, shape (p, m)
         The tag-anchor links given an NLOS excess.
+
     """
     joints = model.forward_kinematics(slew, pitches)
     ranges, nlos = range_noise.apply(model.ranges(joints), rng)
@@ -200,7 +231,8 @@ class Trajectory:
 
 
 def working_cycle(model, duration, rate, rng=None, slew_amplitude=np.radians(60.0)):
-    """A smooth pouring cycle: the boom sweeps in slew while its sections luff.
+    """
+    Return a smooth pouring cycle: the boom sweeps in slew while its sections luff.
 
     Slew follows ``s0 + A sin(2 pi t / 40 s)``; each section's pitch oscillates by 10 deg
     about an unfolded pose (55 deg at the base down to -45 deg at the tip) with its own
@@ -209,6 +241,7 @@ def working_cycle(model, duration, rate, rng=None, slew_amplitude=np.radians(60.
     Parameters
     ----------
     model : BoomModel
+        The boom to move.
     duration : float
         Seconds.
     rate : float
@@ -221,6 +254,7 @@ def working_cycle(model, duration, rate, rng=None, slew_amplitude=np.radians(60.
     Returns
     -------
     Trajectory
+
     """
     p = model.n_sections
     times = np.arange(int(round(duration * rate))) / rate

@@ -1,15 +1,31 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """What every epp_ros node shares: parameters, the pump description, messages, main()."""
 import os
+from pathlib import Path
 import re
-import signal
 import sys
 import tempfile
-from pathlib import Path
 
-import rclpy
 from builtin_interfaces.msg import Time
+from epp_ros import contract
+from epp_ros.config import ConfigError, pump_config_from_parameters, PUMP_PARAMETERS
+from epp_ros.nodes.stopping import ignore_signals, shutdown_on_signals
 from geometry_msgs.msg import Point, Pose, PoseArray
 from rcl_interfaces.msg import ParameterDescriptor
+import rclpy
 from rclpy.exceptions import InvalidHandle, ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation
@@ -18,12 +34,9 @@ from rclpy.signals import SignalHandlerOptions
 from visualization_msgs.msg import Marker, MarkerArray
 import yaml
 
-from epp_ros import contract
-from epp_ros.config import PUMP_PARAMETERS, ConfigError, pump_config_from_parameters
-from epp_ros.nodes.stopping import ignore_signals, shutdown_on_signals
 
 def qos(topic):
-    """The rclpy QoS profile of a :class:`epp_ros.contract.Topic`."""
+    """Return the rclpy QoS profile of a :class:`epp_ros.contract.Topic`."""
     reliability = ReliabilityPolicy.RELIABLE if topic.reliable else \
         ReliabilityPolicy.BEST_EFFORT
     if topic.depth is None:
@@ -48,12 +61,14 @@ class StartupError(Exception):
 
 
 def declare(node, name, default, description, **descriptor):
-    """Declare a parameter with a descriptor and return its value.
+    """
+    Declare a parameter with a descriptor and return its value.
 
     Raises
     ------
     StartupError
         When the value given does not fit the parameter (e.g. an integer for a float).
+
     """
     try:
         node.declare_parameter(name, default,
@@ -64,12 +79,14 @@ def declare(node, name, default, description, **descriptor):
 
 
 def declare_pump_parameters(node):
-    """Declare the shared pump description and return it validated.
+    """
+    Declare the shared pump description and return it validated.
 
     Raises
     ------
     StartupError
         Naming the offending field.
+
     """
     values = {name: declare(node, name, default, description + ' Read-only.',
                             dynamic_typing=True, read_only=True)
@@ -95,7 +112,8 @@ def _stamp(stamp):
 
 
 def posture_message(base, joints, stamp, frame_id):
-    """PoseArray of the base pivot then joints 1..p, oriented along the sections.
+    """
+    Return a PoseArray of the base pivot then joints 1..p, oriented along the sections.
 
     ``stamp`` is a builtin_interfaces/Time (copied exactly) or seconds.
     """
@@ -112,7 +130,7 @@ def posture_message(base, joints, stamp, frame_id):
 
 
 def posture_markers(base, joints, stamp, frame_id, namespace='boom'):
-    """MarkerArray for RViz: the boom as a line strip, joint spheres and a tip label."""
+    """Return a MarkerArray for RViz: the boom as a line strip, joint spheres, a tip label."""
     header_stamp = _stamp(stamp)
     points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in [base, *joints]]
     strip = Marker(ns=namespace, id=0, type=Marker.LINE_STRIP, action=Marker.ADD,
@@ -193,7 +211,8 @@ def _init_problem(exc):
 
 
 def _init(args):
-    """rclpy.init without rclpy's signal handlers; StartupError with one line if it fails.
+    """
+    rclpy.init without rclpy's signal handlers; StartupError with one line if it fails.
 
     rcl logs its own ERROR line to stderr (fd 2, from C) before the exception: it is held
     back while init runs and given back unless init failed, so the user sees one line.
@@ -218,7 +237,8 @@ def _init(args):
 
 
 def _spin(node, stop):
-    """Spin until a shutdown is requested or the context is shut down elsewhere.
+    """
+    Spin until a shutdown is requested or the context is shut down elsewhere.
 
     The request is polled: Python runs signal handlers only between rclpy's waits.
     """
@@ -242,7 +262,8 @@ def _close(node):
 
 
 def run_node(factory, args=None, name=None):
-    """The usual node main(): init, construct, spin, shut down; return the exit status.
+    """
+    Run the usual node main(): init, construct, spin, shut down; return the exit status.
 
     SIGINT and SIGTERM, however many and whenever, end it cleanly with status 0 (an
     RCLError once shutdown began counts as clean); a StartupError, including a parameters

@@ -1,4 +1,19 @@
-"""uwb_driver: UWB range lines from serial ports, WiFi bridges and WiFi tags -> /uwb/ranges.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+uwb_driver: UWB range lines from serial ports, WiFi bridges and WiFi tags -> /uwb/ranges.
 
 Publishes ``sensor_msgs/JointState`` on ``uwb/ranges`` (relative: namespaces work), one
 message per ranging cycle, as a stamped, labelled range array: ``name[i] = "<tag>:<anchor>"``
@@ -13,20 +28,18 @@ import functools
 import sys
 import threading
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.node import Node
-from sensor_msgs.msg import JointState
-
 from epp_ros import contract
-from epp_ros.config import (PROTOCOLS, ConfigError, Source, listen_address,
-                            normalise_device_id)
-from epp_ros.nodes.common import (RANGES_QOS, StartupError, declare, declare_pump_parameters,
-                                  run_node, to_time)
+from epp_ros.config import ConfigError, listen_address, normalise_device_id, PROTOCOLS, Source
+from epp_ros.nodes.common import (declare, declare_pump_parameters, RANGES_QOS, run_node,
+                                  StartupError, to_time)
 from epp_ros.uwb.decoder import LineDecoder
-from epp_ros.uwb.formats import FORMATS, fits_slots
+from epp_ros.uwb.formats import fits_slots, FORMATS
 from epp_ros.uwb.frames import FrameAssembler
 from epp_ros.uwb.source import open_source
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
 
 
 class UwbDriver(Node):
@@ -82,7 +95,7 @@ class UwbDriver(Node):
 
     @staticmethod
     def _single_source(port, protocol, tag, anchor):
-        """The source given by the ``port`` parameters."""
+        """Return the source given by the ``port`` parameters."""
         if protocol not in PROTOCOLS:
             raise StartupError(f'protocol: {protocol!r} is not one of {list(PROTOCOLS)}')
         try:
@@ -106,7 +119,7 @@ class UwbDriver(Node):
                 f'(ids 0-{slots - 1}); anchors {extra} need another source or another format')
 
     def _now(self):
-        """The node's clock, seconds: system time, or simulated time with use_sim_time."""
+        """Return the node's clock, seconds: system time, or simulated time with use_sim_time."""
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _handler(self, source, decoder):

@@ -1,4 +1,19 @@
-"""uwb_emulator: a simulated pump whose UWB modules talk like the real ones.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+uwb_emulator: a simulated pump whose UWB modules talk like the real ones.
 
 The boom follows a working cycle; each cycle's noisy ranges are written, in any format of
 the registry (:data:`epp_ros.uwb.formats.FORMATS`), to a pseudo-terminal (like a USB-UART)
@@ -13,22 +28,22 @@ cycles and measures ``--duration``.
 import argparse
 import sys
 
-import numpy as np
-from geometry_msgs.msg import PoseArray
-from rclpy.node import Node
-from rclpy.utilities import remove_ros_args
-
 from epp_ros import contract
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core.simulate import RangeNoise, working_cycle
-from epp_ros.nodes.common import POSTURE_QOS, posture_message, run_node
+from epp_ros.nodes.common import posture_message, POSTURE_QOS, run_node
 from epp_ros.nodes.stopping import shutdown_on_signals
-from epp_ros.uwb.emulation import PtyOutput, TcpOutput, channel_devices, corrupt, cycle_lines
-from epp_ros.uwb.formats import FORMATS, fits_slots
+from epp_ros.uwb.emulation import channel_devices, corrupt, cycle_lines, PtyOutput, TcpOutput
+from epp_ros.uwb.formats import fits_slots, FORMATS
+from geometry_msgs.msg import PoseArray
+import numpy as np
+from rclpy.node import Node
+from rclpy.utilities import remove_ros_args
 
 
 def parse_args(argv):
-    parser = argparse.ArgumentParser(prog='uwb_emulator', description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog='uwb_emulator',
+                                     description=__doc__.lstrip().splitlines()[0])
     parser.add_argument('--protocol', choices=list(FORMATS), default='json')
     where = parser.add_mutually_exclusive_group(required=True)
     where.add_argument('--pty', action='store_true', help='serve on pseudo-terminal(s)')
@@ -63,7 +78,8 @@ def parse_args(argv):
 
 
 def open_outputs(args, config):
-    """The channels for this protocol, and the lines announcing them.
+    """
+    Open the channels for this protocol; return them and the lines announcing them.
 
     Each announcement is ``PTY <path>`` or ``TCP <url>``, followed by the tag id and the
     anchor id that the channel's lines do not name, where the format names none.

@@ -1,4 +1,19 @@
-"""posture_estimator: uwb/ranges -> arm_posture, every frame, with diagnostics and markers.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+posture_estimator: uwb/ranges -> arm_posture, every frame, with diagnostics and markers.
 
 Subscribes to ``uwb/ranges`` (``sensor_msgs/JointState`` from uwb_driver; reliable, keep
 all, so no frame is lost silently: a node that lags shows it as latency), arranges the
@@ -30,28 +45,27 @@ Parameters (``SETTINGS``) are live: a change is checked as at start (refused wit
 reason otherwise) and applies from the next frame; a new ``method`` starts cold, which
 ``/diagnostics`` counts. The pump's description and the angle sensors' names are read-only.
 """
-import math
-import sys
 from collections import Counter
 from dataclasses import dataclass
+import math
+import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from epp_ros.angles import AngleSamples
+from epp_ros.config import PUMP_PARAMETERS
+from epp_ros.contract import ANGLES, DIAGNOSTICS, MARKERS, POSTURE, RANGES
+from epp_ros.core import METHODS, PostureEstimator, RANGE_METHODS
+from epp_ros.core.frame_policy import ADMIT, CLOCK_JUMP, FramePolicy
+from epp_ros.core.integrity import IntegrityLimits, Thresholds
+from epp_ros.health import assess, grade
+from epp_ros.nodes.common import (declare, declare_pump_parameters, posture_markers,
+                                  posture_message, POSTURE_QOS, RANGES_INPUT_QOS, run_node,
+                                  StartupError, to_seconds, to_time)
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
-
-from epp_ros.angles import AngleSamples
-from epp_ros.config import PUMP_PARAMETERS
-from epp_ros.contract import ANGLES, DIAGNOSTICS, MARKERS, POSTURE, RANGES
-from epp_ros.core import METHODS, RANGE_METHODS, PostureEstimator
-from epp_ros.core.frame_policy import ADMIT, CLOCK_JUMP, FramePolicy
-from epp_ros.core.integrity import IntegrityLimits, Thresholds
-from epp_ros.health import assess, grade
-from epp_ros.nodes.common import (POSTURE_QOS, RANGES_INPUT_QOS, StartupError, declare,
-                                  declare_pump_parameters, posture_message, posture_markers,
-                                  run_node, to_seconds, to_time)
 
 LEVELS = {0: DiagnosticStatus.OK, 1: DiagnosticStatus.WARN, 2: DiagnosticStatus.ERROR}
 STALE_AFTER = 1.0           # s without a frame: the diagnostics say STALE
@@ -59,8 +73,12 @@ STALE_AFTER = 1.0           # s without a frame: the diagnostics say STALE
 
 @dataclass(frozen=True)
 class Setting:
-    """One node parameter: its default, what it means, whether it can change while running,
-    and its range (inclusive, shown by ``ros2 param describe`` and enforced by ROS)."""
+    """
+    One node parameter.
+
+    Its default, what it means, whether it can change while running, and its range
+    (inclusive, shown by ``ros2 param describe`` and enforced by ROS).
+    """
 
     default: object
     description: str
@@ -124,19 +142,21 @@ OPTION_OF = {'range_sigma': 'sigma', 'nlos_fraction': 'nlos_fraction',
 
 
 def _parameter_name(message):
-    """An estimator error names its option; say the node parameter instead."""
+    """Say the node parameter where an estimator error names its option."""
     option = message.split(':', 1)[0]
     names = {option_name: parameter for parameter, option_name in OPTION_OF.items()}
     return message.replace(option, names[option], 1) if option in names else message
 
 
 def estimator_settings(values):
-    """Keyword arguments of PostureEstimator from the node's parameter values.
+    """
+    Keyword arguments of PostureEstimator from the node's parameter values.
 
     Raises
     ------
     ValueError
         Naming the parameter, when a value cannot be used.
+
     """
     method = values['method']
     if method not in RANGE_METHODS:
@@ -195,7 +215,7 @@ class PostureEstimatorNode(Node):
 
     @property
     def angles(self):
-        """The angle samples, when the method fuses angle sensors (else None)."""
+        """Return the angle samples, when the method fuses angle sensors (else None)."""
         return self.angle_samples if 'pitches' in METHODS[self.estimator.method].inputs \
             else None
 
@@ -302,7 +322,7 @@ class PostureEstimatorNode(Node):
             self.counts[f'rejected {diagnostics["status"]}'] += 1
 
     def _now(self):
-        """The node's time, seconds (simulated under use_sim_time)."""
+        """Return the node's time, seconds (simulated under use_sim_time)."""
         return self.get_clock().now().nanoseconds * 1e-9
 
     def publish_diagnostics(self):

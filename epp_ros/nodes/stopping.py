@@ -1,4 +1,19 @@
-"""How a node is asked to stop: SIGINT and SIGTERM set a flag, whenever and however often.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+How a node is asked to stop: SIGINT and SIGTERM set a flag, whenever and however often.
 
 Standard library only, so that the console scripts (``entry``) install it before the slow
 imports of rclpy, numpy and scipy: a Ctrl-C during start-up must not end in a traceback.
@@ -9,7 +24,8 @@ __all__ = ['ShutdownRequest', 'shutdown_on_signals', 'ignore_signals']
 
 
 class ShutdownRequest:
-    """Set by SIGINT and SIGTERM, however often and whenever they come; never raises.
+    """
+    Set by SIGINT and SIGTERM, however often and whenever they come; never raises.
 
     ``ros2 launch`` forwards a terminal's Ctrl-C as a second SIGINT (and SIGTERM after a
     timeout): a handler that raised (KeyboardInterrupt) would land in the cleanup of the
@@ -27,7 +43,8 @@ class ShutdownRequest:
 
 
 def shutdown_on_signals():
-    """From now on SIGINT and SIGTERM only request a shutdown; return the request.
+    """
+    From now on SIGINT and SIGTERM only request a shutdown; return the request.
 
     Call it before anything slow: a signal that arrives before it is installed still
     interrupts the process the Python way.
@@ -38,7 +55,8 @@ def shutdown_on_signals():
 
 
 def ignore_signals():
-    """Ignore SIGINT and SIGTERM from now on, for a process that has shut down.
+    """
+    Ignore SIGINT and SIGTERM from now on, for a process that has shut down.
 
     Python's finalization puts back the default handlers of signals that have Python
     handlers (not of ignored ones): a second Ctrl-C while rclpy and Fast DDS tear down at

@@ -1,4 +1,19 @@
-"""epp_bag: synthesise, record, replay, evaluate and describe rosbag2 files.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+epp_bag: synthesise, record, replay, evaluate and describe rosbag2 files.
 
     epp_bag synth OUT [--storage mcap|sqlite3] [--duration S] [--sigma M] [--nlos F]
                       [--drop F] [--seed N] [--config FILE] [--raw PROTOCOL] [--start S]
@@ -17,20 +32,19 @@ import signal
 import sys
 import time
 
-import numpy as np
-
 from epp_ros import bags, contract
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core import RANGE_METHODS
 from epp_ros.uwb.formats import FORMATS
+import numpy as np
 
 DEFAULT_RECORD = [bags.RANGES, bags.POSTURE, bags.TRUTH, contract.DIAGNOSTICS.absolute]
 CLOCK_HZ = 40.0         # /clock rate of `play --clock`, as ros2 bag play's default
 
 
 def parse_args(argv):
-    parser = argparse.ArgumentParser(prog='epp_bag', description=__doc__.splitlines()[0],
-                                     epilog=__doc__.split('\n', 2)[2],
+    parser = argparse.ArgumentParser(prog='epp_bag', description=__doc__.lstrip().splitlines()[0],
+                                     epilog=__doc__.lstrip().split('\n', 2)[2],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     commands = parser.add_subparsers(dest='command', required=True)
     synth = commands.add_parser('synth', help='write a simulated working cycle')

@@ -1,4 +1,19 @@
-"""epp_bench: speed and accuracy of the estimators, next to the paper's published figures.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+epp_bench: speed and accuracy of the estimators, next to the paper's published figures.
 
 Suites:
   xie3dim   The authors' geometry at additive sigma = 1 m, cold start per trial: RMSE,
@@ -23,20 +38,19 @@ option to the estimators (e.g. ``anchor_weight=inf``, ``predict_slew=false``).
 """
 import argparse
 import json
+from pathlib import Path
 import subprocess
 import sys
 import time
-from pathlib import Path
-
-import numpy as np
 
 from epp_ros.core import METHODS, PostureEstimator
 from epp_ros.core.bounds import crlb
 from epp_ros.core.chain import angles_from_joints
 from epp_ros.core.measurements import Measurements, SensorNoise
 from epp_ros.core.metrics import frame_rmse, pooled_rmse
-from epp_ros.core.simulate import (XIE3DIM, AngleNoise, RangeNoise, observe, truck_pump,
-                                   working_cycle, xie3dim)
+from epp_ros.core.simulate import (AngleNoise, observe, RangeNoise, truck_pump, working_cycle,
+                                   XIE3DIM, xie3dim)
+import numpy as np
 
 PUBLISHED_XIE3DIM = {'cepp': ('EMBED/CEPP', XIE3DIM['published_rmse_m']['EMBED_CEPP']),
                      'srls': ('SR-LS 3-D', XIE3DIM['published_rmse_m']['SR-LS_3D']),
@@ -70,7 +84,8 @@ def commit():
 
 
 def method_inputs(method, frame, fused=False):
-    """What a method is given of a simulated frame (a dict of ``update`` keywords).
+    """
+    Return what a method is given of a simulated frame (a dict of ``update`` keywords).
 
     Methods that use ranges get the tag-anchor ranges alone, unless ``fused``; the others
     (TPSM) their angle sensors.
@@ -86,7 +101,8 @@ def method_inputs(method, frame, fused=False):
 
 
 def method_estimate(estimator, frame):
-    """The method's estimate of a frame, whether the integrity checks pass it or not.
+    """
+    Return the method's estimate of a frame, whether the integrity checks pass it or not.
 
     The accuracy suites score the methods themselves; ``update`` returns only postures
     that may be published (``epp_bench integrity`` scores that).
@@ -96,7 +112,8 @@ def method_estimate(estimator, frame):
 
 
 def run_frames(estimator, frames, truths, cold=False, fused=False):
-    """Feed frames to an estimator; per-frame RMSE, arm-length error and wall time.
+    """
+    Feed frames to an estimator; per-frame RMSE, arm-length error and wall time.
 
     ``frames`` are range arrays (p, m) or dicts of ``update`` keywords, passed through
     :func:`method_inputs`. ``cold``: forget the warm start before each frame.
@@ -122,7 +139,7 @@ def summarize(rmses, lengths, times):
 
 
 def method_options(method, options, sigma):
-    """The user's options, plus the suite's range noise (every method is told it)."""
+    """Return the user's options, plus the suite's range noise (every method is told it)."""
     return options if 'sigma' in options else dict(options, sigma=sigma)
 
 
@@ -146,7 +163,8 @@ def xie3dim_suite(methods, trials, seed, options):
 
 
 def tracking_suite(methods, seconds, seed, options):
-    """A working cycle at 10 Hz, warm-started; with tpsm asked for, also chain+angles.
+    """
+    Run a working cycle at 10 Hz, warm-started; with tpsm asked for, also chain+angles.
 
     The inclinometers and the slew encoder are simulated as TPSM's (``AngleNoise``); the
     range methods get the ranges alone, tpsm the angles alone, and ``chain+angles`` both,
@@ -278,8 +296,9 @@ def markdown(report):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(prog='epp_bench', description=__doc__.splitlines()[0],
-                                     epilog=__doc__.split('\n', 1)[1],
+    parser = argparse.ArgumentParser(prog='epp_bench',
+                                     description=__doc__.lstrip().splitlines()[0],
+                                     epilog=__doc__.lstrip().split('\n', 1)[1],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('suites', nargs='*', metavar='suite',
                         help='xie3dim, tracking, latency, bags (default: these four), '

@@ -1,4 +1,19 @@
-"""epp_demo: the whole pipeline live on the built-in simulated pump.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+epp_demo: the whole pipeline live on the built-in simulated pump.
 
 Starts ``uwb_emulator`` (a pseudo-terminal, with the true posture), ``uwb_driver`` and
 ``posture_estimator`` as separate processes talking over DDS, and watches them: each joint's
@@ -9,31 +24,30 @@ line) and can save a plot of the estimated and true boom (``--plot FILE.png``).
 """
 import argparse
 import json
+from pathlib import Path
 import signal
 import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
 
-import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseArray
-from rclpy.node import Node
-from sensor_msgs.msg import JointState
-
 from epp_ros import contract
 from epp_ros.config import ConfigError, default_config_path, load_pump_config
 from epp_ros.core import RANGE_METHODS
 from epp_ros.core.metrics import frame_rmse, joint_errors, pooled_rmse
 from epp_ros.nodes.common import POSTURE_QOS, RANGES_QOS, to_seconds
+from geometry_msgs.msg import PoseArray
+import numpy as np
+import rclpy
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
 
 LEVEL_NAMES = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}
 
 
 def parse_args(argv):
-    parser = argparse.ArgumentParser(prog='epp_demo', description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog='epp_demo', description=__doc__.lstrip().splitlines()[0])
     parser.add_argument('--method', choices=RANGE_METHODS, default='cepp')
     parser.add_argument('--duration', type=float, default=None,
                         help='seconds to run (default: until Ctrl-C)')
@@ -100,8 +114,12 @@ class Monitor(Node):
                 self.level = LEVEL_NAMES.get(ord(status.level), '?')
 
     def unanswered_frames(self, settle=0.5):
-        """Range frames that got no posture, from the first posture on (before it the
-        estimator may not have been listening yet) to ``settle`` s ago."""
+        """
+        Count the range frames that got no posture.
+
+        Counted from the first posture on (before it the estimator may not have been
+        listening yet) to ``settle`` s ago.
+        """
         if not self.posture_stamps:
             return len(self.frame_stamps)
         answered = set(self.posture_stamps)
@@ -121,7 +139,7 @@ class Monitor(Node):
 
 
 def render(monitor, args, elapsed):
-    """The live view as text."""
+    """Render the live view as text."""
     lines = [f'epp_demo  method={args.method}  sigma={args.sigma} m  drop={args.drop}  '
              f'nlos={args.nlos}  {elapsed:5.1f} s   (Ctrl-C to stop)', '',
              '  joint      x [m]      y [m]      z [m]    error [m]']

@@ -1,4 +1,19 @@
-"""How fast the driver reads: lines/s and CPU per 1,000 lines, over TCP and a pty.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+How fast the driver reads: lines/s and CPU per 1,000 lines, over TCP and a pty.
 
 A child process floods a transport with ``count`` copies of one device line as fast as the
 transport takes them; this process reads them with the driver's own path
@@ -21,7 +36,7 @@ __all__ = ['measure_reading', 'run_driver_bench', 'TRANSPORTS']
 TRANSPORTS = ('tcp', 'pty')
 DEFAULT_LINE = '{"tag":"1","links":[{"A":"1782","R":"2.300"},{"A":"1783","R":"4.125"}]}'
 
-_WRITER = '''
+_WRITER = """
 import os, socket, sys
 fd, kind, count, line = int(sys.argv[1]), sys.argv[2], int(sys.argv[3]), sys.argv[4]
 data = (line + "\\r\\n").encode() * count
@@ -35,7 +50,7 @@ else:
     while view:
         view = view[os.write(fd, view[:65536]):]
     sys.stdin.read()
-'''
+"""
 
 
 def _transport(kind):
@@ -50,7 +65,8 @@ def _transport(kind):
 
 def measure_reading(transport='tcp', count=20000, line=DEFAULT_LINE, protocol='json',
                     timeout=300.0):
-    """Read ``count`` lines flooded through ``transport``; how fast, at what CPU cost.
+    r"""
+    Read ``count`` lines flooded through ``transport``; how fast, at what CPU cost.
 
     Parameters
     ----------
@@ -59,7 +75,7 @@ def measure_reading(transport='tcp', count=20000, line=DEFAULT_LINE, protocol='j
     count : int
         Lines written.
     line : str
-        The device line (written with ``\\r\\n``).
+        The device line (written with ``\r\n``).
     protocol : str
         Decoder protocol for the lines.
     timeout : float
@@ -70,6 +86,7 @@ def measure_reading(transport='tcp', count=20000, line=DEFAULT_LINE, protocol='j
     dict
         ``lines``, ``seconds`` (first byte written to last line decoded), ``lines_per_s``,
         ``cpu_ms_per_1000_lines`` (this process: reader thread and decoder), ``reads``.
+
     """
     port, fd, owned = _transport(transport)
     decoder = LineDecoder(protocol)
@@ -110,7 +127,7 @@ def run_driver_bench(count=20000, transports=TRANSPORTS):
 
 
 def format_rows(rows):
-    """A plain table of :func:`run_driver_bench` rows."""
+    """Format :func:`run_driver_bench` rows as a plain table."""
     lines = ['transport   lines   seconds   lines/s   CPU ms / 1000 lines   reads']
     lines += [f"{r['transport']:<9} {r['lines']:>7} {r['seconds']:>9.2f} "
               f"{r['lines_per_s']:>9.0f} {r['cpu_ms_per_1000_lines']:>21.1f} {r['reads']:>7}"

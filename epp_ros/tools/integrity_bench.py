@@ -1,4 +1,19 @@
-"""``epp_bench integrity``: whether the estimators publish wrong postures, and how they recover.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+``epp_bench integrity``: whether the estimators publish wrong postures, and how they recover.
 
 Streams on the simulated truck pump (a 10 Hz working cycle, range noise sigma = 0.1 m with
 5 % of the links missing, every estimator told sigma = 0.1 m) with frames broken on
@@ -18,15 +33,14 @@ clean cycles on booms whose anchors are nearly collinear or nearly coincident. P
 
 No ROS: the estimators are called in-process.
 """
-import time
 from collections import Counter
 from dataclasses import asdict, dataclass, field
-
-import numpy as np
+import time
 
 from epp_ros.core import PostureEstimator
 from epp_ros.core.model import BoomModel
 from epp_ros.core.simulate import RangeNoise, truck_pump, working_cycle
+import numpy as np
 
 __all__ = ['CASES', 'Stream', 'FrameLog', 'CaseResult', 'MethodSummary', 'build_streams',
            'run_stream', 'score_case', 'summarize_method', 'run', 'markdown']
@@ -68,7 +82,8 @@ DESCRIPTIONS = {
 
 @dataclass
 class Stream:
-    """Frames of one case, with the truth and where they were broken.
+    """
+    Frames of one case, with the truth and where they were broken.
 
     Attributes
     ----------
@@ -90,6 +105,7 @@ class Stream:
         Unbroken frames that count for false rejections.
     cold : bool
         Whether the estimator forgets its warm start before every frame.
+
     """
 
     case: str
@@ -104,7 +120,7 @@ class Stream:
 
 
 def case_rng(seed, case, purpose=0):
-    """The seeded Generator of one case (and purpose: noise, breakage, anchors)."""
+    """Return the seeded Generator of one case (and purpose: noise, breakage, anchors)."""
     return np.random.default_rng([seed, CASES.index(case), purpose])
 
 
@@ -114,7 +130,7 @@ def noisy_ranges(model, joints, rng):
 
 
 def cycle_stream(model, seconds, seed, case):
-    """A working cycle at :data:`RATE` with noisy ranges; every frame scored, none broken."""
+    """Build a working cycle at :data:`RATE` with noisy ranges; every frame scored, none broken."""
     trajectory = working_cycle(model, seconds, RATE, rng=np.random.default_rng(seed))
     ranges = noisy_ranges(model, trajectory.joints, case_rng(seed, case))
     return Stream(case, model, ranges, trajectory.times, trajectory.joints,
@@ -122,15 +138,18 @@ def cycle_stream(model, seconds, seed, case):
 
 
 def broken_runs(frames, rng, length=(1, 1)):
-    """(first, last) frames of broken runs: after :data:`LEAD_S`, :data:`GAP_S` apart.
+    """
+    (first, last) frames of broken runs: after :data:`LEAD_S`, :data:`GAP_S` apart.
 
     Parameters
     ----------
     frames : int
         Length of the stream.
     rng : numpy.random.Generator
+        Draws the runs' lengths and the gaps between them.
     length : (int, int)
         Fewest and most frames in a run.
+
     """
     runs, start = [], int(LEAD_S * RATE)
     gap = (int(GAP_S[0] * RATE), int(GAP_S[1] * RATE))
@@ -151,7 +170,8 @@ def _break(stream, runs, labels):
 
 
 def corrupted_stream(seconds, seed, tags='all'):
-    """Single frames with ranges multiplied by independent U[0, 3) factors.
+    """
+    Single frames with ranges multiplied by independent U[0, 3) factors.
 
     ``tags``: ``'all'`` (every range), ``'tip'`` (the tip tag's row) or ``'one'`` (a
     random tag's row, drawn per frame).
@@ -214,7 +234,8 @@ def two_anchor_stream(seconds, seed):
 
 
 def degenerate_model(shape, rng, spread=DEGENERATE_SPREAD):
-    """The truck pump's boom with its anchors nearly on a line or nearly at one point.
+    """
+    Build the truck pump's boom with its anchors nearly on a line or nearly at one point.
 
     Built directly (the config loader refuses such anchors), yet just past what
     ``BoomModel`` refuses: anchors 1 cm apart and 1 cm off a line.
@@ -226,8 +247,10 @@ def degenerate_model(shape, rng, spread=DEGENERATE_SPREAD):
         direction; ``'coincident'``: on a sphere of radius ``spread`` round one point on the
         chassis, evenly spread and randomly turned.
     rng : numpy.random.Generator
+        Draws the anchors' directions off the line or the sphere's turn.
     spread : float
         Metres.
+
     """
     reference = truck_pump()
     m = reference.n_anchors
@@ -247,7 +270,7 @@ def degenerate_model(shape, rng, spread=DEGENERATE_SPREAD):
 
 
 def degenerate_stream(seconds, seed, shape):
-    """A clean working cycle on a :func:`degenerate_model`; no frame scored for rejections."""
+    """Make a clean working cycle on a :func:`degenerate_model`; no frame scored for rejections."""
     model = degenerate_model(shape, case_rng(seed, shape, 1))
     stream = cycle_stream(model, seconds, seed, shape)
     stream.scored[:] = False
@@ -255,7 +278,7 @@ def degenerate_stream(seconds, seed, shape):
 
 
 def build_streams(seconds, seed, cases=CASES):
-    """The streams of ``cases`` (names in :data:`CASES`), ``seconds`` long each."""
+    """Build the streams of ``cases`` (names in :data:`CASES`), ``seconds`` long each."""
     builders = {
         'clean': lambda: cycle_stream(truck_pump(), seconds, seed, 'clean'),
         'corrupt_all': lambda: corrupted_stream(seconds, seed, 'all'),
@@ -272,7 +295,8 @@ def build_streams(seconds, seed, cases=CASES):
 
 @dataclass
 class FrameLog:
-    """What an estimator reported on each frame of a stream.
+    """
+    What an estimator reported on each frame of a stream.
 
     Attributes
     ----------
@@ -285,6 +309,7 @@ class FrameLog:
     reacquired, cold_start : ndarray of bool, shape (T,)
     seconds : ndarray, shape (T,)
         Wall time of each ``update``.
+
     """
 
     valid: np.ndarray
@@ -298,7 +323,8 @@ class FrameLog:
 
 
 def run_stream(stream, method, options):
-    """Feed a stream to a new ``PostureEstimator``; the :class:`FrameLog`.
+    """
+    Feed a stream to a new ``PostureEstimator``; the :class:`FrameLog`.
 
     ``options``: keyword options of the estimator (``sigma`` defaults to :data:`SIGMA`).
     """
@@ -325,7 +351,8 @@ def run_stream(stream, method, options):
 
 
 def wrong_and_valid(log):
-    """Boolean (T, p): valid frames' joints > 1 m and > 5 predicted sigmas off.
+    """
+    Boolean (T, p): valid frames' joints > 1 m and > 5 predicted sigmas off.
 
     A valid frame without a ``joint_std`` is judged on the distance alone.
     """
@@ -335,7 +362,8 @@ def wrong_and_valid(log):
 
 
 def recoveries(stream, log):
-    """Seconds from each broken run's last frame to the first valid frame within 1 m.
+    """
+    Seconds from each broken run's last frame to the first valid frame within 1 m.
 
     The search stops at the next broken run: None when not recovered by then.
     """
@@ -351,7 +379,8 @@ def recoveries(stream, log):
 
 @dataclass
 class CaseResult:
-    """One method on one stream.
+    """
+    One method on one stream.
 
     Attributes
     ----------
@@ -377,6 +406,7 @@ class CaseResult:
         Frames per reported status.
     seconds : list of float
         Wall time per frame.
+
     """
 
     method: str
@@ -395,7 +425,7 @@ class CaseResult:
 
 
 def _frame_detail(stream, log, index, **extra):
-    """A frame's index, stamp, status and message, for the report's lists."""
+    """Return a frame's index, stamp, status and message, for the report's lists."""
     return {'case': stream.case, 'frame': int(index), 'stamp_s': float(stream.stamps[index]),
             'status': log.status[index], 'message': log.message[index],
             'reacquired': bool(log.reacquired[index]),
@@ -403,7 +433,8 @@ def _frame_detail(stream, log, index, **extra):
 
 
 def score_case(stream, method, log):
-    """The :class:`CaseResult` of a log, and details of the frames that miss a target.
+    """
+    Return the :class:`CaseResult` of a log, and details of the frames that miss a target.
 
     Returns
     -------
@@ -413,6 +444,7 @@ def score_case(stream, method, log):
         ``errors_m`` and ``joint_std_m``), ``slow_recoveries``
         (runs not recovered within :data:`RECOVERY_TARGET_S`) and ``rejections``
         (scored frames reported not valid), at most :data:`DETAIL_LIMIT` each.
+
     """
     wrong = wrong_and_valid(log)
     rejected = stream.scored & ~log.valid
@@ -447,7 +479,8 @@ def score_case(stream, method, log):
 
 @dataclass
 class MethodSummary:
-    """One method over every stream: the suite's targets.
+    """
+    One method over every stream: the suite's targets.
 
     Attributes
     ----------
@@ -467,6 +500,7 @@ class MethodSummary:
         Unbroken frames of the broken streams reported not valid, of all.
     ms_median, ms_p99 : float
         Per-frame time, every stream.
+
     """
 
     method: str
@@ -495,7 +529,7 @@ class MethodSummary:
 
 
 def summarize_method(method, results):
-    """The :class:`MethodSummary` of a method's :class:`CaseResult` list."""
+    """Return the :class:`MethodSummary` of a method's :class:`CaseResult` list."""
     broken = [r for r in results if r.case in BROKEN_CASES]
     times = [t for r in broken for t in r.recoveries_s]
     recovered = [t for t in times if t is not None]
@@ -512,7 +546,8 @@ def summarize_method(method, results):
 
 
 def run(methods, seconds=60.0, seed=0, options=None, cases=CASES):
-    """The integrity suite's report (a JSON-ready dict).
+    """
+    Run the integrity suite; return its report (a JSON-ready dict).
 
     Parameters
     ----------
@@ -521,6 +556,7 @@ def run(methods, seconds=60.0, seed=0, options=None, cases=CASES):
     seconds : float
         Length of each stream.
     seed : int
+        Seeds every stream (each case and purpose its own generator, see :func:`case_rng`).
     options : dict, optional
         Estimator options for every method (``sigma`` defaults to :data:`SIGMA`).
     cases : sequence of str
@@ -535,6 +571,7 @@ def run(methods, seconds=60.0, seed=0, options=None, cases=CASES):
         (:class:`CaseResult` per method and case, without the frame times),
         ``wrong_frames``, ``slow_recoveries`` and ``rejections`` (see
         :func:`score_case`).
+
     """
     streams = build_streams(seconds, seed, cases)
     report = {'suite': 'integrity', 'seconds': seconds, 'seed': seed, 'sigma_m': SIGMA,
@@ -563,7 +600,7 @@ def _seconds(value):
 
 
 def _case_cell(row):
-    """``valid % / wrong and valid / worst recovery`` of one method on one case."""
+    """Format ``valid % / wrong and valid / worst recovery`` of one method on one case."""
     cell = f'{100.0 * row["valid"] / max(row["frames"], 1):.1f} % / {row["wrong_valid"]}'
     if row['events']:
         times = row['recoveries_s']
@@ -574,7 +611,7 @@ def _case_cell(row):
 
 
 def markdown(report):
-    """The report as markdown: per-method targets, per-case table, frames missing them."""
+    """Return the report as markdown: per-method targets, per-case table, frames missing them."""
     lines = [f'### Integrity: truck pump, working cycle at 10 Hz, sigma = {report["sigma_m"]} '
              f'm, {report["dropout"]:.0%} dropouts, {report["seconds"]:g} s per stream, '
              f'seed {report["seed"]}', '',

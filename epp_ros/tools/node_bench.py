@@ -1,3 +1,17 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Measuring a running posture_estimator from outside, over DDS (used by epp_bench)."""
 import os
 import signal
@@ -5,15 +19,14 @@ import subprocess
 import sys
 import time
 
-import numpy as np
-import rclpy
-from geometry_msgs.msg import PoseArray
-from rclpy.node import Node
-from sensor_msgs.msg import JointState
-
 from epp_ros import contract
 from epp_ros.config import default_config_path, load_pump_config
 from epp_ros.nodes.common import POSTURE_QOS, RANGES_INPUT_QOS, RANGES_QOS, to_time
+from geometry_msgs.msg import PoseArray
+import numpy as np
+import rclpy
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
 
 __all__ = ['measure_latency', 'sustained_rate', 'replay_rate']
 
@@ -43,8 +56,12 @@ class _Feeder(Node):
 
 
 def _with_estimator(method, work):
-    """Run ``work(feeder)`` against a fresh posture_estimator process, on a domain of its own
-    (set in this process's environment, which the estimator inherits)."""
+    """
+    Run ``work(feeder)`` against a fresh posture_estimator process.
+
+    The process runs on a domain of its own (set in this process's environment, which the
+    estimator inherits).
+    """
     config = default_config_path()
     names = load_pump_config(config).link_names
     args = [sys.executable, '-m', 'epp_ros.nodes.estimator', '--ros-args', '--params-file',
@@ -103,12 +120,16 @@ def measure_latency(method, frames, rate, seconds):
     return _with_estimator(method, work)
 
 
-def sustained_rate(method, frames, rates=(50, 100, 150, 200, 300, 500, 700,
-                                                        1000, 1500, 2000), seconds=2.0,
+def sustained_rate(method, frames,
+                   rates=(50, 100, 150, 200, 300, 500, 700, 1000, 1500, 2000), seconds=2.0,
                    max_latency=0.1):
-    """Highest of ``rates`` (frames/s) at which the node keeps up for ``seconds``: every
-    frame answered, none later than ``max_latency`` s (the input queue keeps everything, so
-    a node that is too slow loses nothing but falls ever further behind)."""
+    """
+    Return the highest of ``rates`` (frames/s) at which the node keeps up for ``seconds``.
+
+    Keeping up is every frame answered, none later than ``max_latency`` s (the input queue
+    keeps everything, so a node that is too slow loses nothing but falls ever further
+    behind).
+    """
     def work(feeder):
         _feed(feeder, frames, 10.0, 10)
         best = 0

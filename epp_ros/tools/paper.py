@@ -1,4 +1,19 @@
-"""``epp_bench paper``: the seed paper's experiments, our figures next to its published ones.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+``epp_bench paper``: the seed paper's experiments, our figures next to its published ones.
 
 1. RMSE against the noise, multiplicative eta (the paper's figure) and additive sigma, with
    the Cramér–Rao bound of the chain model; cold start every run.
@@ -15,18 +30,17 @@ gives neither the eta of Table 1, nor the NLOS fraction, nor TPSM's inclinometer
 ours are stated in each table.
 """
 import json
-import time
 from pathlib import Path
+import time
 
-import numpy as np
-
-from epp_ros.core import METHODS, BoomModel, PostureEstimator
+from epp_ros.core import BoomModel, METHODS, PostureEstimator
 from epp_ros.core.bounds import crlb
-from epp_ros.core.chain import ChainMethod, angles_from_joints
+from epp_ros.core.chain import angles_from_joints, ChainMethod
 from epp_ros.core.measurements import Measurements, Residuals
 from epp_ros.core.metrics import pooled_rmse
-from epp_ros.core.simulate import (AngleNoise, RangeNoise, observe, random_posture,
-                                   truck_pump, xie3dim)
+from epp_ros.core.simulate import (AngleNoise, observe, random_posture, RangeNoise, truck_pump,
+                                   xie3dim)
+import numpy as np
 
 from .bench import (commit, markdown, method_estimate, run_frames, summarize, tracking_suite,
                     xie3dim_suite)
@@ -50,13 +64,15 @@ NLOS_METHODS = ['sdp', 'srls', 'tpsm', 'epp2', 'cepp', 'chain']
 
 
 def paper_manipulator():
-    """The p = 5, 9/7/7/9/9 m manipulator on the authors' anchors, in their posture.
+    """
+    Return the p = 5, 9/7/7/9/9 m manipulator on the authors' anchors, in their posture.
 
     Returns
     -------
     model : BoomModel
     slew : float
     pitches : ndarray, shape (5,)
+
     """
     authors, joints = xie3dim()
     model = BoomModel([9.0, 7.0, 7.0, 9.0, 9.0], authors.base, authors.anchors)
@@ -69,7 +85,8 @@ def _estimators(model, methods, options):
 
 
 def noise_sweep(kind, levels, runs, methods, seed):
-    """RMSE of each method at each noise level, cold start per run, and the CRLB.
+    """
+    RMSE of each method at each noise level, cold start per run, and the CRLB.
 
     ``kind`` is ``'eta'`` (range * (1 + eta N)) or ``'sigma'`` (range + sigma N).
     """
@@ -89,7 +106,7 @@ def noise_sweep(kind, levels, runs, methods, seed):
         row = {kind: level, 'crlb_m': crlb(model, slew, pitches, sigma).rmse, 'methods': {}}
         for method, estimator in estimators.items():
             row['methods'][method] = summarize(*run_frames(estimator, frames,
-                                                          [joints] * runs, cold=True))
+                                                           [joints] * runs, cold=True))
         rows.append(row)
     return {'part': f'sweep_{kind}', 'runs': runs, 'rows': rows}
 
@@ -120,7 +137,8 @@ OTHER_POSTURE = 0.5
 
 
 def target_cases(runs, seed, sigma=0.1):
-    """Chain RMSE / CRLB on truck pumps of 4-6 sections and 4-6 anchors, 0 or 15 % missing.
+    """
+    Chain RMSE / CRLB on truck pumps of 4-6 sections and 4-6 anchors, 0 or 15 % missing.
 
     Each frame is also fitted from the true angles: that local fit is what the (local) CRLB
     describes, and a cold start that ends with a higher cost than it (by more than 0.001 in
@@ -282,7 +300,8 @@ def plot_sweep(report, path):
 
 
 def run(out, runs, seed, methods=None, tracking_seconds=60.0, target_runs=None):
-    """All parts; writes paper.md, paper.json and the PNG plots into ``out``.
+    """
+    All parts; writes paper.md, paper.json and the PNG plots into ``out``.
 
     Returns the markdown.
     """

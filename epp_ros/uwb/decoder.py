@@ -1,4 +1,19 @@
-"""Lines of one source -> range records, with protocol auto-detection.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Lines of one source -> range records, with protocol auto-detection.
 
 With ``protocol="auto"`` every format's parser is tried on each line until one format has
 parsed ``lock_after`` lines; from then on only that parser runs. Records parsed while
@@ -14,7 +29,8 @@ __all__ = ['LineDecoder']
 
 
 class LineDecoder:
-    """Decode the lines of one source.
+    """
+    Decode the lines of one source.
 
     Parameters
     ----------
@@ -31,6 +47,7 @@ class LineDecoder:
         ``lines``, ``parsed`` (lines that gave records), ``unparsed`` (lines no parser
         understood), ``errors`` (broken pieces inside parsed lines), ``records``, and one
         count per label of lines known to carry no range (``position``, ``preamble``).
+
     """
 
     def __init__(self, protocol='auto', lock_after=3):
@@ -42,12 +59,12 @@ class LineDecoder:
         self._votes = Counter()
 
     @property
-    def format(self):
-        """The :class:`~epp_ros.uwb.formats.LineFormat` in use, None while detecting."""
+    def format(self):  # noqa: A003 (public attribute of the API; a property shadows nothing)
+        """Return the :class:`~epp_ros.uwb.formats.LineFormat` in use, None while detecting."""
         return FORMATS.get(self.protocol)
 
     def decode(self, line):
-        """Records of one line (a tuple, empty when nothing valid was in it)."""
+        """Return the records of one line (a tuple, empty when nothing valid was in it)."""
         self.counts['lines'] += 1
         candidates = [self.protocol] if self.protocol else list(FORMATS)
         for name in candidates:

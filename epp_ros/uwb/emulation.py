@@ -1,4 +1,19 @@
-"""Impersonating the UWB hardware: device lines per ranging cycle, and where they go.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Impersonating the UWB hardware: device lines per ranging cycle, and where they go.
 
 A ranging cycle's (p, m) ranges become the lines the real devices would print, in any format
 of :data:`epp_ros.uwb.formats.FORMATS` (each format's ``emit``). Formats that name the tag
@@ -7,17 +22,16 @@ rig where each tag has its own serial port or WiFi bridge; formats that name no 
 all need one channel per tag-anchor pair. A channel is a pseudo-terminal
 (:class:`PtyOutput`) or a TCP server like the ESP8266 bridge (:class:`TcpOutput`).
 """
+from collections import Counter
 import os
 import socket
 import threading
 import time
 import tty
-from collections import Counter
 
-import numpy as np
-
-from epp_ros.uwb.formats import FORMATS, Cycle
+from epp_ros.uwb.formats import Cycle, FORMATS
 from epp_ros.uwb.formats.trek import RAW_BIAS
+import numpy as np
 
 __all__ = ['TAG_NAMING', 'channel_count', 'channel_devices', 'cycle_lines', 'corrupt',
            'PtyOutput', 'TcpOutput']
@@ -55,11 +69,13 @@ def channel_devices(protocol, config):
 
 
 def cycle_lines(config, ranges, protocol, sequence=0, rx_power=-80.0):
-    """Device lines of one ranging cycle.
+    """
+    Device lines of one ranging cycle.
 
     Parameters
     ----------
     config : epp_ros.config.PumpConfig
+        The pump: device ids and anchor positions.
     ranges : ndarray, shape (p, m)
         Metres; NaN links are not reported.
     protocol : str
@@ -78,6 +94,7 @@ def cycle_lines(config, ranges, protocol, sequence=0, rx_power=-80.0):
     ------
     ValueError
         For an unknown protocol, or ids or ranges the format cannot carry.
+
     """
     line_format = _format(protocol)
     cycle = Cycle(sequence, dict(zip(config.anchor_ids, config.anchor_positions)), rx_power)
@@ -100,7 +117,7 @@ def cycle_lines(config, ranges, protocol, sequence=0, rx_power=-80.0):
 
 
 def corrupt(line, rng):
-    """A damaged version of ``line`` (bytes), as noisy links and firmware produce."""
+    """Return a damaged version of ``line`` (bytes), as noisy links and firmware produce."""
     data = line.encode()
     kind = rng.integers(4)
     if kind == 0:                                   # cut short
@@ -114,7 +131,8 @@ def corrupt(line, rng):
 
 
 class PtyOutput:
-    """A pseudo-terminal that a driver opens like a USB-UART device.
+    """
+    A pseudo-terminal that a driver opens like a USB-UART device.
 
     Parameters
     ----------
@@ -128,6 +146,7 @@ class PtyOutput:
         What to open: the link if given, else the pty device.
     counts : collections.Counter
         ``written``, ``truncated`` and ``dropped`` writes (the reader fell behind).
+
     """
 
     def __init__(self, link=None):
@@ -163,7 +182,8 @@ class PtyOutput:
 
 
 class TcpOutput:
-    """A TCP server on loopback that streams lines to every client, like the ESP8266 bridge.
+    """
+    A TCP server on loopback that streams lines to every client, like the ESP8266 bridge.
 
     New clients get data 0.2 s after they connect: pyserial's ``socket://`` discards what
     arrives while it opens.

@@ -1,4 +1,19 @@
-"""Range records -> frames: one (p, m) range matrix per ranging cycle.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Range records -> frames: one (p, m) range matrix per ranging cycle.
 
 A cycle opens with its first range and closes when every configured tag-anchor pair has
 reported, or ``frame_period`` seconds after it opened, whichever comes first. Ranges from a
@@ -9,9 +24,9 @@ missing pairs, so the cycle closes as soon as every tag has reported. A pair (or
 tag) that reports again before its cycle closed starts the next cycle (the devices have
 moved on), so no range that arrived whole is lost. Unused ranges are counted by reason.
 """
-import math
 from collections import Counter
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
@@ -22,15 +37,20 @@ __all__ = ['Frame', 'FrameAssembler']
 class Frame:
     """One ranging cycle."""
 
-    stamp: float            #: receive time of the newest range (raised by 1 us where
-                            #: needed so that stamps strictly increase), seconds
-    ranges: np.ndarray      #: (p, m) metres, NaN where the pair did not report
-    rx_power: np.ndarray    #: (p, m) dBm where the device reported it, else NaN
-    tag_ranges: np.ndarray  #: (p, p) metres from tag row to tag column, NaN where none
+    #: receive time of the newest range (raised by 1 us where needed so that stamps
+    #: strictly increase), seconds
+    stamp: float
+    #: (p, m) metres, NaN where the pair did not report
+    ranges: np.ndarray
+    #: (p, m) dBm where the device reported it, else NaN
+    rx_power: np.ndarray
+    #: (p, p) metres from tag row to tag column, NaN where none
+    tag_ranges: np.ndarray
 
 
 class FrameAssembler:
-    """Collect range records of a pump into frames.
+    """
+    Collect range records of a pump into frames.
 
     Parameters
     ----------
@@ -50,6 +70,7 @@ class FrameAssembler:
         bias correction, reported again corrected), which the estimators do not use.
     frames : int
         Frames closed so far.
+
     """
 
     def __init__(self, config, frame_period=0.1, min_range=0.05, max_range=200.0):
@@ -83,7 +104,8 @@ class FrameAssembler:
         return frame
 
     def add(self, record, stamp, source_tag=None, source_anchor=None):
-        """Add one record received at ``stamp`` (s); return the frames it closed (0 to 2).
+        """
+        Add one record received at ``stamp`` (s); return the frames it closed (0 to 2).
 
         ``source_tag`` and ``source_anchor`` are the device ids of the record's source, used
         when the line names none. Ids compare as numbers (see ``PumpConfig.tag_index``).
@@ -122,11 +144,12 @@ class FrameAssembler:
         return closed
 
     def _values(self, tag_link):
-        """The open cycle's tag-tag (p, p) or tag-anchor (p, m) ranges."""
+        """Return the open cycle's tag-tag (p, p) or tag-anchor (p, m) ranges."""
         return self._tag_ranges if tag_link else self._ranges
 
     def add_line(self, records, stamp, source_tag=None, whole=False, source_anchor=None):
-        """Add the records of one line; return the frames closed (0 to 2 or so).
+        """
+        Add the records of one line; return the frames closed (0 to 2 or so).
 
         With ``whole`` the line carries all of its tag's ranges this cycle (see
         ``WHOLE_TAG_LINES``): its tag counts as reported, and a tag reporting twice starts

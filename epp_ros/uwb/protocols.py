@@ -1,4 +1,19 @@
-"""The device line formats by their 0.1 names: a view of :mod:`epp_ros.uwb.formats`.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The device line formats by their 0.1 names: a view of :mod:`epp_ros.uwb.formats`.
 
 Each format lives in its own module under :mod:`epp_ros.uwb.formats`, with its parser, its
 formatter and its descriptor; :data:`epp_ros.uwb.formats.FORMATS` is the one registry that
@@ -7,12 +22,12 @@ names earlier code imports: the records, the parse and format functions of the f
 formats, and :data:`PARSERS`/:data:`FORMATTERS` (those four; :data:`ALL_PARSERS` holds
 every format's parser).
 """
-from epp_ros.uwb.formats import FORMATS, detect_format
+from epp_ros.uwb.formats import detect_format, FORMATS
 from epp_ros.uwb.formats.arduino import format_arduino, parse_arduino
 from epp_ros.uwb.formats.base import ParseResult, RangeRecord
 from epp_ros.uwb.formats.json_links import format_json, parse_json
 from epp_ros.uwb.formats.lec import format_lec, parse_lec
-from epp_ros.uwb.formats.trek import RAW_BIAS, TREK_ANCHOR_IDS, format_trek, parse_trek
+from epp_ros.uwb.formats.trek import format_trek, parse_trek, RAW_BIAS, TREK_ANCHOR_IDS
 
 __all__ = ['RangeRecord', 'ParseResult', 'parse_trek', 'parse_lec', 'parse_arduino',
            'parse_json', 'PARSERS', 'ALL_PARSERS', 'detect_protocol', 'format_trek',
@@ -32,7 +47,8 @@ WHOLE_TAG_LINES = frozenset(name for name, line_format in FORMATS.items()
 
 
 def detect_protocol(lines):
-    """The format name whose parser gives records for the most ``lines`` (every format).
+    """
+    Return the format name whose parser gives records for the most ``lines`` (every format).
 
     Ties go to the earlier name in the registry; None if no parser reads any line.
     """

@@ -1,4 +1,19 @@
-"""Byte streams from serial ports, WiFi-TCP bridges and WiFi tags, as lines, never giving up.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Byte streams from serial ports, WiFi-TCP bridges and WiFi tags, as lines, never giving up.
 
 Three kinds of port:
 
@@ -15,6 +30,7 @@ back to back with no newline (``{...}{...}``), so that a device that never ends 
 read message by message. Over-long lines are discarded and counted; bytes that are not
 UTF-8 are replaced. Sources reconnect (or listen again) forever with backoff.
 """
+from collections import Counter
 import fcntl
 import re
 import selectors
@@ -23,7 +39,6 @@ import struct
 import termios
 import threading
 import time
-from collections import Counter
 
 import serial
 
@@ -39,7 +54,8 @@ _CONCATENATED = re.compile(rb'\}\s*\{')
 
 
 class LineSplitter:
-    """Split a byte stream into text lines, keeping at most ``max_line`` bytes pending.
+    """
+    Split a byte stream into text lines, keeping at most ``max_line`` bytes pending.
 
     Lines end at a newline, or where a top-level JSON object closes when another follows
     on the same line or no newline has come yet (a device writing ``{...}{...}``). Braces
@@ -49,6 +65,7 @@ class LineSplitter:
     ----------
     overlong : int
         Lines discarded because they exceeded ``max_line`` bytes.
+
     """
 
     def __init__(self, max_line=4096):
@@ -93,7 +110,7 @@ class LineSplitter:
         self._reset_scan()
 
     def _resync(self, part, complete):
-        """The rest of ``part`` after an over-long line ended, None while it goes on."""
+        """Return the rest of ``part`` after an over-long line ended, None while it goes on."""
         if complete:
             self._discarding = False        # an over-long line runs to its newline ...
             return None
@@ -109,7 +126,7 @@ class LineSplitter:
         self._reset_scan()
 
     def _finish_line(self, lines):
-        """A newline came: emit what is pending (split between JSON objects) and reset."""
+        """Handle a newline: emit what is pending (split between JSON objects) and reset."""
         if self._scan_position or self._depth or _CONCATENATED.search(self._pending):
             self._emit_objects(lines)
         self._emit(lines, self._pending)
@@ -222,7 +239,8 @@ def _tcp_address(url):
 
 
 class LineSource:
-    """Read lines from one port in a thread, reconnecting with backoff, never raising.
+    """
+    Read lines from one port in a thread, reconnecting with backoff, never raising.
 
     Parameters
     ----------
@@ -252,6 +270,7 @@ class LineSource:
     newest_line : float or None
         Receive time (``time.time()``) of the newest line.
     last_error : str
+
     """
 
     def __init__(self, port, on_line, baud=115200, max_line=4096, backoff=1.0,
@@ -277,7 +296,7 @@ class LineSource:
 
     @property
     def clients(self):
-        """Connected peers (1 while connected)."""
+        """Return the number of connected peers (1 while connected)."""
         return int(self.state == 'connected')
 
     def start(self):
@@ -303,7 +322,7 @@ class LineSource:
         self.state = 'disconnected'
 
     def _open(self):
-        """The port as a stream (a socket for ``socket://`` unless an opener was given)."""
+        """Return the port as a stream (a socket for ``socket://`` unless an opener was given)."""
         if self.port.startswith('socket://') and self.opener is serial.serial_for_url:
             return _SocketStream(socket.create_connection(_tcp_address(self.port), timeout=2))
         return _SerialStream(self.opener(self.port, baudrate=self.baud, timeout=READ_TIMEOUT))
@@ -374,7 +393,8 @@ def listen_url_address(url):
 
 
 class ListenSource(LineSource):
-    """Accept devices that connect to us, read each client's lines, listen again if it fails.
+    """
+    Accept devices that connect to us, read each client's lines, listen again if it fails.
 
     Parameters
     ----------
@@ -395,6 +415,7 @@ class ListenSource(LineSource):
     counts : collections.Counter
         As :class:`LineSource`, plus ``disconnects`` and ``refused``; ``connections``
         counts accepted clients.
+
     """
 
     def __init__(self, port, on_line, max_line=4096, backoff=1.0, max_clients=8, **_):
@@ -488,7 +509,7 @@ class ListenSource(LineSource):
 
 
 def open_source(port, on_line, **options):
-    """A started-later reader for ``port``: :class:`ListenSource` or :class:`LineSource`."""
+    """Return a started-later reader for ``port``: :class:`ListenSource` or :class:`LineSource`."""
     if port.startswith('tcp-listen://'):
         return ListenSource(port, on_line, **options)
     return LineSource(port, on_line, **options)

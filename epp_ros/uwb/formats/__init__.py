@@ -1,4 +1,19 @@
-"""Every UWB device output format, one descriptor each, in one registry.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Every UWB device output format, one descriptor each, in one registry.
 
 A format is one module here that defines ``FORMAT``, a
 :class:`~epp_ros.uwb.formats.base.LineFormat`: its parser, its emitter (the emulator's
@@ -7,10 +22,10 @@ ranges, its anchor slots and how it prints ids. Everything else -- the decoder a
 auto-detection, the emulator, the configuration check, the driver, the bag tool -- reads
 :data:`FORMATS`, so a new format is a new module, one line below, and its tests.
 """
-from epp_ros.uwb.formats import (arduino, bare, haoru, jremington, json_links, lec, les,
-                                 mauwb, mauwb_json, nrng, trek)
-from epp_ros.uwb.formats.base import (Cycle, LineFormat, ParseResult, RangeRecord,
-                                      device_number, slot_of)
+from epp_ros.uwb.formats import (arduino, bare, haoru, jremington, json_links, lec, les, mauwb,
+                                 mauwb_json, nrng, trek)
+from epp_ros.uwb.formats.base import (Cycle, device_number, LineFormat, ParseResult, RangeRecord,
+                                      slot_of)
 
 __all__ = ['FORMATS', 'LineFormat', 'Cycle', 'ParseResult', 'RangeRecord', 'device_number',
            'detect_format', 'recognised', 'fits_slots']
@@ -21,7 +36,8 @@ FORMATS = {module.FORMAT.name: module.FORMAT for module in (
 
 
 def detect_format(lines, names=None):
-    """The format among ``names`` (default all) whose parser gives records for most ``lines``.
+    """
+    Return the format among ``names`` (default all) whose parser gives records for most ``lines``.
 
     Ties go to the earlier name in :data:`FORMATS`; None if no parser reads any line.
     """
@@ -34,7 +50,7 @@ def detect_format(lines, names=None):
 
 
 def recognised(line, names=None):
-    """The label under which a format among ``names`` counts a line without ranges, or None."""
+    """Return the label under which a format among ``names`` counts a rangeless line, or None."""
     for name in FORMATS if names is None else names:
         label = FORMATS[name].recognise(line)
         if label:

@@ -1,4 +1,21 @@
-"""arduino -- thotro/arduino-dw1000 ``DW1000Ranging`` examples (``newRange`` callback)::
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+r"""
+arduino -- thotro/arduino-dw1000 ``DW1000Ranging`` examples (``newRange`` callback).
+
+A line::
 
     from: 1782\t Range: 2.34 m\t RX power: -78.32 dBm
 
@@ -13,9 +30,8 @@ derived from these examples print the same line.
 import math
 import re
 
-from epp_ros.uwb.formats.base import (LineFormat, ParseResult, RangeRecord, checked_id,
-                                      checked_range, decimal, device_number, line_text,
-                                      metres, normalised_id)
+from epp_ros.uwb.formats.base import (checked_id, checked_range, decimal, device_number, line_text,
+                                      LineFormat, metres, normalised_id, ParseResult, RangeRecord)
 
 __all__ = ['parse_arduino', 'format_arduino', 'FORMAT']
 
@@ -50,7 +66,8 @@ def parse_arduino(line):
 
 
 def format_arduino(anchor, range_m, rx_power_dbm=-80.0):
-    """An arduino-dw1000 line, e.g. ``from: 1782\\t Range: 2.34 m\\t RX power: -78.32 dBm``.
+    r"""
+    Return an arduino-dw1000 line, e.g. ``from: 1782\t Range: 2.34 m\t RX power: -78.32 dBm``.
 
     ``rx_power_dbm=None`` leaves the RX power out.
     """

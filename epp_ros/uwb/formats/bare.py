@@ -1,4 +1,21 @@
-"""bare -- a range that names no device: DW1000-ng and DW3000 ranging examples::
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+bare -- a range that names no device: DW1000-ng and DW3000 ranging examples.
+
+Lines::
 
     Range: 1.23 m	 RX power: -78.32 dBm	 Sampling: 5.00 Hz
     DIST: 1.23 m
@@ -13,8 +30,8 @@ range makes it an arduino-dw1000 line, not this format. A malformed RX power is 
 import math
 import re
 
-from epp_ros.uwb.formats.base import (LineFormat, ParseResult, RangeRecord, checked_range,
-                                      decimal, line_text, metres)
+from epp_ros.uwb.formats.base import (checked_range, decimal, line_text, LineFormat, metres,
+                                      ParseResult, RangeRecord)
 
 __all__ = ['parse_bare', 'format_bare', 'FORMAT']
 
@@ -25,7 +42,7 @@ _POWER = re.compile(r'RX power:[ \t]*(?P<power>\S{1,64}?)[ \t]*dBm', re.ASCII)
 
 
 def parse_bare(line):
-    """The record (anchor and tag None) of a ``Range: ... m`` or ``DIST: ... m`` line."""
+    """Return the record (anchor and tag None) of a ``Range: ... m`` or ``DIST: ... m`` line."""
     text = line_text(line)
     match = _RANGE.search(text) if text else None
     if match is None or 'from:' in text[:match.start()]:
@@ -42,7 +59,7 @@ def parse_bare(line):
 
 
 def format_bare(range_m, rx_power_dbm=None, style='ng'):
-    """A DW1000-ng (``style='ng'``) or DW3000 (``'dw3000'``) line."""
+    """Return a DW1000-ng (``style='ng'``) or DW3000 (``'dw3000'``) line."""
     value = checked_range(range_m)
     if style == 'dw3000':
         return f'DIST: {value:.2f} m'

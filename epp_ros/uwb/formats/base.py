@@ -1,15 +1,30 @@
-"""What every line format shares: the records, the descriptor, and small safe conversions.
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
 
-Standard library only, no ROS. A parser takes one line (with or without its ``\\r\\n``) and
+r"""
+What every line format shares: the records, the descriptor, and small safe conversions.
+
+Standard library only, no ROS. A parser takes one line (with or without its ``\r\n``) and
 returns None when the line is not of its format or holds no valid range, else a
 :class:`ParseResult`. Parsers never raise, whatever the input. A range is returned only when
 it is finite and >= 0; no plausibility limits are applied here. Device ids are returned as
 the firmware printed them, stripped and upper-cased; they are compared as numbers later
 (:func:`device_number`).
 """
+from dataclasses import dataclass, field
 import math
 import re
-from dataclasses import dataclass, field
 from typing import Callable
 
 __all__ = ['RangeRecord', 'ParseResult', 'LineFormat', 'Cycle', 'device_number',
@@ -20,12 +35,16 @@ __all__ = ['RangeRecord', 'ParseResult', 'LineFormat', 'Cycle', 'device_number',
 class RangeRecord:
     """One range measurement taken from a device line."""
 
-    anchor: str | None          # device id of the anchor as the line names it, normalised;
-                                # None in formats that name no device (from the source)
-    range_m: float              # metres, finite, >= 0
-    tag: str | None = None      # device id of the tag if the line names it, else None
-    kind: str = 'range'         # 'range' (tag-anchor), 'raw' (TREK mr: the same exchange
-                                # before bias correction) or 'anchor' (anchor-anchor)
+    # device id of the anchor as the line names it, normalised; None in formats that name no
+    # device (from the source)
+    anchor: str | None
+    # metres, finite, >= 0
+    range_m: float
+    # device id of the tag if the line names it, else None
+    tag: str | None = None
+    # 'range' (tag-anchor), 'raw' (TREK mr: the same exchange before bias correction) or
+    # 'anchor' (anchor-anchor)
+    kind: str = 'range'
     rx_power_dbm: float | None = None
 
 
@@ -48,7 +67,8 @@ class Cycle:
 
 @dataclass(frozen=True)
 class LineFormat:
-    """One device output format: everything the driver, emulator and tools need to know.
+    """
+    One device output format: everything the driver, emulator and tools need to know.
 
     Attributes
     ----------
@@ -81,6 +101,7 @@ class LineFormat:
     recognise : callable(str) -> str or None
         For lines of the format that carry no range (positions, HTTP preambles): a label
         to count them under, else None.
+
     """
 
     name: str
@@ -102,7 +123,8 @@ _ID_NUMBER = re.compile(r'(?:0[xX])?([0-9A-Fa-f]{1,16})', re.ASCII)
 
 
 def device_number(value):
-    """The number a device id spells in hexadecimal, or None if it is not one.
+    """
+    Return the number a device id spells in hexadecimal, or None if it is not one.
 
     Case-insensitive, with or without ``0x``, any zero padding: ``'0B82'``, ``'b82'`` and
     ``'0x0b82'`` are all 0xB82. Integers are taken by their decimal digits (``17`` is
@@ -119,7 +141,8 @@ def device_number(value):
 
 
 def printed_number(value, maximum=None):
-    """The decimal digits a firmware that prints small numbers shows for an id, else ValueError.
+    """
+    Return the decimal digits a firmware printing small numbers shows for an id, else ValueError.
 
     ``'3'``, ``'03'`` and ``'0x3'`` give ``'3'``; an id whose digits are not decimal (``'A'``)
     cannot be printed by such firmware.
@@ -144,7 +167,7 @@ _PROMPT = re.compile(r'^(?:dwm>|nsh>|>)[ \t]*')
 
 
 def line_text(line):
-    """The line without surrounding whitespace (and line ending), or None if not a str."""
+    """Return the line without surrounding whitespace (and line ending), or None if not a str."""
     return line.strip() if isinstance(line, str) else None
 
 
@@ -159,7 +182,7 @@ def junk_errors(text, start):
 
 
 def result(records, errors):
-    """A ParseResult, or None when no record survived."""
+    """Return a ParseResult, or None when no record survived."""
     return ParseResult(tuple(records), int(errors)) if records else None
 
 
@@ -183,7 +206,7 @@ def decimal(text):
 
 
 def metres(value, scale=1.0):
-    """A valid range in metres (finite, >= 0, never -0.0) from text or number, else None."""
+    """Return a valid range in metres from text or number (finite, >= 0, never -0.0), else None."""
     number = decimal(value)
     if number is None or number < 0:
         return None
@@ -192,7 +215,7 @@ def metres(value, scale=1.0):
 
 
 def normalised_id(value):
-    """A device id stripped and upper-cased, or None if empty, too long or not one word."""
+    """Return a device id stripped and upper-cased, or None if empty, too long or not one word."""
     if isinstance(value, bool):
         return None
     if isinstance(value, int):
@@ -218,7 +241,7 @@ def checked_range(value):
 
 
 def checked_id(value, pattern=None):
-    """A formatter's id as text, ValueError unless it is one normalisable word."""
+    """Return a formatter's id as text, ValueError unless it is one normalisable word."""
     text = str(value).strip()
     if normalised_id(text) is None or (pattern and not pattern.fullmatch(text)):
         raise ValueError(f'not a usable device id: {value!r}')
@@ -226,5 +249,5 @@ def checked_id(value, pattern=None):
 
 
 def slot_of(anchor, slots):
-    """The field position of an anchor id in a format with ``slots`` positional anchors."""
+    """Return the field position of an anchor id in a format with ``slots`` positional anchors."""
     return int(printed_number(anchor, slots - 1))

@@ -1,4 +1,21 @@
-"""haoru -- TREK1000-derived firmware with eight anchors (HaoruTech and its copies)::
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+haoru -- TREK1000-derived firmware with eight anchors (HaoruTech and its copies).
+
+A line::
 
     mc f0 00000000 00000000 00000000 00000000 00000630 00000519 000004c2 00000602 0b3e 5f ...
 
@@ -15,9 +32,8 @@ is a ``%04x`` range count is a 4-anchor TREK1000 line, not this format.
 """
 import re
 
-from epp_ros.uwb.formats.base import LineFormat, RangeRecord, printed_number, result, slot_of
-from epp_ros.uwb.formats.trek import (decaranging_fields, decaranging_records,
-                                      range_millimetres)
+from epp_ros.uwb.formats.base import LineFormat, printed_number, RangeRecord, result, slot_of
+from epp_ros.uwb.formats.trek import decaranging_fields, decaranging_records, range_millimetres
 
 __all__ = ['parse_haoru', 'format_haoru', 'FORMAT']
 
@@ -27,7 +43,7 @@ _KINDS = {'mc': 'range', 'mr': 'raw'}
 
 
 def parse_haoru(line):
-    """Records of an 8-anchor ``mc``/``mr`` line (see the module docstring)."""
+    """Return the records of an 8-anchor ``mc``/``mr`` line (see the module docstring)."""
     fields, errors = decaranging_fields(line)
     if fields is None or fields[0] not in _KINDS:
         return None
@@ -40,7 +56,8 @@ def parse_haoru(line):
 
 
 def format_haoru(tag, ranges, kind='mc', sequence=0):
-    """An 8-anchor line as a tag prints it, e.g. ``mc 01 000004ec 00000000 ... t1:0``.
+    """
+    Return an 8-anchor line as a tag prints it, e.g. ``mc 01 000004ec 00000000 ... t1:0``.
 
     Parameters
     ----------
@@ -52,6 +69,7 @@ def format_haoru(tag, ranges, kind='mc', sequence=0):
         'mc' or 'mr'.
     sequence : int
         Written as the range count and sequence number; the time field is written as zero.
+
     """
     if kind not in _KINDS:
         raise ValueError(f'kind must be one of {list(_KINDS)}, got {kind!r}')

@@ -1,4 +1,21 @@
-"""json -- JSON of WiFi bridges (ESP8266/ESP32 forwarding a tag's ranges)::
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+json -- JSON of WiFi bridges (ESP8266/ESP32 forwarding a tag's ranges).
+
+A line::
 
     {"tag":"1","links":[{"A":"1782","R":"2.3"}]}
 
@@ -13,8 +30,8 @@ are recognised and counted as a preamble (see :mod:`epp_ros.uwb.source` for the 
 import json
 import re
 
-from epp_ros.uwb.formats.base import (LineFormat, RangeRecord, checked_id, checked_range,
-                                      junk_errors, line_text, metres, normalised_id, result)
+from epp_ros.uwb.formats.base import (checked_id, checked_range, junk_errors, line_text,
+                                      LineFormat, metres, normalised_id, RangeRecord, result)
 
 __all__ = ['parse_json', 'format_json', 'json_object', 'http_preamble', 'FORMAT']
 
@@ -37,7 +54,7 @@ def json_object(text):
 
 
 def _json_link(link, tag):
-    """The record of one ``{"A": ..., "R": ...}`` link, None if broken."""
+    """Return the record of one ``{"A": ..., "R": ...}`` link, None if broken."""
     if not isinstance(link, dict):
         return None
     anchor = normalised_id(link.get('A'))
@@ -48,7 +65,7 @@ def _json_link(link, tag):
 
 
 def parse_json(line):
-    """Records of a JSON ``{"tag": ..., "links": [...]}`` line (see the module docstring)."""
+    """Return records of a JSON ``{"tag": ..., "links": [...]}`` line (see module docstring)."""
     text = line_text(line)
     if text is None:
         return None
@@ -71,7 +88,8 @@ def parse_json(line):
 
 
 def format_json(tag, ranges):
-    """A JSON line, e.g. ``{"tag":"1","links":[{"A":"1782","R":"2.300"}]}``.
+    """
+    Return a JSON line, e.g. ``{"tag":"1","links":[{"A":"1782","R":"2.300"}]}``.
 
     ``tag=None`` leaves the ``tag`` key out, as some bridges do.
     """

@@ -1,4 +1,21 @@
-"""lec -- Decawave DWM1001 PANS shell command ``lec`` (CSV location output of a tag)::
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+lec -- Decawave DWM1001 PANS shell command ``lec`` (CSV location output of a tag).
+
+A line::
 
     DIST,2,AN0,022E,7.94,8.03,0.00,3.44,AN1,9280,7.95,0.00,0.00,5.68,POS,6.95,5.37,-1.97,52
 
@@ -13,13 +30,13 @@ ambiguous: its groups are all skipped, each one an error. A shell prompt (``dwm>
 the line is not an error; other text before ``DIST`` is one. Position-only lines (``lep``,
 ``POS,...``) are recognised and counted as positions.
 """
+from collections import Counter
 import math
 import re
-from collections import Counter
 
-from epp_ros.uwb.formats.base import (HEX_ID, LineFormat, RangeRecord, checked_id,
-                                      checked_range, decimal, device_number, junk_errors,
-                                      line_text, metres, result, without_prompt)
+from epp_ros.uwb.formats.base import (checked_id, checked_range, decimal, device_number, HEX_ID,
+                                      junk_errors, line_text, LineFormat, metres, RangeRecord,
+                                      result, without_prompt)
 from epp_ros.uwb.formats.dwm1001 import position_line
 
 __all__ = ['parse_lec', 'format_lec', 'FORMAT']
@@ -36,7 +53,7 @@ def _lec_is_marker(field):
 
 
 def _lec_declared_count(fields):
-    """(declared anchor count or None, fields after it)."""
+    """Return (declared anchor count or None, fields after it)."""
     if fields and _LEC_COUNT.fullmatch(fields[0]):
         return int(fields[0]), fields[1:]
     if fields and not _lec_is_marker(fields[0]):
@@ -80,7 +97,7 @@ def _lec_position_is_valid(fields):
 
 
 def parse_lec(line):
-    """Records of a DWM1001 ``lec`` ``DIST,...`` line (see the module docstring)."""
+    """Return the records of a DWM1001 ``lec`` ``DIST,...`` line (see the module docstring)."""
     text = line_text(line)
     if text is None:
         return None
@@ -118,7 +135,8 @@ def _xyz(values, what):
 
 
 def format_lec(ranges, anchors_xyz=None, position=None):
-    """A DWM1001 ``lec`` line.
+    """
+    Return a DWM1001 ``lec`` line.
 
     Parameters
     ----------
@@ -134,6 +152,7 @@ def format_lec(ranges, anchors_xyz=None, position=None):
     -------
     str
         E.g. ``DIST,1,AN0,022E,7.94,8.03,0.00,3.44,POS,6.95,5.37,-1.97,52``.
+
     """
     known = {str(key).strip().upper(): value for key, value in (anchors_xyz or {}).items()}
     parts = ['DIST', str(len(ranges))]
@@ -158,10 +177,8 @@ def format_lec(ranges, anchors_xyz=None, position=None):
     return ','.join(parts)
 
 
-
-
 def anchor_xyz(cycle, anchor):
-    """The position the emulated firmware reports for an anchor (0, 0, 0 if unknown)."""
+    """Return the position the emulated firmware reports for an anchor (0, 0, 0 if unknown)."""
     number = device_number(anchor)
     for key, xyz in cycle.anchor_positions.items():
         if device_number(key) == number:
@@ -170,7 +187,7 @@ def anchor_xyz(cycle, anchor):
 
 
 def _emit(tag, ranges, cycle):
-    """The tag's ``lec`` line (anchor ids as four hex digits, as the firmware prints them)."""
+    """Return the tag's ``lec`` line (anchor ids in four hex digits, as firmware prints them)."""
     ids = {f'{device_number(anchor):04X}' if device_number(anchor) is not None else anchor:
            value for anchor, value in ranges.items()}
     positions = {key: anchor_xyz(cycle, anchor) for key, anchor in zip(ids, ranges)}

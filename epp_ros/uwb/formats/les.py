@@ -1,4 +1,21 @@
-"""les -- Decawave DWM1001 PANS shell command ``les`` (a tag's ranges with anchor positions)::
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+les -- Decawave DWM1001 PANS shell command ``les`` (a tag's ranges with anchor positions).
+
+A line::
 
     022E[7.94,8.03,0.00]=3.38 0C8A[0.00,8.00,2.25]=6.51 le_us=3082 est[2.57,1.98,1.37,56]
 
@@ -12,12 +29,12 @@ named by more than one group is ambiguous: its groups are all skipped, each an e
 with no group but a position (``le_us=... est[...]``, ``lep``'s ``POS,...``) is recognised
 and counted as a position.
 """
-import re
 from collections import Counter
+import re
 
-from epp_ros.uwb.formats.base import (LineFormat, RangeRecord, checked_range, decimal,
-                                      device_number, junk_errors, line_text, metres,
-                                      result, without_prompt)
+from epp_ros.uwb.formats.base import (checked_range, decimal, device_number, junk_errors,
+                                      line_text, LineFormat, metres, RangeRecord, result,
+                                      without_prompt)
 from epp_ros.uwb.formats.dwm1001 import position_line
 from epp_ros.uwb.formats.lec import anchor_xyz
 
@@ -51,7 +68,7 @@ def _est_is_valid(token):
 
 
 def _pieces(text):
-    """(groups as (anchor, record), errors) of the pieces of a line."""
+    """Return (groups as (anchor, record), errors) of the pieces of a line."""
     first = _FIRST_GROUP.search(text)
     if first is None:
         return [], 0
@@ -70,7 +87,7 @@ def _pieces(text):
 
 
 def parse_les(line):
-    """Records of a DWM1001 ``les`` line (see the module docstring)."""
+    """Return the records of a DWM1001 ``les`` line (see the module docstring)."""
     text = line_text(line)
     if text is None:
         return None
@@ -86,7 +103,8 @@ def parse_les(line):
 
 
 def format_les(ranges, anchors_xyz=None, le_us=0):
-    """A DWM1001 ``les`` line, e.g. ``022E[7.94,8.03,0.00]=3.38 le_us=3082``.
+    """
+    Return a DWM1001 ``les`` line, e.g. ``022E[7.94,8.03,0.00]=3.38 le_us=3082``.
 
     Parameters
     ----------
@@ -96,6 +114,7 @@ def format_les(ranges, anchors_xyz=None, le_us=0):
         ``{anchor_id: (x, y, z)}`` metres; anchors missing here are written at 0, 0, 0.
     le_us : int
         The location engine's time, microseconds.
+
     """
     parts = []
     known = {device_number(key): xyz for key, xyz in (anchors_xyz or {}).items()}

@@ -1,4 +1,21 @@
-"""mauwb -- Makerfabs MaUWB (DW3000 + STM32) AT firmware, automatic range reports::
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+mauwb -- Makerfabs MaUWB (DW3000 + STM32) AT firmware, automatic range reports.
+
+A line::
 
     AT+RANGE=tid:1,mask:04,seq:63,range:(0,0,30,0,0,0,0,0),rssi:(0,0,-80.50,0,0,0,0,0)
 
@@ -11,9 +28,8 @@ one error; text before ``AT+RANGE=`` is one error.
 """
 import re
 
-from epp_ros.uwb.formats.base import (LineFormat, RangeRecord, checked_range, decimal,
-                                      junk_errors, line_text, metres, printed_number,
-                                      result, slot_of)
+from epp_ros.uwb.formats.base import (checked_range, decimal, junk_errors, line_text, LineFormat,
+                                      metres, printed_number, RangeRecord, result, slot_of)
 
 __all__ = ['parse_mauwb', 'format_mauwb', 'centimetre_records', 'FORMAT']
 
@@ -32,7 +48,8 @@ def _parts(text):
 
 
 def centimetre_records(values, tag, mask=None, anchors=None):
-    """(records, errors) of centimetre ranges per slot, as both MaUWB formats give them.
+    """
+    Return (records, errors) of centimetre ranges per slot, as both MaUWB formats give them.
 
     ``mask`` the validity bits (None: a slot is valid when its value is not 0);
     ``anchors`` the anchor id of each slot (None: the slot number), '' for none.
@@ -63,7 +80,7 @@ def _anchor_ids(text):
 
 
 def parse_mauwb(line):
-    """Records of an ``AT+RANGE=`` report (see the module docstring)."""
+    """Return the records of an ``AT+RANGE=`` report (see the module docstring)."""
     text = line_text(line)
     start = _START.search(text) if text else None
     if start is None:
@@ -91,7 +108,7 @@ def centimetres(ranges):
 
 
 def format_mauwb(tag, ranges, sequence=0, rssi=-80.0):
-    """A report as the AT firmware prints it (ranges in centimetres, slots '0'..'7')."""
+    """Return a report as the AT firmware prints it (ranges in centimetres, slots '0'..'7')."""
     values, mask = centimetres(ranges)
     power = [f'{rssi:.2f}' if mask >> slot & 1 else '0' for slot in range(SLOTS)]
     return (f'AT+RANGE=tid:{printed_number(tag)},mask:{mask:02x},seq:{int(sequence) & 0xFF},'

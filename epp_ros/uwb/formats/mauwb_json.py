@@ -1,4 +1,21 @@
-"""mauwb_json -- the JSON a Makerfabs MaUWB tag sends over WiFi::
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+mauwb_json -- the JSON a Makerfabs MaUWB tag sends over WiFi.
+
+A line::
 
     {"id":1,"range":[0,0,30,0,0,0,0,0]}
 
@@ -8,15 +25,15 @@ text after the object is one error.
 """
 import json
 
-from epp_ros.uwb.formats.base import LineFormat, line_text, normalised_id, printed_number, result
+from epp_ros.uwb.formats.base import line_text, LineFormat, normalised_id, printed_number, result
 from epp_ros.uwb.formats.json_links import json_object
-from epp_ros.uwb.formats.mauwb import SLOTS, centimetre_records, centimetres
+from epp_ros.uwb.formats.mauwb import centimetre_records, centimetres, SLOTS
 
 __all__ = ['parse_mauwb_json', 'format_mauwb_json', 'FORMAT']
 
 
 def parse_mauwb_json(line):
-    """Records of a ``{"id": ..., "range": [...]}`` line (see the module docstring)."""
+    """Return the records of a ``{"id": ..., "range": [...]}`` line (see the module docstring)."""
     text = line_text(line)
     if text is None:
         return None
@@ -33,7 +50,7 @@ def parse_mauwb_json(line):
 
 
 def format_mauwb_json(tag, ranges):
-    """The tag's message, e.g. ``{"id":1,"range":[0,0,30,0,0,0,0,0]}``."""
+    """Return the tag's message, e.g. ``{"id":1,"range":[0,0,30,0,0,0,0,0]}``."""
     values, _ = centimetres(ranges)
     return json.dumps({'id': int(printed_number(tag)), 'range': values}, separators=(',', ':'))
 

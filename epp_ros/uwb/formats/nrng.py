@@ -1,4 +1,21 @@
-"""nrng -- Decawave mynewt ``twr_nranges_tdma`` tag (uwb-apps / uwb-core ``nrng``)::
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+nrng -- Decawave mynewt ``twr_nranges_tdma`` tag (uwb-apps / uwb-core ``nrng``).
+
+A line::
 
     {"utime": 88307220,"nrng": {"seq": 224,"mask": 3,"rng": ["8.088","1.320"],"uid": ["19","5"]}}
 
@@ -12,8 +29,8 @@ object is one error.
 """
 import json
 
-from epp_ros.uwb.formats.base import (LineFormat, RangeRecord, checked_range, line_text,
-                                      metres, normalised_id, printed_number, result)
+from epp_ros.uwb.formats.base import (checked_range, line_text, LineFormat, metres, normalised_id,
+                                      printed_number, RangeRecord, result)
 from epp_ros.uwb.formats.json_links import json_object
 
 __all__ = ['parse_nrng', 'format_nrng', 'FORMAT']
@@ -34,7 +51,7 @@ def _lists(value):
 
 
 def parse_nrng(line):
-    """Records of an ``nrng`` JSON line (see the module docstring)."""
+    """Return the records of an ``nrng`` JSON line (see the module docstring)."""
     text = line_text(line)
     if text is None:
         return None
@@ -55,7 +72,8 @@ def parse_nrng(line):
 
 
 def format_nrng(ranges, sequence=0, utime=0):
-    """The tag's line, e.g. ``{"utime": 0,"nrng": {"seq": 0,"mask": 1,"rng": ["8.088"],...``.
+    """
+    Return the tag's line, e.g. ``{"utime": 0,"nrng": {"seq": 0,"mask": 1,"rng": ["8.088"],...``.
 
     ``ranges`` is ``{node id: metres}``, ids written as given (digits as printed).
     """

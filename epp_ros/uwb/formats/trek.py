@@ -1,4 +1,21 @@
-"""trek -- Decawave TREK1000 / DecaRangeRTLS (EVB1000 firmware, USB virtual COM port)::
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+trek -- Decawave TREK1000 / DecaRangeRTLS (EVB1000 firmware, USB virtual COM port).
+
+A line::
 
     mc 07 000004ec 000008ee 0000087e 00000000 6cc0 0a 00a0642b a0:0
 
@@ -33,8 +50,8 @@ A line whose fifth field after the mask is another ``%08x`` range is the 8-ancho
 """
 import re
 
-from epp_ros.uwb.formats.base import (LineFormat, RangeRecord, checked_range, junk_errors,
-                                      line_text, printed_number, result, slot_of)
+from epp_ros.uwb.formats.base import (checked_range, junk_errors, line_text, LineFormat,
+                                      printed_number, RangeRecord, result, slot_of)
 
 __all__ = ['parse_trek', 'format_trek', 'TREK_ANCHOR_IDS', 'FORMAT', 'decaranging_fields',
            'decaranging_records']
@@ -70,7 +87,8 @@ def _token_tag(fields):
 
 
 def decaranging_fields(line):
-    """(fields from the report type on, errors for noise before it), or (None, 0).
+    """
+    (fields from the report type on, errors for noise before it), or (None, 0).
 
     Shared by the TREK1000-derived formats: the fields of a ``mc``/``mr``/``ma`` line whose
     second field is a two-digit hex mask.
@@ -88,7 +106,8 @@ def decaranging_fields(line):
 
 
 def decaranging_records(fields, slots, record_of):
-    """(records, errors) of the ``slots`` range fields after the mask.
+    """
+    Return (records, errors) of the ``slots`` range fields after the mask.
 
     ``record_of(index, metres, tag)`` makes the record of valid field ``index`` (None when
     the field has no meaning). A missing token is one error, each broken valid field one.
@@ -110,7 +129,7 @@ def decaranging_records(fields, slots, record_of):
 
 
 def _record(kind, index, metres, tag):
-    """The record of range field ``index`` of a ``kind`` line, None if it has no meaning."""
+    """Return the record of range field ``index`` of a ``kind`` line, None if it has no meaning."""
     if kind != 'ma':
         return RangeRecord(anchor=_ANCHORS[index], range_m=metres, tag=tag,
                            kind='range' if kind == 'mc' else 'raw')
@@ -121,7 +140,7 @@ def _record(kind, index, metres, tag):
 
 
 def parse_trek(line):
-    """Records of a TREK1000 ``mc``/``mr``/``ma`` line (see the module docstring)."""
+    """Return the records of a TREK1000 ``mc``/``mr``/``ma`` line (see the module docstring)."""
     fields, errors = decaranging_fields(line)
     if fields is None or (len(fields) > 6 and RANGE_FIELD.fullmatch(fields[6])):
         return None
@@ -132,7 +151,8 @@ def parse_trek(line):
 
 
 def format_trek(tag, ranges, kind='mc', sequence=0):
-    """A TREK1000 line as anchor A0 prints it on USB.
+    """
+    Return a TREK1000 line as anchor A0 prints it on USB.
 
     Parameters
     ----------
@@ -151,6 +171,7 @@ def format_trek(tag, ranges, kind='mc', sequence=0):
     -------
     str
         E.g. ``mc 07 000004ec 000008ee 0000087e 00000000 0000 00 00000000 a0:0``.
+
     """
     if kind not in _KINDS:
         raise ValueError(f'kind must be one of {_KINDS}, got {kind!r}')
@@ -188,7 +209,7 @@ RAW_BIAS = 0.25
 
 
 def _emit(tag, ranges, cycle):
-    """The ``mr`` (biased) and ``mc`` lines anchor A0 prints for one tag's exchange."""
+    """Return the ``mr`` (biased) and ``mc`` lines anchor A0 prints for one tag's exchange."""
     fields = {str(slot_of(anchor, 4)): value for anchor, value in ranges.items()}
     tag = printed_number(tag)
     raw = {anchor: value + RAW_BIAS for anchor, value in fields.items()}
