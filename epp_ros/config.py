@@ -203,8 +203,8 @@ def listen_address(port):
         return None
     match = _LISTEN.fullmatch(port)
     if match is None or not 0 < int(match['port']) < 65536:
-        raise ConfigError(f'source_ports: {port!r} must be tcp-listen://ADDRESS:PORT with an '
-                          'address to bind (e.g. 192.168.4.1, or 0.0.0.0 for every '
+        raise ConfigError(f'source_ports: {_short(port)} must be tcp-listen://ADDRESS:PORT '
+                          'with an address to bind (e.g. 192.168.4.1, or 0.0.0.0 for every '
                           'interface) and a port 1-65535')
     return match['host'].strip('[]'), int(match['port'])
 
@@ -212,12 +212,14 @@ def listen_address(port):
 def _names(values, field):
     names = tuple(str(v).strip() for v in values)
     if not names or any(not n for n in names):
-        raise ConfigError(f'{field}: every entry needs a non-empty name, got {list(values)}')
+        raise ConfigError(f'{field}: every entry needs a non-empty name, got '
+                          f'{_short(list(values))}')
     if any(not re.fullmatch(r'[A-Za-z0-9_]+', n) for n in names):
-        raise ConfigError(f'{field}: names may hold letters, digits and _ only, got {list(names)}')
+        raise ConfigError(f'{field}: names may hold letters, digits and _ only, got '
+                          f'{_short(list(names))}')
     duplicates = sorted({n for n in names if names.count(n) > 1})
     if duplicates:
-        raise ConfigError(f'{field}: duplicate names {duplicates}')
+        raise ConfigError(f'{field}: duplicate names {_short(duplicates)}')
     return names
 
 
@@ -228,10 +230,11 @@ def _device_ids(values, field, count):
     numbers = [device_number(i) for i in ids]
     bad = [v for v, number in zip(values, numbers) if number is None]
     if bad:
-        raise ConfigError(f'{field}: device ids must be 1-16 hexadecimal digits, got {bad}')
+        raise ConfigError(f'{field}: device ids must be 1-16 hexadecimal digits, got '
+                          f'{_short(bad)}')
     duplicates = sorted({i for i, n in zip(ids, numbers) if numbers.count(n) > 1})
     if duplicates:
-        raise ConfigError(f'{field}: duplicate device ids {duplicates} (ids compare as '
+        raise ConfigError(f'{field}: duplicate device ids {_short(duplicates)} (ids compare as '
                           'numbers: 0B82 = B82)')
     return ids
 
@@ -240,7 +243,7 @@ def _numbers(values, field):
     try:
         return tuple(float(v) for v in values)
     except (TypeError, ValueError):
-        raise ConfigError(f'{field}: must be a list of numbers, got {values!r}') from None
+        raise ConfigError(f'{field}: must be a list of numbers, got {_short(values)}') from None
 
 
 def pump_config_from_parameters(values):
@@ -289,8 +292,8 @@ def pump_config_from_parameters(values):
     try:
         pivot_offset = float(get['pivot_offset'])
     except (TypeError, ValueError):
-        raise ConfigError(f"pivot_offset: must be a number, got {get['pivot_offset']!r}") \
-            from None
+        shown = _short(get['pivot_offset'])
+        raise ConfigError(f'pivot_offset: must be a number, got {shown}') from None
     try:
         BoomModel(arm_lengths, base, positions, pivot_offset)
     except ValueError as exc:
@@ -306,7 +309,7 @@ def pump_config_from_parameters(values):
 def _sources(ports, protocols, tags, anchors, tag_ids, anchor_ids):
     ports = [str(p).strip() for p in ports]
     if not ports or any(not p for p in ports):
-        raise ConfigError(f'source_ports: every source needs a port, got {ports}')
+        raise ConfigError(f'source_ports: every source needs a port, got {_short(ports)}')
     if len(protocols) != len(ports) or len(tags) != len(ports):
         raise ConfigError(f'source_protocols, source_tags: need one entry per source port '
                           f'({len(ports)}), got {len(protocols)} and {len(tags)}')
@@ -320,7 +323,7 @@ def _sources(ports, protocols, tags, anchors, tag_ids, anchor_ids):
                     for entry in zip(ports, protocols, tags, anchors))
     duplicates = sorted({p for p in ports if ports.count(p) > 1})
     if duplicates:
-        raise ConfigError(f'source_ports: duplicate ports {duplicates}')
+        raise ConfigError(f'source_ports: duplicate ports {_short(duplicates)}')
     return sources
 
 
@@ -329,7 +332,7 @@ def _source(port, protocol, tag, anchor, tag_ids, anchor_ids):
     listen_address(port)
     protocol = str(protocol).strip().lower()
     if protocol not in PROTOCOLS:
-        raise ConfigError(f'source_protocols: {protocol!r} for {port} is not one of '
+        raise ConfigError(f'source_protocols: {_short(protocol)} for {_short(port)} is not one of '
                           f'{list(PROTOCOLS)}')
     tag = _known_id(tag, tag_ids, 'source_tags', 'tag_ids', port)
     anchor = _known_id(anchor, anchor_ids, 'source_anchors', 'anchor_ids', port)
@@ -347,7 +350,8 @@ def _known_id(value, ids, field, ids_field, port):
     """Return a source's device id (None if empty), ConfigError unless it is one of ``ids``."""
     value = normalise_device_id(value) or None
     if value is not None and device_number(value) not in {device_number(i) for i in ids}:
-        raise ConfigError(f'{field}: {value!r} for {port} is not in {ids_field} {list(ids)}')
+        raise ConfigError(f'{field}: {_short(value)} for {_short(port)} is not in {ids_field} '
+                          f'{_short(list(ids))}')
     return value
 
 
@@ -362,6 +366,51 @@ def default_config_path():
     raise ConfigError('no config/pump.yaml found next to the package; pass one explicitly')
 
 
+#: Bytes: a pump description is a few kilobytes; more is not one.
+MAX_CONFIG_BYTES = 1 << 20
+
+
+def _safe_yaml(path):
+    """
+    Parse a YAML file of bounded size without aliases.
+
+    An alias (``*name``) repeats a node without copying it in the file: a kilobyte of
+    nested aliases expands to gigabytes ("billion laughs"). A pump description needs none.
+
+    Raises
+    ------
+    ConfigError
+        On an oversized file or an alias, naming its line.
+
+    """
+    size = path.stat().st_size
+    if size > MAX_CONFIG_BYTES:
+        raise ConfigError(f'{path}: {size} bytes; a pump description is at most '
+                          f'{MAX_CONFIG_BYTES} bytes')
+    text = path.read_text()
+    for event in yaml.parse(text, Loader=yaml.SafeLoader):
+        if isinstance(event, yaml.AliasEvent):
+            raise ConfigError(f'{path}: line {event.start_mark.line + 1}: YAML aliases '
+                              '(*name) are not accepted in a pump description')
+    return yaml.safe_load(text)
+
+
+def _short(value, limit=80):
+    """
+    Return ``repr(value)`` cut to ``limit`` characters, for one-line error messages.
+
+    Parameters
+    ----------
+    value : object
+        What to show.
+    limit : int
+        Longest text kept.
+
+    """
+    text = value if isinstance(value, str) else repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + '...'
+
+
 def load_pump_config(path=None):
     """
     Read and validate a pump description from a ROS parameters YAML file.
@@ -370,9 +419,9 @@ def load_pump_config(path=None):
     """
     path = Path(path) if path is not None else default_config_path()
     try:
-        document = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError(f'{path}: cannot read: {exc}') from None
+        document = _safe_yaml(path)
+    except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise ConfigError(f'{path}: cannot read: {_short(exc, 200)}') from None
     try:
         values = document['/**']['ros__parameters']
     except (TypeError, KeyError):

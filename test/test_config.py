@@ -188,3 +188,43 @@ def test_coincident_or_collinear_anchors_are_refused(positions, message, tmp_pat
     with pytest.raises(ConfigError, match=f'anchor_positions: .*{message}') as error:
         load_pump_config(path)
     assert '\n' not in str(error.value)
+
+
+BOMB = '''/**:
+  ros__parameters:
+    a: &a ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]
+    b: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a, *a]
+    c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b, *b]
+    d: &d [*c, *c, *c, *c, *c, *c, *c, *c, *c, *c]
+    e: &e [*d, *d, *d, *d, *d, *d, *d, *d, *d, *d]
+    f: &f [*e, *e, *e, *e, *e, *e, *e, *e, *e, *e]
+    g: &g [*f, *f, *f, *f, *f, *f, *f, *f, *f, *f]
+    h: &h [*g, *g, *g, *g, *g, *g, *g, *g, *g, *g]
+    tag_names: [*h, *h, *h, *h, *h, *h, *h, *h, *h, *h]
+'''
+
+
+def test_a_yaml_alias_bomb_is_refused_at_once_with_one_short_line(tmp_path):
+    path = tmp_path / 'bomb.yaml'
+    path.write_text(BOMB)
+    with pytest.raises(ConfigError, match='line 4: YAML aliases') as error:
+        load_pump_config(path)
+    assert len(str(error.value)) < 200 and '\n' not in str(error.value)
+
+
+def test_an_oversized_file_is_refused(tmp_path):
+    path = tmp_path / 'big.yaml'
+    path.write_text(PUMP_YAML.read_text() + '#' * (2 << 20))
+    with pytest.raises(ConfigError, match='at most'):
+        load_pump_config(path)
+
+
+@pytest.mark.parametrize('field', ['tag_names', 'arm_lengths', 'anchor_ids', 'source_tags'])
+def test_error_messages_stay_short_whatever_the_value(field, tmp_path):
+    document = yaml.safe_load(PUMP_YAML.read_text())
+    document['/**']['ros__parameters'][field] = ['x y' * 500] * 500     # 750 kB
+    path = tmp_path / 'long.yaml'
+    path.write_text(yaml.safe_dump(document))
+    with pytest.raises(ConfigError, match=field) as error:
+        load_pump_config(path)
+    assert len(str(error.value)) < 400

@@ -15,6 +15,7 @@
 """The console tools run end to end and keep their output contracts."""
 import argparse
 import json
+from pathlib import Path
 import subprocess
 import sys
 
@@ -176,3 +177,26 @@ def test_bench_help_lists_the_new_suites(capsys):
     assert 'integrity' in out and 'driver' in out
     with pytest.raises(SystemExit):
         bench.main(['integrity', '--methods', 'tpsm'])
+
+
+@pytest.mark.parametrize('argv', [
+    ['epp_bag', 'synth', 'OUT', '--duration', 'nan'],
+    ['epp_bag', 'synth', 'OUT', '--rate', 'inf'],
+    ['epp_bag', 'synth', 'OUT', '--duration', '1e12'],
+    ['epp_bag', 'synth', 'OUT', '--drop', '2'],
+    ['epp_bag', 'synth', 'OUT', '--sigma', 'nan'],
+    ['epp_bag', 'synth', 'OUT', '--seed', '-1'],
+    ['epp_bag', 'play', 'BAG', '--rate', '0'],
+    ['epp_bag', 'play', 'BAG', '--clock', '-5'],
+    ['uwb_emulator', '--tcp', '127.0.0.1:99999'],
+    ['uwb_emulator', '--pty', '--rate', 'nan'],
+    ['uwb_emulator', '--pty', '--drop', '1.5'],
+])
+def test_bad_numbers_on_the_command_line_give_one_line_and_status_2(argv, tmp_path):
+    args = [str(Path(sys.executable).parent / argv[0])] + [
+        str(tmp_path / a) if a in ('OUT', 'BAG') else a for a in argv[1:]]
+    result = subprocess.run(args, capture_output=True, text=True, timeout=60)
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert 'error' in lines[0] and 'Traceback' not in result.stderr
+    assert not (tmp_path / 'OUT').exists()

@@ -25,10 +25,10 @@ lines leave out follow). With ``--truth`` the true posture is published as
 stamped with the node's clock (simulated time with ``use_sim_time``), which also paces the
 cycles and measures ``--duration``.
 """
-import argparse
 import sys
 
 from epp_ros import contract
+from epp_ros.arguments import host_port, integer, number, Parser
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core.simulate import RangeNoise, working_cycle
 from epp_ros.nodes.common import posture_message, POSTURE_QOS, run_node
@@ -42,12 +42,12 @@ from rclpy.utilities import remove_ros_args
 
 
 def parse_args(argv):
-    parser = argparse.ArgumentParser(prog='uwb_emulator',
-                                     description=__doc__.lstrip().splitlines()[0])
+    parser = Parser(prog='uwb_emulator',
+                    description=__doc__.lstrip().splitlines()[0])
     parser.add_argument('--protocol', choices=list(FORMATS), default='json')
     where = parser.add_mutually_exclusive_group(required=True)
     where.add_argument('--pty', action='store_true', help='serve on pseudo-terminal(s)')
-    where.add_argument('--tcp', metavar='HOST:PORT',
+    where.add_argument('--tcp', metavar='HOST:PORT', type=host_port,
                        help='serve as TCP bridge(s) (per-tag channels on PORT, PORT+1, ...)')
     parser.add_argument('--link', help='symlink to the (first) pty, e.g. /tmp/ttyUWB; '
                                        'further channels get .1, .2, ...')
@@ -55,25 +55,24 @@ def parse_args(argv):
                         help='write messages back to back without line ends, as the '
                              'Makerfabs ESP32 UWB tag writes its JSON')
     parser.add_argument('--config', help='pump description (default: the packaged pump.yaml)')
-    parser.add_argument('--rate', type=float, default=10.0, help='ranging cycles per second')
-    parser.add_argument('--sigma', type=float, default=0.05, help='range noise, metres')
-    parser.add_argument('--nlos', type=float, default=0.0,
+    parser.add_argument('--rate', type=number(0, 1000, low_open=True), default=10.0,
+                        help='ranging cycles per second')
+    parser.add_argument('--sigma', type=number(0, 100), default=0.05,
+                        help='range noise, metres')
+    parser.add_argument('--nlos', type=number(0, 1), default=0.0,
                         help='fraction of NLOS links (exponential excess, mean 2 m)')
-    parser.add_argument('--drop', type=float, default=0.0, help='link dropout probability')
-    parser.add_argument('--garbage', type=float, default=0.0,
+    parser.add_argument('--drop', type=number(0, 1), default=0.0,
+                        help='link dropout probability')
+    parser.add_argument('--garbage', type=number(0, 1), default=0.0,
                         help='probability that a line is corrupted or noise is sent')
     parser.add_argument('--truth', action='store_true',
                         help='publish the true posture on arm_posture/ground_truth')
-    parser.add_argument('--duration', type=float, default=None, help='stop after seconds')
-    parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--duration', type=number(0, 1e7, low_open=True), default=None,
+                        help='stop after seconds')
+    parser.add_argument('--seed', type=integer(0, 2 ** 63 - 1), default=0)
     args = parser.parse_args(argv)
-    if args.rate <= 0:
-        parser.error('--rate must be positive')
     if args.tcp:
-        host, _, port = args.tcp.rpartition(':')
-        if not host or not port.isdigit():
-            parser.error(f'--tcp needs HOST:PORT, got {args.tcp!r}')
-        args.host, args.port = host, int(port)
+        args.host, args.port = args.tcp
     return args
 
 

@@ -33,6 +33,7 @@ import sys
 import time
 
 from epp_ros import bags, contract
+from epp_ros.arguments import integer, number, Parser
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core import RANGE_METHODS
 from epp_ros.uwb.formats import FORMATS
@@ -43,42 +44,44 @@ CLOCK_HZ = 40.0         # /clock rate of `play --clock`, as ros2 bag play's defa
 
 
 def parse_args(argv):
-    parser = argparse.ArgumentParser(prog='epp_bag', description=__doc__.lstrip().splitlines()[0],
-                                     epilog=__doc__.lstrip().split('\n', 2)[2],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = Parser(prog='epp_bag', description=__doc__.lstrip().splitlines()[0],
+                    epilog=__doc__.lstrip().split('\n', 2)[2],
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
     commands = parser.add_subparsers(dest='command', required=True)
     synth = commands.add_parser('synth', help='write a simulated working cycle')
     synth.add_argument('out')
     synth.add_argument('--storage', choices=sorted(bags.STORAGES), default='mcap')
-    synth.add_argument('--duration', type=float, default=60.0)
-    synth.add_argument('--rate', type=float, default=10.0)
-    synth.add_argument('--sigma', type=float, default=0.1)
-    synth.add_argument('--nlos', type=float, default=0.0)
-    synth.add_argument('--drop', type=float, default=0.0)
-    synth.add_argument('--seed', type=int, default=0)
+    synth.add_argument('--duration', type=number(0, 86400, low_open=True), default=60.0)
+    synth.add_argument('--rate', type=number(0, 1000, low_open=True), default=10.0)
+    synth.add_argument('--sigma', type=number(0, 100), default=0.1)
+    synth.add_argument('--nlos', type=number(0, 1), default=0.0)
+    synth.add_argument('--drop', type=number(0, 1), default=0.0)
+    synth.add_argument('--seed', type=integer(0, 2 ** 63 - 1), default=0)
     synth.add_argument('--config')
     synth.add_argument('--raw', choices=list(FORMATS),
                        help='also write the device lines on /uwb/raw')
-    synth.add_argument('--start', type=float, metavar='S',
+    synth.add_argument('--start', type=number(0, 1e10, low_open=True), metavar='S',
                        help='time of the first message, seconds since the epoch (default: '
                             'now); e.g. 1000 for a bag that is plainly simulated time')
     record = commands.add_parser('record', help='record topics until Ctrl-C or --duration')
     record.add_argument('out')
     record.add_argument('--topics', nargs='+', default=DEFAULT_RECORD)
-    record.add_argument('--duration', type=float)
+    record.add_argument('--duration', type=number(0, 1e7, low_open=True))
     record.add_argument('--storage', choices=sorted(bags.STORAGES), default='mcap')
     play = commands.add_parser('play', help='publish a bag with its recorded timing')
     play.add_argument('bag')
-    play.add_argument('--rate', type=float, default=1.0, help='speed factor')
+    play.add_argument('--rate', type=number(0, 1000, low_open=True), default=1.0,
+                      help='speed factor')
     play.add_argument('--loop', action='store_true')
     play.add_argument('--fast', action='store_true',
                       help='as fast as the subscribers keep up (reliable, nothing lost)')
     play.add_argument('--topics', nargs='+')
-    play.add_argument('--clock', type=float, nargs='?', const=CLOCK_HZ, metavar='HZ',
+    play.add_argument('--clock', type=number(0, 10000, low_open=True), nargs='?',
+                      const=CLOCK_HZ, metavar='HZ',
                       help="also publish the bag's time on /clock (rosgraph_msgs/Clock), "
                            f'at HZ (default {CLOCK_HZ:g}) and with every message, for nodes '
                            'started with use_sim_time:=true')
-    play.add_argument('--subscribers', type=int, metavar='N',
+    play.add_argument('--subscribers', type=integer(1, 1000), metavar='N',
                       help='wait up to 10 s until every topic has N subscribers (without: '
                            'up to 2 s for one)')
     evaluate = commands.add_parser('eval', help='run an estimator offline over a bag')
@@ -91,10 +94,6 @@ def parse_args(argv):
     show = commands.add_parser('info', help='topics, counts, duration')
     show.add_argument('bag')
     args = parser.parse_args(argv)
-    if getattr(args, 'rate', 1.0) <= 0:
-        parser.error('--rate must be positive')
-    if getattr(args, 'clock', None) is not None and args.clock <= 0:
-        parser.error('--clock must be positive')
     return args
 
 

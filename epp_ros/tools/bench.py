@@ -43,6 +43,7 @@ import subprocess
 import sys
 import time
 
+from epp_ros.arguments import Parser
 from epp_ros.core import METHODS, PostureEstimator
 from epp_ros.core.bounds import crlb
 from epp_ros.core.chain import angles_from_joints
@@ -296,10 +297,10 @@ def markdown(report):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(prog='epp_bench',
-                                     description=__doc__.lstrip().splitlines()[0],
-                                     epilog=__doc__.lstrip().split('\n', 1)[1],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = Parser(prog='epp_bench',
+                    description=__doc__.lstrip().splitlines()[0],
+                    epilog=__doc__.lstrip().split('\n', 1)[1],
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('suites', nargs='*', metavar='suite',
                         help='xie3dim, tracking, latency, bags (default: these four), '
                              'paper, integrity, driver')

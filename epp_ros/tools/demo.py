@@ -22,7 +22,6 @@ a range frame to its posture, and the estimator's diagnostic level. Stops on Ctr
 ``--duration``, shuts every process down, prints a summary (``--json``: as the last stdout
 line) and can save a plot of the estimated and true boom (``--plot FILE.png``).
 """
-import argparse
 import json
 from pathlib import Path
 import signal
@@ -33,6 +32,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from epp_ros import contract
+from epp_ros.arguments import Parser
 from epp_ros.config import ConfigError, default_config_path, load_pump_config
 from epp_ros.core import RANGE_METHODS
 from epp_ros.core.metrics import frame_rmse, joint_errors, pooled_rmse
@@ -47,7 +47,7 @@ LEVEL_NAMES = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}
 
 
 def parse_args(argv):
-    parser = argparse.ArgumentParser(prog='epp_demo', description=__doc__.lstrip().splitlines()[0])
+    parser = Parser(prog='epp_demo', description=__doc__.lstrip().splitlines()[0])
     parser.add_argument('--method', choices=RANGE_METHODS, default='cepp')
     parser.add_argument('--duration', type=float, default=None,
                         help='seconds to run (default: until Ctrl-C)')

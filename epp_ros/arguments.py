@@ -1,0 +1,99 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Command-line numbers and addresses, checked where they are parsed.
+
+Every numeric option of the console scripts is finite and in its range, so that a typo
+gives argparse's one usage line and exit status 2, never a traceback or an all-NaN file.
+"""
+import argparse
+import math
+
+__all__ = ['Parser', 'number', 'integer', 'host_port']
+
+
+class Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are one line (``prog: error: ...``) and exit 2."""
+
+    def error(self, message):
+        """Print one line naming the problem and exit with status 2."""
+        self.exit(2, f'{self.prog}: error: {message} (see --help)\n')
+
+
+def number(low, high, low_open=False, high_open=False):
+    """
+    Return an argparse ``type`` for a finite float in ``[low, high]``.
+
+    Parameters
+    ----------
+    low, high : float
+        The range, inclusive unless ``low_open`` or ``high_open``.
+    low_open, high_open : bool
+        Exclude that end.
+
+    """
+    left, right = '(' if low_open else '[', ')' if high_open else ']'
+
+    def parse(text):
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'{text!r} is not a number') from None
+        inside = (math.isfinite(value) and (value > low if low_open else value >= low)
+                  and (value < high if high_open else value <= high))
+        if not inside:
+            raise argparse.ArgumentTypeError(
+                f'{text} is not in {left}{low:g}, {high:g}{right}')
+        return value
+    parse.__name__ = 'number'
+    return parse
+
+
+def integer(low, high):
+    """
+    Return an argparse ``type`` for an integer in ``[low, high]``.
+
+    Parameters
+    ----------
+    low, high : int
+        The range, inclusive.
+
+    """
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'{text!r} is not an integer') from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f'{text} is not in [{low}, {high}]')
+        return value
+    parse.__name__ = 'integer'
+    return parse
+
+
+def host_port(text):
+    """
+    Parse ``HOST:PORT`` with a port in 0-65535 (0: one the system picks; an argparse type).
+
+    Returns
+    -------
+    (str, int)
+        The host and the port.
+
+    """
+    host, _, port = text.rpartition(':')
+    if not host or not port.isdigit() or not 0 <= int(port) < 65536:
+        raise argparse.ArgumentTypeError(f'{text!r} is not HOST:PORT with a port 0-65535')
+    return host, int(port)
