@@ -190,7 +190,7 @@ def test_coincident_or_collinear_anchors_are_refused(positions, message, tmp_pat
     assert '\n' not in str(error.value)
 
 
-BOMB = '''/**:
+BOMB = """/**:
   ros__parameters:
     a: &a ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]
     b: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a, *a]
@@ -201,7 +201,7 @@ BOMB = '''/**:
     g: &g [*f, *f, *f, *f, *f, *f, *f, *f, *f, *f]
     h: &h [*g, *g, *g, *g, *g, *g, *g, *g, *g, *g]
     tag_names: [*h, *h, *h, *h, *h, *h, *h, *h, *h, *h]
-'''
+"""
 
 
 def test_a_yaml_alias_bomb_is_refused_at_once_with_one_short_line(tmp_path):
