@@ -154,3 +154,24 @@ def test_joints_are_held_above_lowest_joint():
     held = estimator.last_diagnostics['estimate']
     assert held[:, 2].min() > floor - 0.2
     np.testing.assert_allclose(model.section_lengths(held), model.arm_lengths)
+
+
+def test_a_search_over_budget_leaves_the_frame_unsolved_and_goes_on_next_frame():
+    """Garbage must not stall the node: a search stops at its budget and resumes."""
+    model = truck_pump()
+    joints = random_posture(model, np.random.default_rng(20))[2]
+    estimator = PostureEstimator(model, 'chain', search_budget=60, sigma=1e-3,
+                                 nlos_fraction=0.0)
+    statuses = []
+    for frame in range(12):
+        estimate = estimator.update(model.ranges(joints), stamp=0.1 * frame)
+        diagnostics = estimator.last_diagnostics
+        statuses.append(diagnostics['status'])
+        if diagnostics['valid']:
+            break
+    assert statuses[0] == 'solver_failed'
+    assert 'budget' in estimator.last_diagnostics.get('error', '') or statuses[-1] == 'ok'
+    assert statuses[-1] == 'ok' and len(statuses) > 1      # resumed, then found
+    np.testing.assert_allclose(estimate, joints, atol=1e-6)
+    with pytest.raises(ValueError, match='search_budget'):
+        PostureEstimator(model, 'chain', search_budget=0)

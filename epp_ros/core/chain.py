@@ -43,7 +43,7 @@ from .measurements import Residuals, SensorNoise, wrap_angle
 from .nlos import NlosMixture
 from .plane import fit_slew, to_plane
 
-__all__ = ['ChainMethod', 'angles_from_joints', 'canonical_angles']
+__all__ = ['ChainMethod', 'SearchExhausted', 'angles_from_joints', 'canonical_angles']
 
 
 def angles_from_joints(model, joints):
@@ -75,6 +75,10 @@ def canonical_angles(psi, pivot_offset=0.0):
     return wrap_angle(psi)
 
 
+class SearchExhausted(RuntimeError):
+    """A global search that reached its iteration budget: the frame is not solved."""
+
+
 class ChainMethod:
     """
     Levenberg–Marquardt over (slew, pitch_1..pitch_p) on everything measured.
@@ -103,6 +107,11 @@ class ChainMethod:
         Slews tried by the cold start.
     screen_iterations : int
         Iterations given to every cold start before only the best are fitted to the end.
+    search_budget : int
+        Iterations one global search may take (a cold start takes about 200, 300 at
+        most; a frame of garbage up to 600). A search that reaches it raises
+        :class:`SearchExhausted`, and the next frame's search continues where it stopped,
+        so that the time per frame stays bounded whatever arrives.
     lowest_joint : float
         No joint is below this height, metres (world z = 0 is the ground; the default
         leaves room for noise). Lower it for a boom that reaches below grade.
@@ -116,7 +125,8 @@ class ChainMethod:
 
     def __init__(self, model, sigma=0.1, eta=0.0, tag_sigma=None, pitch_sigma=np.radians(0.5),
                  slew_sigma=np.radians(0.5), nlos_fraction=0.1, nlos_gamma=1.0, tol=1e-10,
-                 max_iter=50, slew_starts=16, screen_iterations=4, lowest_joint=-0.5):
+                 max_iter=50, slew_starts=16, screen_iterations=4, lowest_joint=-0.5,
+                 search_budget=400):
         self.model = model
         self.eta = float(eta)
         self.noise = SensorNoise(float(sigma), float(sigma if tag_sigma is None else tag_sigma),
@@ -127,6 +137,11 @@ class ChainMethod:
         self.slew_starts = int(slew_starts)
         self.screen_iterations = int(screen_iterations)
         self.lowest_joint = float(lowest_joint)
+        if isinstance(search_budget, bool) or not isinstance(search_budget, (int, np.integer)) \
+                or search_budget < 1:
+            raise ValueError(f'search_budget: must be an integer >= 1, got {search_budget!r}')
+        self.search_budget = int(search_budget)
+        self._carry = ([], 0)           # an exhausted search: its best fits, starts screened
         self._link_loss = (None, None)      # (Residuals, its ranges' bound NLOS loss)
 
     def enough_information(self, measurements):
@@ -142,7 +157,8 @@ class ChainMethod:
         return bool(tip_seen) and measurements.count() >= self.model.n_sections + 1
 
     def reset(self):
-        """Do nothing: the chain keeps no state; its warm start is the prior it is given."""
+        """Forget an unfinished search (the warm start is the prior the chain is given)."""
+        self._carry = ([], 0)
 
     # -- the least-squares problem --------------------------------------------------------
     def _loss(self, scaled, residuals):
@@ -371,10 +387,17 @@ class ChainMethod:
         """
         iterations = 0
         screened = []
-        for start in self._cold_starts(measurements, guess, range_sigma):
+        starts = self._cold_starts(measurements, guess, range_sigma)
+        carried, resume = self._carry
+        # Go on where the last search stopped: its best fits, then the starts it had not tried.
+        order = carried + starts[resume:]
+        for done, start in enumerate(order):
+            if iterations >= self.search_budget:
+                self._give_up(screened, resume + max(done - len(carried), 0))
             psi, cost, used = self.fit(start, residuals, max_iter=self.screen_iterations)
             screened.append((cost, psi))
             iterations += used
+        self._carry = ([], 0)
         finished = []
         for _, start in sorted(screened, key=lambda t: t[0])[:finish]:
             psi, cost, used = self.fit(start, residuals)
@@ -386,6 +409,8 @@ class ChainMethod:
             improved = False
             for start in (self._folds(psi) + self._reversals(psi)
                           + self._tip_alternatives(psi, measurements, range_sigma)):
+                if iterations >= 2 * self.search_budget:    # a fit is in hand: keep it
+                    break
                 # Screened like the starts: only a move already fitting better is finished.
                 trial, trial_cost, used = self.fit(start, residuals,
                                                    max_iter=2 * self.screen_iterations)
@@ -398,6 +423,13 @@ class ChainMethod:
             if not improved:
                 break
         return psi, cost, iterations, tried
+
+    def _give_up(self, screened, resume, keep=3):
+        """Stop a search at its budget, keeping its best fits and where to go on from."""
+        best = [psi for _, psi in sorted(screened, key=lambda t: t[0])[:keep]]
+        self._carry = (best, resume)
+        raise SearchExhausted(f'global search stopped at its budget of {self.search_budget} '
+                              'iterations; the next frame goes on with it')
 
     def solve(self, measurements, prior, warm=False):
         """
@@ -436,7 +468,7 @@ class ChainMethod:
         psi = canonical_angles(psi, self.model.pivot_offset)
         joints = self.model.forward_kinematics(psi[0], psi[1:])
         info = {'iterations': total_iterations, 'converged': True, 'slew': float(psi[0]),
-                'pitches': psi[1:].copy(),
+                'pitches': psi[1:].copy(), 'searched': lost,
                 # the search's runners-up: the integrity checks ask if they fit as well
                 'alternatives': self.model.forward_kinematics(
                     np.array([o[0] for o in others]), np.array([o[1:] for o in others]))

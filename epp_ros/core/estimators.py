@@ -513,7 +513,9 @@ class PostureEstimator:
             return self._reject('solver_failed', diagnostics, measurements, start)
         joints, info = solved
         verdict = self._judge(solved, measurements, stamp)
-        if verdict.lost and self._warm is not None and self._due_for_search():
+        # A fresh solve, unless the method searched from scratch for this frame already.
+        if verdict.lost and self._warm is not None and not info.get('searched') \
+                and self._due_for_search():
             fresh = self._solve(measurements, warm=False)
             if not isinstance(fresh, str):
                 fresh_verdict = self._judge(fresh, measurements, stamp)
