@@ -21,6 +21,7 @@ Topics: ``/uwb/ranges`` (``sensor_msgs/JointState`` exactly as uwb_driver publis
 ``/arm_posture/ground_truth`` and ``/arm_posture`` (``geometry_msgs/PoseArray``), and
 optionally ``/uwb/raw`` (``std_msgs/String``, the devices' lines).
 """
+from dataclasses import dataclass, field
 from pathlib import Path
 import time
 
@@ -215,23 +216,35 @@ class _Bag:
             raise BagError(f'{self.path}: {topic} holds {wrong[0]}, expected {msgtype}')
         return found
 
-    def messages(self, topic, msgtype):
-        """(t_ns, message) of one topic, deserialized; BagError on any broken message."""
+    def messages(self, topic, msgtype, salvage=False):
+        """
+        Yield (t_ns, message) of one topic, deserialized.
+
+        Raises BagError on any broken message, unless ``salvage``: then broken messages
+        are skipped, and damaged storage ends the topic early.
+        """
         connections = self.connections(topic, msgtype)
         try:
             for connection, t_ns, raw in self.reader.messages(connections=connections):
-                yield t_ns, TYPESTORE.deserialize_cdr(raw, connection.msgtype)
+                try:
+                    message = TYPESTORE.deserialize_cdr(raw, connection.msgtype)
+                except Exception:  # noqa: BLE001 - corrupt CDR
+                    if salvage:
+                        continue
+                    raise
+                yield t_ns, message
         except BagError:
             raise
         except Exception as exc:  # noqa: BLE001 - truncated files, other definitions
-            raise BagError(f'{self.path}: cannot read {topic}: {exc}') from None
+            if not salvage:
+                raise BagError(f'{self.path}: cannot read {topic}: {exc}') from None
 
 
 def _stamp_ns(message):
     return message.header.stamp.sec * 10 ** 9 + message.header.stamp.nanosec
 
 
-def read_frames(path, config):
+def read_frames(path, config, salvage=False):
     """
     (stamp_ns, (p, m) ranges, (p, p) tag ranges) of every ``/uwb/ranges`` message.
 
@@ -239,7 +252,7 @@ def read_frames(path, config):
     """
     frames = []
     with _Bag(path) as bag:
-        for _, message in bag.messages(RANGES, TYPES[RANGES]):
+        for _, message in bag.messages(RANGES, TYPES[RANGES], salvage):
             try:
                 ranges, tag_ranges, _ = config.link_matrices(list(message.name),
                                                              message.position)
@@ -249,13 +262,13 @@ def read_frames(path, config):
     return frames
 
 
-def read_truth(path):
+def read_truth(path, salvage=False):
     """{stamp_ns: (p, 3) joints} from ``/arm_posture/ground_truth``, or {} without it."""
     with _Bag(path) as bag:
         if not any(c.topic == TRUTH for c in bag.reader.connections):
             return {}
         return {_stamp_ns(m): contract.joints_of(m)
-                for _, m in bag.messages(TRUTH, TYPES[TRUTH])}
+                for _, m in bag.messages(TRUTH, TYPES[TRUTH], salvage)}
 
 
 def info(path):
@@ -270,7 +283,7 @@ def info(path):
                            for c in reader.connections]}
 
 
-def evaluate(path, config, method='cepp', out=None, **options):
+def evaluate(path, config, method='cepp', out=None, salvage=False, **options):
     """
     Run an estimator over a bag's ``/uwb/ranges``; score it against the truth if any.
 
@@ -283,7 +296,12 @@ def evaluate(path, config, method='cepp', out=None, **options):
     method : str
         A name in :data:`epp_ros.core.METHODS`.
     out : path, optional
-        A copy of the bag with the estimated ``/arm_posture`` added.
+        A copy of the bag with the estimated ``/arm_posture`` added; must not exist.
+    salvage : bool
+        Evaluate what can be read of a damaged bag (``damage`` says what was skipped)
+        instead of refusing it.
+    **options
+        Passed to :class:`PostureEstimator`.
 
     Returns
     -------
@@ -295,8 +313,14 @@ def evaluate(path, config, method='cepp', out=None, **options):
         the per-frame series ``stamps_ns``, ``frame_rmse_m`` for plotting.
 
     """
-    frames = read_frames(path, config)
-    truth = read_truth(path)
+    if out is not None and Path(out).exists():
+        raise BagError(f'{out} exists already')
+    damage = check(path)
+    if not damage.intact and not salvage:
+        raise BagError(f'{path}: damaged: {damage.describe()} (--salvage uses what could '
+                       'be read)')
+    frames = read_frames(path, config, salvage=salvage)
+    truth = read_truth(path, salvage=salvage)
     model = config.model()
     estimator = PostureEstimator(model, method, **options)
     postures, rmses, squared, stamps, length_errors, elapsed = [], [], [], [], [], 0.0
@@ -331,7 +355,8 @@ def evaluate(path, config, method='cepp', out=None, **options):
             'joint_rmse_m': np.sqrt(np.mean(squared, axis=0)).tolist() if squared else [],
             'max_arm_length_error_m': max(length_errors, default=float('nan')),
             'ms_per_frame': 1e3 * elapsed / max(len(frames), 1),
-            'stamps_ns': stamps, 'frame_rmse_m': rmses}
+            'stamps_ns': stamps, 'frame_rmse_m': rmses,
+            'damage': None if damage.intact else damage.describe()}
 
 
 def _copy_with_postures(path, out, postures, config, model):
@@ -340,7 +365,7 @@ def _copy_with_postures(path, out, postures, config, model):
     estimated = [(POSTURE, TYPES[POSTURE], stamp, _serialize(
         _posture_message(stamp, config.frame_id, model.pivot_of(joints), joints)), None)
         for stamp, joints in postures]
-    write_raw(out, read_all(path) + estimated, storage)
+    write_raw(out, read_all(path, salvage=True)[0] + estimated, storage)
 
 
 def _storage_of(bag):
@@ -348,18 +373,125 @@ def _storage_of(bag):
     return 'sqlite3' if '.db3' in files else 'mcap'
 
 
-def read_all(path):
-    """Every message of a bag as (topic, msgtype, t_ns, raw bytes, qos or None)."""
+@dataclass
+class Damage:
+    """
+    What of a bag could not be read: its metadata's counts against what was.
+
+    Attributes
+    ----------
+    expected : dict
+        Messages per topic, as the bag's metadata counts them.
+    read : dict
+        Messages per topic read and decoded.
+    undecodable : dict
+        Messages per topic read but not decodable (corrupt CDR); skipped.
+    error : str or None
+        Why reading stopped early, if it did.
+
+    """
+
+    expected: dict
+    read: dict = field(default_factory=dict)
+    undecodable: dict = field(default_factory=dict)
+    error: str = None
+
+    @property
+    def intact(self):
+        """Whether every message the metadata counts was read and decoded."""
+        return self.error is None and all(self.read.get(topic, 0) == count
+                                          for topic, count in self.expected.items())
+
+    def describe(self):
+        """One line: what was read of what, and what was skipped and why."""
+        total = sum(self.expected.values())
+        topics = ', '.join(f'{topic} {self.read.get(topic, 0)} of {count}'
+                           for topic, count in self.expected.items())
+        line = f'read {sum(self.read.values())} of {total} messages ({topics})'
+        broken = sum(self.undecodable.values())
+        if broken:
+            line += f'; {broken} undecodable, skipped'
+        missing = total - sum(self.read.values()) - broken
+        if missing > 0:
+            line += f'; {missing} lost in damaged storage'
+        if self.error:
+            line += f'; reading stopped: {self.error}'
+        return line
+
+
+def read_all(path, salvage=False, topics=None):
+    """
+    Every intact message of a bag as (topic, msgtype, t_ns, raw bytes, qos or None).
+
+    Each message is decoded to be sure it is whole, and the counts compared with the
+    bag's metadata: rosbags reads past damaged storage without a word.
+
+    Parameters
+    ----------
+    path : path
+        The bag.
+    salvage : bool
+        Return what could be read of a damaged bag instead of refusing it.
+    topics : collection of str, optional
+        Only these topics (all by default).
+
+    Returns
+    -------
+    messages : list
+    damage : Damage
+
+    Raises
+    ------
+    BagError
+        On a damaged bag, saying what was read and skipped, unless ``salvage``.
+
+    """
     with _Bag(path) as bag:
+        connections = [c for c in bag.reader.connections
+                       if topics is None or c.topic in topics]
+        damage = Damage({c.topic: c.msgcount for c in connections})
         messages = []
         try:
-            for connection, t_ns, raw in bag.reader.messages():
+            for connection, t_ns, raw in bag.reader.messages(connections=connections):
+                if not _decodes(raw, connection.msgtype):
+                    _count(damage.undecodable, connection.topic)
+                    continue
+                _count(damage.read, connection.topic)
                 profiles = getattr(connection.ext, 'offered_qos_profiles', None)
                 messages.append((connection.topic, connection.msgtype, t_ns, bytes(raw),
                                  profiles[0] if profiles else None))
-        except Exception as exc:  # noqa: BLE001
-            raise BagError(f'{path}: cannot read: {exc}') from None
-        return messages
+        except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds on bad files
+            damage.error = str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__
+        if not damage.intact and not salvage:
+            raise BagError(f'{path}: damaged: {damage.describe()} (--salvage uses what could '
+                           'be read)')
+        return messages, damage
+
+
+def check(path):
+    """Return the :class:`Damage` of a bag (read and decode every message, keep none)."""
+    with _Bag(path) as bag:
+        damage = Damage({c.topic: c.msgcount for c in bag.reader.connections})
+        try:
+            for connection, _, raw in bag.reader.messages():
+                counts = damage.read if _decodes(raw, connection.msgtype) \
+                    else damage.undecodable
+                _count(counts, connection.topic)
+        except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds on bad files
+            damage.error = str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__
+        return damage
+
+
+def _decodes(raw, msgtype):
+    try:
+        TYPESTORE.deserialize_cdr(raw, msgtype)
+    except Exception:  # noqa: BLE001 - any decoding failure means a corrupt message
+        return False
+    return True
+
+
+def _count(counts, key):
+    counts[key] = counts.get(key, 0) + 1
 
 
 def write_raw(path, messages, storage='mcap'):

@@ -84,7 +84,7 @@ def test_missing_topic_and_other_message_types_are_refused(tmp_path):
     truth_only = tmp_path / 'truth_only'
     source = tmp_path / 'source'
     bags.synthesize(source, CONFIG, duration=2.0)
-    bags.write_raw(truth_only, [m for m in bags.read_all(source) if m[0] == bags.TRUTH])
+    bags.write_raw(truth_only, [m for m in bags.read_all(source)[0] if m[0] == bags.TRUTH])
     result = epp_bag('eval', truth_only)
     assert result.returncode == 2 and 'no /uwb/ranges topic' in result.stderr
     retyped = tmp_path / 'retyped'
@@ -146,3 +146,46 @@ def test_play_into_the_live_estimator_equals_eval(tmp_path, listener, processes)
             np.testing.assert_allclose([a.position.x, a.position.y, a.position.z],
                                        [b.position.x, b.position.y, b.position.z], atol=1e-9)
     assert to_seconds(listener.postures[-1].header.stamp) > 0
+
+
+def damaged_copy(source, target, where, data):
+    """Copy a bag and write ``data`` over its storage file at fraction ``where``."""
+    import shutil
+    shutil.copytree(source, target)
+    storage = next(path for path in target.iterdir() if path.suffix == '.mcap')
+    content = bytearray(storage.read_bytes())
+    at = int(len(content) * where)
+    content[at:at + len(data)] = data
+    storage.write_bytes(bytes(content))
+    return target
+
+
+@pytest.mark.parametrize('where, data', [
+    (0.5, np.random.default_rng(0).bytes(4096)), (0.3, bytes(64)), (0.9, bytes(64))],
+    ids=['random-4k-middle', 'zeros-30%', 'zeros-90%'])
+def test_a_damaged_bag_is_refused_unless_salvaged(where, data, tmp_path):
+    clean = tmp_path / 'clean'
+    bags.synthesize(clean, CONFIG, duration=60.0, seed=4)
+    damaged = damaged_copy(clean, tmp_path / 'damaged', where, data)
+    damage = bags.check(damaged)
+    assert not damage.intact and bags.check(clean).intact
+    assert damage.expected == {bags.RANGES: 600, bags.TRUTH: 600}
+    assert sum(damage.read.values()) < 1200
+    for command in (['eval', str(damaged)], ['play', str(damaged), '--fast']):
+        result = epp_bag(*command)
+        lines = [line for line in result.stderr.splitlines() if line.strip()]
+        assert result.returncode == 2 and len(lines) == 1, result.stderr
+        assert 'damaged: read' in lines[0] and 'of 1200 messages' in lines[0]
+    salvaged = epp_bag('eval', str(damaged), '--salvage', '--json')
+    assert salvaged.returncode == 0, salvaged.stderr
+    assert 'salvaged' in salvaged.stderr
+    result = json.loads(salvaged.stdout.splitlines()[-1])
+    assert result['frames'] == damage.read.get(bags.RANGES, 0) < 600
+    assert result['damage'] == damage.describe()
+
+
+def test_eval_refuses_an_existing_output_before_it_starts(tmp_path):
+    """The output is checked first: before the bag is even opened, let alone evaluated."""
+    (tmp_path / 'taken').mkdir()
+    with pytest.raises(bags.BagError, match='taken exists already'):
+        bags.evaluate(tmp_path / 'no_such_bag', CONFIG, 'chain', out=tmp_path / 'taken')

@@ -76,6 +76,8 @@ def parse_args(argv):
     play.add_argument('--fast', action='store_true',
                       help='as fast as the subscribers keep up (reliable, nothing lost)')
     play.add_argument('--topics', nargs='+')
+    play.add_argument('--salvage', action='store_true',
+                      help='play what can be read of a damaged bag (default: refuse it)')
     play.add_argument('--clock', type=number(0, 10000, low_open=True), nargs='?',
                       const=CLOCK_HZ, metavar='HZ',
                       help="also publish the bag's time on /clock (rosgraph_msgs/Clock), "
@@ -91,6 +93,8 @@ def parse_args(argv):
     evaluate.add_argument('--out', help='write a copy with /arm_posture added')
     evaluate.add_argument('--plot', help='PNG of the error over time')
     evaluate.add_argument('--json', action='store_true')
+    evaluate.add_argument('--salvage', action='store_true',
+                          help='evaluate what can be read of a damaged bag (default: refuse)')
     show = commands.add_parser('info', help='topics, counts, duration')
     show.add_argument('bag')
     args = parser.parse_args(argv)
@@ -116,7 +120,9 @@ def run_info(args):
 
 def run_eval(args):
     config = load_pump_config(args.config)
-    result = bags.evaluate(args.bag, config, args.method, out=args.out)
+    result = bags.evaluate(args.bag, config, args.method, out=args.out, salvage=args.salvage)
+    if result['damage']:
+        print(f'epp_bag: salvaged {args.bag}: {result["damage"]}', file=sys.stderr)
     joints = ' '.join(f'{e:.3f}' for e in result['joint_rmse_m']) or '-'
     rejected = ', '.join(f'{count} {reason}' for reason, count
                          in sorted(result['rejected'].items())) or 'none'
@@ -165,9 +171,9 @@ def _rclpy_qos(profile, fast):
 
 def run_play(args):
     import rclpy
-    messages = bags.read_all(args.bag)
-    if args.topics:
-        messages = [m for m in messages if m[0] in args.topics]
+    messages, damage = bags.read_all(args.bag, salvage=args.salvage, topics=args.topics)
+    if not damage.intact:
+        print(f'epp_bag: salvaged {args.bag}: {damage.describe()}', file=sys.stderr)
     if not messages:
         raise bags.BagError(f'{args.bag}: nothing to play')
     rclpy.init()
