@@ -22,6 +22,7 @@ it is finite and >= 0; no plausibility limits are applied here. Device ids are r
 the firmware printed them, stripped and upper-cased; they are compared as numbers later
 (:func:`device_number`).
 """
+from collections import Counter
 from dataclasses import dataclass, field
 import math
 import re
@@ -184,6 +185,30 @@ def junk_errors(text, start):
 def result(records, errors):
     """Return a ParseResult, or None when no record survived."""
     return ParseResult(tuple(records), int(errors)) if records else None
+
+
+def once_per_anchor(pieces):
+    """
+    Return the records of (anchor, record) pieces, and how many pieces are errors.
+
+    A broken piece (record None) is an error, and so is every piece of an anchor named
+    more than once in a line (a truncated group followed by a repeat): which is right
+    cannot be told.
+
+    Parameters
+    ----------
+    pieces : list of (str or None, RangeRecord or None)
+        Each piece's anchor id and record.
+
+    """
+    named = Counter(anchor for anchor, _ in pieces if anchor is not None)
+    records, errors = [], 0
+    for anchor, record in pieces:
+        if record is None or named[anchor] > 1:
+            errors += 1
+        else:
+            records.append(record)
+    return records, errors
 
 
 def decimal(text):

@@ -30,13 +30,12 @@ ambiguous: its groups are all skipped, each one an error. A shell prompt (``dwm>
 the line is not an error; other text before ``DIST`` is one. Position-only lines (``lep``,
 ``POS,...``) are recognised and counted as positions.
 """
-from collections import Counter
 import math
 import re
 
 from epp_ros.uwb.formats.base import (checked_id, checked_range, decimal, device_number, HEX_ID,
-                                      junk_errors, line_text, LineFormat, metres, RangeRecord,
-                                      result, without_prompt)
+                                      junk_errors, line_text, LineFormat, metres,
+                                      once_per_anchor, RangeRecord, result, without_prompt)
 from epp_ros.uwb.formats.dwm1001 import position_line
 
 __all__ = ['parse_lec', 'format_lec', 'FORMAT']
@@ -115,15 +114,8 @@ def parse_lec(line):
     errors += bool(head)
     errors += declared is not None and declared != len(groups)
     errors += sum(not _lec_position_is_valid(position) for position in positions)
-    parsed = [_lec_group(group) for group in groups]
-    named = Counter(anchor for anchor, _ in parsed if anchor is not None)
-    records = []
-    for anchor, record in parsed:
-        if record is None or named[anchor] > 1:
-            errors += 1
-        else:
-            records.append(record)
-    return result(records, errors)
+    records, broken = once_per_anchor([_lec_group(group) for group in groups])
+    return result(records, errors + broken)
 
 
 def _xyz(values, what):

@@ -29,12 +29,11 @@ named by more than one group is ambiguous: its groups are all skipped, each an e
 with no group but a position (``le_us=... est[...]``, ``lep``'s ``POS,...``) is recognised
 and counted as a position.
 """
-from collections import Counter
 import re
 
 from epp_ros.uwb.formats.base import (checked_range, decimal, device_number, junk_errors,
-                                      line_text, LineFormat, metres, RangeRecord, result,
-                                      without_prompt)
+                                      line_text, LineFormat, metres, once_per_anchor,
+                                      RangeRecord, result, without_prompt)
 from epp_ros.uwb.formats.dwm1001 import position_line
 from epp_ros.uwb.formats.lec import anchor_xyz
 
@@ -92,14 +91,8 @@ def parse_les(line):
     if text is None:
         return None
     groups, errors = _pieces(without_prompt(text))
-    named = Counter(anchor for anchor, _ in groups if anchor is not None)
-    records = []
-    for anchor, record in groups:
-        if record is None or named[anchor] > 1:
-            errors += 1
-        else:
-            records.append(record)
-    return result(records, errors)
+    records, broken = once_per_anchor(groups)
+    return result(records, errors + broken)
 
 
 def format_les(ranges, anchors_xyz=None, le_us=0):
