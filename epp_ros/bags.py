@@ -21,6 +21,8 @@ Topics: ``/uwb/ranges`` (``sensor_msgs/JointState`` exactly as uwb_driver publis
 ``/arm_posture/ground_truth`` and ``/arm_posture`` (``geometry_msgs/PoseArray``), and
 optionally ``/uwb/raw`` (``std_msgs/String``, the devices' lines).
 """
+from array import array
+import contextlib
 from dataclasses import dataclass, field
 from pathlib import Path
 import time
@@ -319,53 +321,130 @@ def evaluate(path, config, method='cepp', out=None, salvage=False, **options):
     if not damage.intact and not salvage:
         raise BagError(f'{path}: damaged: {damage.describe()} (--salvage uses what could '
                        'be read)')
-    frames = read_frames(path, config, salvage=salvage)
-    truth = read_truth(path, salvage=salvage)
     model = config.model()
-    estimator = PostureEstimator(model, method, **options)
-    postures, rmses, squared, stamps, length_errors, elapsed = [], [], [], [], [], 0.0
-    rejected, ignored = {}, {}
-    policy = FramePolicy()                  # the node's stamp rules
-    for stamp, ranges, tag_ranges in frames:
-        decision = policy.admit(stamp * 1e-9)
-        if decision not in (ADMIT, CLOCK_JUMP):
-            ignored[decision] = ignored.get(decision, 0) + 1
-            continue
-        if decision == CLOCK_JUMP:
-            estimator.reset()
-        start = time.perf_counter()
-        joints = estimator.update(ranges, tag_ranges=tag_ranges, stamp=stamp * 1e-9)
-        elapsed += time.perf_counter() - start
-        diagnostics = estimator.last_diagnostics
-        if not diagnostics['valid']:        # the node's publishing policy: the estimator's
-            rejected[diagnostics['status']] = rejected.get(diagnostics['status'], 0) + 1
-            continue
-        postures.append((stamp, joints))
-        length_errors.append(float(np.max(diagnostics['arm_length_error'])))
-        if stamp in truth:
-            rmses.append(float(frame_rmse(joints, truth[stamp])))
-            squared.append(joint_errors(joints, truth[stamp]) ** 2)
-            stamps.append(stamp)
-    if out is not None:
-        _copy_with_postures(path, out, postures, config, model)
-    return {'frames': len(frames), 'solved': len(postures), 'method': method,
-            'rejected': rejected, 'ignored': ignored,
-            'published_stamps_ns': [stamp for stamp, _ in postures],
-            'rmse_m': pooled_rmse(rmses),
-            'joint_rmse_m': np.sqrt(np.mean(squared, axis=0)).tolist() if squared else [],
-            'max_arm_length_error_m': max(length_errors, default=float('nan')),
-            'ms_per_frame': 1e3 * elapsed / max(len(frames), 1),
-            'stamps_ns': stamps, 'frame_rmse_m': rmses,
-            'damage': None if damage.intact else damage.describe()}
-
-
-def _copy_with_postures(path, out, postures, config, model):
+    run = _Evaluation(model, PostureEstimator(model, method, **options), config)
     with _Bag(path) as bag:
-        storage = _storage_of(bag)
-    estimated = [(POSTURE, TYPES[POSTURE], stamp, _serialize(
-        _posture_message(stamp, config.frame_id, model.pivot_of(joints), joints)), None)
-        for stamp, joints in postures]
-    write_raw(out, read_all(path, salvage=True)[0] + estimated, storage)
+        bag.connections(RANGES, TYPES[RANGES])            # there, and of the right type
+        if any(c.topic == TRUTH for c in bag.reader.connections):
+            bag.connections(TRUTH, TYPES[TRUTH])
+        writer = _BagWriter(out, _storage_of(bag)) if out is not None else None
+        with writer or contextlib.nullcontext():
+            for connection, t_ns, raw, message in _decoded(bag, salvage):
+                if writer is not None:
+                    writer.write(connection.topic, t_ns, bytes(raw), connection.msgtype,
+                                 _offered_qos(connection))
+                if connection.topic == RANGES:
+                    posture = run.frame(message)
+                    if posture is not None and writer is not None:
+                        writer.write(POSTURE, posture[0], _serialize(posture[1]))
+                elif connection.topic == TRUTH:
+                    run.truth(message)
+    return dict(run.report(), method=method,
+                damage=None if damage.intact else damage.describe())
+
+
+class _Evaluation:
+    """
+    One pass of an estimator over a bag's frames, scored as they come: memory stays flat.
+
+    Frames and truths are matched by stamp within ``window_ns`` of the newest (a recorder
+    may store either first); per-frame series are kept as 8-byte arrays.
+    """
+
+    def __init__(self, model, estimator, config, window_ns=10 ** 10):
+        self.model, self.estimator, self.config = model, estimator, config
+        self.window_ns = window_ns
+        self.policy = FramePolicy()                 # the node's stamp rules
+        self.pending = {'truth': {}, 'estimate': {}}
+        self.frames = self.solved = 0
+        self.rejected, self.ignored = {}, {}
+        self.published = array('q')
+        self.scored_stamps, self.scored_rmse = array('q'), array('d')
+        self.squared = np.zeros(model.n_sections)
+        self.max_length_error = float('nan')
+        self.elapsed = 0.0
+
+    def frame(self, message):
+        """Solve one ``/uwb/ranges`` message; return (stamp_ns, PoseArray) if published."""
+        self.frames += 1
+        stamp = _stamp_ns(message)
+        try:
+            ranges, tag_ranges, _ = self.config.link_matrices(list(message.name),
+                                                              message.position)
+        except ValueError as exc:
+            raise BagError(f'a /uwb/ranges message is malformed: {exc}') from None
+        decision = self.policy.admit(stamp * 1e-9)
+        if decision not in (ADMIT, CLOCK_JUMP):
+            _count(self.ignored, decision)
+            return None
+        if decision == CLOCK_JUMP:
+            self.estimator.reset()
+        start = time.perf_counter()
+        joints = self.estimator.update(ranges, tag_ranges=tag_ranges, stamp=stamp * 1e-9)
+        self.elapsed += time.perf_counter() - start
+        diagnostics = self.estimator.last_diagnostics
+        if not diagnostics['valid']:        # the node's publishing policy: the estimator's
+            _count(self.rejected, diagnostics['status'])
+            return None
+        self.solved += 1
+        self.published.append(stamp)
+        error = float(np.max(diagnostics['arm_length_error']))
+        self.max_length_error = np.fmax(self.max_length_error, error)
+        self._match('estimate', stamp, joints)
+        return stamp, _posture_message(stamp, self.config.frame_id,
+                                       self.model.pivot_of(joints), joints)
+
+    def truth(self, message):
+        """Take one ``/arm_posture/ground_truth`` message."""
+        self._match('truth', _stamp_ns(message), contract.joints_of(message))
+
+    def _match(self, kind, stamp, joints):
+        other = 'truth' if kind == 'estimate' else 'estimate'
+        partner = self.pending[other].pop(stamp, None)
+        if partner is None:
+            self.pending[kind][stamp] = joints
+            self._forget_before(stamp - self.window_ns)
+            return
+        estimate, truth = (joints, partner) if kind == 'estimate' else (partner, joints)
+        self.scored_stamps.append(stamp)
+        self.scored_rmse.append(float(frame_rmse(estimate, truth)))
+        self.squared += joint_errors(estimate, truth) ** 2
+
+    def _forget_before(self, oldest):
+        for waiting in self.pending.values():
+            for stamp in [s for s in waiting if s < oldest]:
+                del waiting[stamp]
+
+    def report(self):
+        """Return the evaluation as :func:`evaluate` does."""
+        scored = len(self.scored_rmse)
+        return {'frames': self.frames, 'solved': self.solved, 'rejected': self.rejected,
+                'ignored': self.ignored, 'published_stamps_ns': list(self.published),
+                'rmse_m': pooled_rmse(np.asarray(self.scored_rmse)),
+                'joint_rmse_m': np.sqrt(self.squared / scored).tolist() if scored else [],
+                'max_arm_length_error_m': float(self.max_length_error),
+                'ms_per_frame': 1e3 * self.elapsed / max(self.frames, 1),
+                'stamps_ns': list(self.scored_stamps),
+                'frame_rmse_m': list(self.scored_rmse)}
+
+
+def _decoded(bag, salvage):
+    """Yield (connection, t_ns, raw, message) of every decodable message, in time order."""
+    try:
+        for connection, t_ns, raw in bag.reader.messages():
+            try:
+                message = TYPESTORE.deserialize_cdr(raw, connection.msgtype)
+            except Exception:  # noqa: BLE001 - corrupt CDR: skipped (checked beforehand)
+                continue
+            yield connection, t_ns, raw, message
+    except Exception as exc:  # noqa: BLE001 - damaged storage (checked beforehand)
+        if not salvage:
+            raise BagError(f'{bag.path}: cannot read: {exc}') from None
+
+
+def _offered_qos(connection):
+    profiles = getattr(connection.ext, 'offered_qos_profiles', None)
+    return profiles[0] if profiles else None
 
 
 def _storage_of(bag):
