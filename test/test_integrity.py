@@ -229,3 +229,18 @@ def test_reconfigure_keeps_the_warm_start_and_refuses_bad_settings():
     estimator.update(MODEL.ranges(joints), stamp=0.1)
     diagnostics = estimator.last_diagnostics
     assert not diagnostics['cold_start'] and diagnostics['level'] == 1     # WARN now
+
+
+def test_the_residual_thresholds_grade_the_line_of_sight_residuals():
+    joints = MODEL.forward_kinematics(0.3, np.radians([50.0, 20.0, 0.0, -20.0, -40.0]))
+    ranges = RangeNoise(sigma=0.1).apply(MODEL.ranges(joints), np.random.default_rng(22))[0]
+    levels = {}
+    for warn, error in ((0.5, 2.0), (0.01, 2.0), (0.01, 0.02)):
+        estimator = PostureEstimator(MODEL, 'chain', thresholds=Thresholds(
+            residual_warn=warn, residual_error=error))
+        estimator.update(ranges)
+        diagnostics = estimator.last_diagnostics
+        assert 0.03 < diagnostics['los_residual_rms'] < 0.3          # about sigma
+        levels[(warn, error)] = (diagnostics['level'], diagnostics['status'])
+    assert levels == {(0.5, 2.0): (0, 'ok'), (0.01, 2.0): (1, 'ok'),
+                      (0.01, 0.02): (2, 'inconsistent')}

@@ -22,12 +22,14 @@ judged here on what its frame can show, so that the node and ``epp_bag eval`` ag
 - consistency: the range residuals must be explained by the noise the estimator was told
   (Gaussian errors, and an always-positive excess on a fraction of blocked links). Links
   more likely blocked than not are set aside; the rest must pass a chi-square test, overall
-  and tag by tag, and the number set aside a binomial test;
+  and tag by tag (and their RMS the ``residual_*`` thresholds); how many were set aside a
+  binomial test, and how long they are a gamma test;
 - observability: the Cramér–Rao bound at the estimate, from the links kept, must be finite
-  and small, and no joint may fold to another position that fits its ranges about as well,
+  and small, and no joint may have another position that fits about as well (a fold, the
+  tip at another pitch, the whole boom mirrored, another fit the method's search found),
   unless the boom could not have got there since the last accepted posture;
-- plausibility: no joint below ``lowest_joint``, section lengths as configured, no jump
-  faster than the boom moves.
+- plausibility: no joint below ``lowest_joint``, section lengths and the boom's vertical
+  plane as configured, no jump faster than the boom moves.
 
 Levels follow ``diagnostic_msgs``: a frame at ERROR is never published.
 """
@@ -345,9 +347,12 @@ class Integrity:
         if bad_tags.size:
             failures.append('ranges of joint(s) ' + ', '.join(str(k + 1) for k in bad_tags)
                             + ' not explained by the noise')
+        los_metres = (links * sigma)[kept]
         values = {'chi_square': statistic, 'chi_square_limit': limit, 'links': n_links,
                   'nlos_links': blocked, 'nlos_tag_links': tag_blocked,
-                  'tag_chi_square': tag_statistic}
+                  'tag_chi_square': tag_statistic,
+                  'los_residual_rms': float(np.sqrt(np.mean(los_metres ** 2)))
+                  if los_metres.size else 0.0}
         return failures, values, (kept, tag_kept)
 
     def bound(self, joints, measurements, kept, angles):
@@ -558,11 +563,16 @@ class Integrity:
         values.update(found)
         if failures:
             checks.append((ERROR, 'inconsistent', '; '.join(failures)))
+        t = self.thresholds
+        rms = values['los_residual_rms']
+        if rms > t.residual_error:
+            checks.append((ERROR, 'inconsistent', f'line-of-sight range residual {rms:.2f} m'))
+        elif rms > t.residual_warn:
+            checks.append((WARN, 'ok', f'line-of-sight range residual {rms:.2f} m'))
         joint_std = (self.bound(joints, measurements, kept, angles).joint_std if chain
                      else self.point_bound(joints, measurements, kept))
         rmse = float(np.sqrt(np.mean(joint_std ** 2)))
         values.update(predicted_rmse=rmse, joint_std=joint_std)
-        t = self.thresholds
         if not math.isfinite(rmse) or rmse > t.predicted_rmse_error:
             checks.append((ERROR, 'unobservable', f'predicted RMSE {rmse:.2f} m'))
         elif rmse > t.predicted_rmse_warn:
