@@ -19,6 +19,7 @@ One schema, validated in one place: nodes pass their ROS parameter values to
 :func:`pump_config_from_parameters`, plain tools read the YAML with :func:`load_pump_config`.
 A bad description raises :class:`ConfigError` with one line naming the field.
 """
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 import re
@@ -217,7 +218,7 @@ def _names(values, field):
     if any(not re.fullmatch(r'[A-Za-z0-9_]+', n) for n in names):
         raise ConfigError(f'{field}: names may hold letters, digits and _ only, got '
                           f'{_short(list(names))}')
-    duplicates = sorted({n for n in names if names.count(n) > 1})
+    duplicates = sorted(n for n, times in Counter(names).items() if times > 1)
     if duplicates:
         raise ConfigError(f'{field}: duplicate names {_short(duplicates)}')
     return names
@@ -232,7 +233,8 @@ def _device_ids(values, field, count):
     if bad:
         raise ConfigError(f'{field}: device ids must be 1-16 hexadecimal digits, got '
                           f'{_short(bad)}')
-    duplicates = sorted({i for i, n in zip(ids, numbers) if numbers.count(n) > 1})
+    repeated = {n for n, times in Counter(numbers).items() if times > 1}
+    duplicates = sorted({i for i, n in zip(ids, numbers) if n in repeated})
     if duplicates:
         raise ConfigError(f'{field}: duplicate device ids {_short(duplicates)} (ids compare as '
                           'numbers: 0B82 = B82)')
@@ -242,7 +244,7 @@ def _device_ids(values, field, count):
 def _numbers(values, field):
     try:
         return tuple(float(v) for v in values)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ConfigError(f'{field}: must be a list of numbers, got {_short(values)}') from None
 
 
@@ -268,6 +270,9 @@ def pump_config_from_parameters(values):
     if unknown:
         raise ConfigError(f'unknown pump parameter(s) {unknown}')
     get = {name: values.get(name, default) for name, (default, _) in PUMP_PARAMETERS.items()}
+    for name, (default, _) in PUMP_PARAMETERS.items():
+        if isinstance(default, list) and not isinstance(get[name], (list, tuple)):
+            raise ConfigError(f'{name}: must be a list, got {_short(get[name])}')
     frame_id = str(get['frame_id']).strip()
     if not frame_id:
         raise ConfigError('frame_id: must not be empty')
@@ -291,13 +296,13 @@ def pump_config_from_parameters(values):
     base = _numbers(get['base'], 'base')
     try:
         pivot_offset = float(get['pivot_offset'])
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         shown = _short(get['pivot_offset'])
         raise ConfigError(f'pivot_offset: must be a number, got {shown}') from None
     try:
         BoomModel(arm_lengths, base, positions, pivot_offset)
     except ValueError as exc:
-        text = str(exc)
+        text = _short(str(exc), 300)
         raise ConfigError(f'anchor_positions: {text}' if text.startswith('anchors ') else text) \
             from None
     sources = _sources(get['source_ports'], get['source_protocols'], get['source_tags'],

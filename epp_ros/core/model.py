@@ -39,7 +39,14 @@ def _as_finite_array(value, field, ndim):
         raise ValueError(f'{field} must be a {ndim}-D array, got shape {array.shape}: {value!r}')
     if not np.all(np.isfinite(array)):
         raise ValueError(f'{field} must be finite, got {value!r}')
+    if np.any(np.abs(array) > MAX_METRES):
+        raise ValueError(f'{field} must be within {MAX_METRES:g} m, got {value!r}')
     return array
+
+
+#: Metres: no pump is larger; a bigger number is a unit or typing mistake (and would
+#: overflow the geometry's squares).
+MAX_METRES = 1e6
 
 
 #: Metres: anchors closer than this to each other, or all this close to one line, give the

@@ -243,6 +243,7 @@ def _play_once(messages, publishers, args, clock):
     def wall_to_bag(wall):
         return first + int((wall - start) * args.rate * 1e9)
 
+    sent = 0
     for topic, _, t_ns, raw, _ in messages:
         if not args.fast:
             due = start + (t_ns - first) / 1e9 / args.rate
@@ -253,6 +254,23 @@ def _play_once(messages, publishers, args, clock):
         if clock is not None:       # the clock reaches a message's time before it arrives
             clock.publish(t_ns)
         publishers[topic].publish(raw)
+        sent += 1
+        if args.fast and sent % FAST_BATCH == 0:
+            _wait_for_acks(publishers)
+    _wait_for_acks(publishers)
+
+
+#: Messages published as fast as possible between waits for every subscriber's ack: a
+#: writer whose history filled up would give up on a sample after its blocking time, and
+#: one that exits with samples unacknowledged loses them.
+FAST_BATCH = 1000
+
+
+def _wait_for_acks(publishers, timeout=60.0):
+    """Wait until every subscriber has acknowledged what was published (or ``timeout``)."""
+    from rclpy.duration import Duration
+    for publisher in publishers.values():
+        publisher.wait_for_all_acked(Duration(seconds=timeout))
 
 
 def run_record(args):

@@ -33,6 +33,13 @@ Suites:
             frames, absurd ranges and degenerate anchor geometries (--seconds each): frames
             reported valid while wrong, time to recover, good frames rejected. Not default.
   driver    The UWB driver's read throughput over TCP and a pty (lines/s, CPU). Not default.
+  soak      --frames frames (default 1,000,000) through parser, assembler and estimator
+            in-process, --live-frames (100,000) through the live node with epp_bag play
+            --fast: frames lost, frames/s, RSS at start, after warm-up and at the end (with
+            --json the last line's object has frames, frames_lost, rss_start_mb,
+            rss_end_mb). Method: the first of --methods, else chain. Not default.
+  fuzz      --inputs generated inputs (default 100,000) per line protocol and per pump
+            configuration field; counts every exception that escapes. Not default.
 Every table ends with the commit it was measured on. ``--option KEY=VALUE`` passes an
 option to the estimators (e.g. ``anchor_weight=inf``, ``predict_slew=false``).
 """
@@ -43,7 +50,7 @@ import subprocess
 import sys
 import time
 
-from epp_ros.arguments import Parser
+from epp_ros.arguments import integer, Parser
 from epp_ros.core import METHODS, PostureEstimator
 from epp_ros.core.bounds import crlb
 from epp_ros.core.chain import angles_from_joints
@@ -245,6 +252,9 @@ def markdown(report):
     if report['suite'] == 'integrity':
         from epp_ros.tools import integrity_bench
         return integrity_bench.markdown(report)
+    if report['suite'] in ('soak', 'fuzz'):
+        from epp_ros.tools import fuzz_bench, soak_bench
+        return (soak_bench if report['suite'] == 'soak' else fuzz_bench).markdown(report)
     if report['suite'] == 'driver':
         from epp_ros.tools.driver_bench import format_rows
         return '\n'.join(['### UWB driver: lines read per second over TCP and a pty', '',
@@ -319,9 +329,15 @@ def main(argv=None):
                         help='paper: Monte-Carlo runs per point (default 3000, as the paper)')
     parser.add_argument('--out', type=Path, default=Path('epp_bench_paper'),
                         help='paper: folder for paper.md, paper.json and the plots')
+    parser.add_argument('--frames', type=integer(2, 10 ** 9), default=1_000_000,
+                        help='soak: frames in-process (default 1,000,000)')
+    parser.add_argument('--live-frames', type=integer(0, 10 ** 7), default=100_000,
+                        help='soak: frames through the live node (default 100,000; 0: none)')
+    parser.add_argument('--inputs', type=integer(1, 10 ** 9), default=100_000,
+                        help='fuzz: inputs per protocol and per configuration field')
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     default = ['xie3dim', 'tracking', 'latency', 'bags']
-    known = default + ['paper', 'integrity', 'driver']
+    known = default + ['paper', 'integrity', 'driver', 'soak', 'fuzz']
     suites = args.suites or default
     unknown = sorted(set(suites) - set(known))
     if unknown:
@@ -356,13 +372,24 @@ def main(argv=None):
         elif suite == 'driver':
             from epp_ros.tools.driver_bench import run_driver_bench
             reports.append({'suite': 'driver', 'rows': run_driver_bench()})
+        elif suite == 'soak':
+            from epp_ros.tools import soak_bench
+            reports.append(soak_bench.run(args.frames, args.live_frames,
+                                          (args.methods or ['chain'])[0], args.seed,
+                                          progress=lambda text: print(text, flush=True)))
+        elif suite == 'fuzz':
+            from epp_ros.tools import fuzz_bench
+            reports.append(fuzz_bench.run(args.inputs, args.seed,
+                                          progress=lambda text: print(text, flush=True)))
         else:
             reports.append(bags_suite(methods, args.seed))
         print(markdown(reports[-1]) + '\n', flush=True)
     print(f'commit {commit()}, Python {sys.version.split()[0]}, numpy {np.__version__}'
           + (f', options {options}' if options else ''))
-    if args.json:
-        print(json.dumps({'commit': commit(), 'reports': reports}))
+    if args.json:       # the soak's headline figures at the top level of the last line
+        summaries = [r['summary'] for r in reports if r['suite'] == 'soak']
+        print(json.dumps({'commit': commit(), 'reports': reports,
+                          **(summaries[-1] if summaries else {})}))
     return 0
 
 

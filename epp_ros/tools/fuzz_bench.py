@@ -45,8 +45,8 @@ import yaml
 __all__ = ['fuzz_protocol', 'fuzz_field', 'protocol_seeds', 'run', 'markdown',
            'LINE_MUTATIONS', 'VALUE_MUTATIONS']
 
-#: Escapes kept per row (all are counted).
-KEEP_ESCAPES = 5
+#: Distinct escapes (exception type and where it was raised) kept per row; all are counted.
+KEEP_ESCAPES = 10
 _EXTREME_NUMBERS = ('nan', 'NaN', 'inf', '-inf', 'Infinity', '-1', '-0', '0', '1e309',
                     '-1e309', '1e-400', '9' * 400, '0x10', '1_000', '١٢', '1.2.3', '.', '-',
                     'e5', '', ' ', '0' * 70, 'ffffffffffffffffff', '18446744073709551616')
@@ -188,11 +188,18 @@ LINE_MUTATIONS = {'random bytes': _random_bytes, 'random latin-1': _random_latin
                   'repeat': _repeat}
 
 
-def _record_escape(escapes, kind, value):
-    """Keep the first few escapes with their input and traceback."""
+def _record_escape(escapes, kind, value, error):
+    """Count an escape under its type and place; keep the first input and traceback of each."""
+    frame = traceback.extract_tb(error.__traceback__)[-1]
+    where = f'{type(error).__name__} at {frame.filename.rsplit("/", 2)[-1]}:{frame.lineno}'
+    for escape in escapes:
+        if escape['where'] == where:
+            escape['count'] += 1
+            return
     if len(escapes) < KEEP_ESCAPES:
-        escapes.append({'mutation': kind, 'input': repr(value)[:300],
-                        'traceback': traceback.format_exc()})
+        escapes.append({'where': where, 'count': 1, 'mutation': kind,
+                        'input': repr(value)[:300], 'error': repr(error)[:300],
+                        'traceback': ''.join(traceback.format_exception(error))})
 
 
 def fuzz_protocol(name, inputs, seed=0):
@@ -231,9 +238,9 @@ def fuzz_protocol(name, inputs, seed=0):
                 whole = line_format is not None and line_format.whole_tag
                 frames += len(assembler.add_line(records, 1.0 + 0.01 * k, source_tag, whole,
                                                  source_anchor))
-        except Exception:  # noqa: BLE001 - what escapes is the measurement
+        except Exception as error:  # noqa: BLE001 - what escapes is the measurement
             escaped += 1
-            _record_escape(escapes, kind, line)
+            _record_escape(escapes, kind, line, error)
         by_mutation[kind] += 1
     return {'protocol': name, 'inputs': inputs, 'parsed': parsed, 'frames': frames,
             'escaped': escaped, 'escapes': escapes, 'by_mutation': by_mutation,
@@ -254,7 +261,7 @@ def _scalar(rng):
                        float('-inf'), 10 ** 400, -10 ** 400, 1e308, -1e308, 5e-324, '', ' ',
                        'x', '0', '1782', '-1', 'nan', 'inf', '0x1782', '1e309', '\x00',
                        '\u00e9\u4e2d', 'a' * 10000, b'1782', datetime.date(2026, 1, 1),
-                       {}, {'a': 1}, [], [[]], (), 1j])
+                       {}, {'a': 1}, [], [[]]])
 
 
 def _value_wrong_type(rng, shipped):
@@ -304,7 +311,7 @@ def _value_numbers(rng, shipped):
 
 
 def _value_huge(rng, shipped):
-    count = rng.choice([1000, 10000, 100000])
+    count = rng.choice([1000, 10000])
     item = rng.choice([1.0, '1782', 0, 'joint', float('nan')])
     return [item] * count if rng.random() < 0.5 else [f'{item}{k}' for k in range(count)]
 
@@ -336,7 +343,7 @@ VALUE_MUTATIONS = {'wrong type': _value_wrong_type, 'list of anything': _value_l
                    'negative': _value_negative}
 
 #: Mutations too slow to run at every turn: one input in this many is one of them.
-_SLOW = {'huge list': 100}
+_SLOW = {'huge list': 1000}
 
 
 def fuzz_field(field, inputs, seed=0, base=None):
@@ -348,7 +355,7 @@ def fuzz_field(field, inputs, seed=0, base=None):
     dict
         ``field``, ``inputs``, ``accepted`` (descriptions that validated), ``refused``
         (ConfigError), ``escaped`` (anything else), ``escapes`` (the first few),
-        ``seconds``.
+        ``seconds``, ``slowest_s`` and ``slowest_input`` (the longest validation).
 
     """
     rng = random.Random(f'{seed}:{field}')
@@ -357,22 +364,30 @@ def fuzz_field(field, inputs, seed=0, base=None):
     fast = [(kind, mutate) for kind, mutate in VALUE_MUTATIONS.items() if kind not in _SLOW]
     slow = [(kind, mutate) for kind, mutate in VALUE_MUTATIONS.items() if kind in _SLOW]
     escapes, escaped, accepted, refused = [], 0, 0, 0
+    slowest = (0.0, '')
     start = time.perf_counter()
     for k in range(inputs):
         kind, mutate = slow[k // _SLOW['huge list'] % len(slow)] \
             if slow and k % _SLOW['huge list'] == 0 else fast[k % len(fast)]
         value = None
+        begun = time.perf_counter()
         try:
             value = mutate(rng, shipped)
+            begun = time.perf_counter()
             pump_config_from_parameters({**base, field: value})
             accepted += 1
         except ConfigError:
             refused += 1
-        except Exception:  # noqa: BLE001 - what escapes is the measurement
+        except Exception as error:  # noqa: BLE001 - what escapes is the measurement
             escaped += 1
-            _record_escape(escapes, kind, value)
+            _record_escape(escapes, kind, value, error)
+        took = time.perf_counter() - begun
+        if took > slowest[0]:
+            size = f', {len(value)} entries' if isinstance(value, (list, str)) else ''
+            slowest = (took, f'{kind}{size}')
     return {'field': field, 'inputs': inputs, 'accepted': accepted, 'refused': refused,
-            'escaped': escaped, 'escapes': escapes, 'seconds': time.perf_counter() - start}
+            'escaped': escaped, 'escapes': escapes, 'seconds': time.perf_counter() - start,
+            'slowest_s': slowest[0], 'slowest_input': slowest[1]}
 
 
 def run(inputs=100_000, seed=0, progress=None, protocols=None, fields=None):
@@ -392,22 +407,31 @@ def run(inputs=100_000, seed=0, progress=None, protocols=None, fields=None):
             'fields': field_rows, 'escaped': escaped}
 
 
-def markdown(report):
-    """Format a :func:`run` report as two markdown tables and the escapes."""
+def markdown(report, traceback_details=True):
+    """Format a :func:`run` report as two markdown tables, the escapes and their tracebacks."""
     lines = [f'### Fuzz: {report["inputs"]} generated inputs per protocol and per '
              f'configuration field (seed {report["seed"]})', '',
              '| protocol | inputs | gave records | frames closed | escaped | s |',
              '|---|---|---|---|---|---|']
     lines += [f'| {r["protocol"]} | {r["inputs"]} | {r["parsed"]} | {r["frames"]} | '
               f'{r["escaped"]} | {r["seconds"]:.1f} |' for r in report['protocols']]
-    lines += ['', '| configuration field | inputs | accepted | ConfigError | escaped | s |',
-              '|---|---|---|---|---|---|']
+    lines += ['', '| configuration field | inputs | accepted | ConfigError | escaped | s | '
+              'slowest input [s] |', '|---|---|---|---|---|---|---|']
     lines += [f'| {r["field"]} | {r["inputs"]} | {r["accepted"]} | {r["refused"]} | '
-              f'{r["escaped"]} | {r["seconds"]:.1f} |' for r in report['fields']]
+              f'{r["escaped"]} | {r["seconds"]:.1f} | {r["slowest_s"]:.3f} '
+              f'({r["slowest_input"]}) |' for r in report['fields']]
     lines += ['', f'Exceptions escaping: {report["escaped"]}.']
-    for row in report['protocols'] + report['fields']:
-        for escape in row['escapes']:
-            where = row.get('protocol') or row.get('field')
-            lines += ['', f'{where}, {escape["mutation"]}: input {escape["input"]}', '```',
-                      escape['traceback'].rstrip(), '```']
+    escapes = [(row.get('protocol') or row['field'], escape)
+               for row in report['protocols'] + report['fields'] for escape in row['escapes']]
+    if escapes:
+        lines += ['', '| protocol or field | exception, raised at | count | first input '
+                  '(its mutation) |', '|---|---|---|---|']
+        lines += [f'| {name} | {e["error"]}, {e["where"]} | {e["count"]} | '
+                  f'`{e["input"][:120]}` ({e["mutation"]}) |' for name, e in escapes]
+        seen = set()
+        for name, escape in escapes:
+            if escape['where'] not in seen and traceback_details:
+                seen.add(escape['where'])
+                lines += ['', f'{name}: {escape["where"]}, input {escape["input"]}', '```',
+                          escape['traceback'].rstrip(), '```']
     return '\n'.join(lines)

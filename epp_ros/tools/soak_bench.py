@@ -60,6 +60,8 @@ WARMUP = 0.01               #: fraction of the frames after which RSS is the ref
 RSS_TOLERANCE = 0.10        #: RSS at the end within this fraction of the warm-up value
 #: Seconds of working cycle simulated once and then walked forth and back (continuous).
 CHUNK_SECONDS = 600.0
+#: Seconds without a new frame at the node, the player done, after which the rest is lost.
+QUIET = 10.0
 
 
 def rss_mb(pid='self'):
@@ -75,9 +77,9 @@ def rss_mb(pid='self'):
 
 
 def _growth(warm, end):
-    """Percent change from ``warm`` to ``end`` (NaN if either is unknown)."""
+    """Percent change from ``warm`` to ``end`` (None if either is unknown)."""
     if warm is None or end is None or warm <= 0:
-        return float('nan')
+        return None
     return 100.0 * (end - warm) / warm
 
 
@@ -262,6 +264,7 @@ def soak_live(frames, method='chain', seed=0, progress=None, timeout=None):
             started = time.monotonic()
             deadline = started + timeout
             warm_taken, next_sample, next_report = False, started + 1.0, started + 30.0
+            last_received, last_change = 0, started
 
             def received():
                 return int(latest.get('frames received', 0))
@@ -276,10 +279,11 @@ def soak_live(frames, method='chain', seed=0, progress=None, timeout=None):
                 if progress and now > next_report:
                     progress(f'soak live: {len(postures)}/{written} postures received')
                     next_report = now + 30.0
-                if player.poll() is not None and received() >= written:
-                    break
-                if player.poll() is not None and now - started > timeout:
-                    break
+                if received() != last_received:
+                    last_received, last_change = received(), now
+                if player.poll() is not None and (received() >= written
+                                                  or now - last_change > QUIET):
+                    break                   # all in, or the player done and nothing more
             rss_end = rss_mb(estimator.pid)
             complete = received() >= written
             settle = time.monotonic() + 2.0                   # late postures and a report
@@ -302,10 +306,11 @@ def soak_live(frames, method='chain', seed=0, progress=None, timeout=None):
             log.close()
     counts = {key: int(latest.get(f'frames {key}', 0))
               for key in ('received', 'published', 'unsolved', 'errors', 'malformed')}
-    elapsed = postures[-1] - postures[0] if len(postures) > 1 else float('nan')
+    elapsed = postures[-1] - postures[0] if len(postures) > 1 else 0.0
     return {'method': method, 'frames': written, **counts, 'postures': len(postures),
             'frames_lost': written - counts['received'], 'complete': complete,
-            'seconds': elapsed, 'frames_per_s': (len(postures) - 1) / elapsed,
+            'seconds': elapsed,
+            'frames_per_s': (len(postures) - 1) / elapsed if elapsed > 0 else 0.0,
             'rss_start_mb': rss_start, 'rss_warm_mb': rss_warm, 'rss_end_mb': rss_end,
             'rss_peak_mb': max(peak, rss_end or 0.0),
             'rss_growth_pct': _growth(rss_warm, rss_end),
@@ -337,14 +342,18 @@ def run(frames=1_000_000, live_frames=100_000, method='chain', seed=0, progress=
                         'live_frames_per_s': live['frames_per_s'],
                         **{f'live_{key}': live[key] for key in
                            ('rss_start_mb', 'rss_warm_mb', 'rss_end_mb', 'rss_growth_pct')}})
-    summary['rss_ok'] = all(abs(part['rss_growth_pct']) <= 100 * RSS_TOLERANCE
-                            for part in parts)
+    summary['rss_ok'] = all(part['rss_growth_pct'] is not None and
+                            abs(part['rss_growth_pct']) <= 100 * RSS_TOLERANCE for part in parts)
     return {'suite': 'soak', 'method': method, 'in_process': in_process, 'live': live,
             'summary': summary}
 
 
 def _mb(value):
     return '-' if value is None else f'{value:.1f}'
+
+
+def _percent(value):
+    return '-' if value is None else f'{value:+.1f} %'
 
 
 def markdown(report):
@@ -366,7 +375,7 @@ def markdown(report):
         lines.append(f'| {name} | {part["frames"]} | {decided} | {part["frames_lost"]} | '
                      f'{part["frames_per_s"]:.0f} | {_mb(part["rss_start_mb"])} | '
                      f'{_mb(part["rss_warm_mb"])} | {_mb(part["rss_end_mb"])} | '
-                     f'{_mb(part["rss_peak_mb"])} | {part["rss_growth_pct"]:+.1f} % |')
+                     f'{_mb(part["rss_peak_mb"])} | {_percent(part["rss_growth_pct"])} |')
     in_process = report['in_process']
     lines += ['', 'Frames lost: cycles sent that reached no decision (in-process), frames '
               'played that the node did not receive (live). Rejections are decisions.']
@@ -377,7 +386,7 @@ def markdown(report):
                   in_process['first_error'].rstrip(), '```']
     live = report['live']
     if live and not live['complete']:
-        lines.append('The live part did not complete in time; the node\'s log ends:')
+        lines.append("The live part did not complete in time; the node's log ends:")
         lines += ['```', live['estimator_log_tail'].rstrip(), '```']
     verdict = 'met' if report['summary']['frames_lost'] == 0 and report['summary']['rss_ok'] \
         else 'NOT met'
