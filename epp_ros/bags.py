@@ -40,8 +40,8 @@ from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import get_typestore, Stores
 
 __all__ = ['BagError', 'RANGES', 'TRUTH', 'POSTURE', 'RAW', 'TYPES', 'synthesize', 'info',
-           'write_frames',
-           'read_frames', 'read_truth', 'evaluate', 'qos_profile', 'read_all', 'write_raw']
+           'write_frames', 'evaluate', 'check', 'Damage', 'qos_profile', 'read_all',
+           'write_raw']
 
 _TOPICS = (contract.RANGES, contract.TRUTH, contract.POSTURE, contract.RAW)
 RANGES, TRUTH, POSTURE, RAW = (topic.absolute for topic in _TOPICS)
@@ -218,59 +218,20 @@ class _Bag:
             raise BagError(f'{self.path}: {topic} holds {wrong[0]}, expected {msgtype}')
         return found
 
-    def messages(self, topic, msgtype, salvage=False):
-        """
-        Yield (t_ns, message) of one topic, deserialized.
-
-        Raises BagError on any broken message, unless ``salvage``: then broken messages
-        are skipped, and damaged storage ends the topic early.
-        """
+    def messages(self, topic, msgtype):
+        """Yield (t_ns, message) of one topic, deserialized; BagError on a broken message."""
         connections = self.connections(topic, msgtype)
         try:
             for connection, t_ns, raw in self.reader.messages(connections=connections):
-                try:
-                    message = TYPESTORE.deserialize_cdr(raw, connection.msgtype)
-                except Exception:  # noqa: BLE001 - corrupt CDR
-                    if salvage:
-                        continue
-                    raise
-                yield t_ns, message
+                yield t_ns, TYPESTORE.deserialize_cdr(raw, connection.msgtype)
         except BagError:
             raise
         except Exception as exc:  # noqa: BLE001 - truncated files, other definitions
-            if not salvage:
-                raise BagError(f'{self.path}: cannot read {topic}: {exc}') from None
+            raise BagError(f'{self.path}: cannot read {topic}: {exc}') from None
 
 
 def _stamp_ns(message):
     return message.header.stamp.sec * 10 ** 9 + message.header.stamp.nanosec
-
-
-def read_frames(path, config, salvage=False):
-    """
-    (stamp_ns, (p, m) ranges, (p, p) tag ranges) of every ``/uwb/ranges`` message.
-
-    Labels are arranged by the config's names (:meth:`PumpConfig.link_matrices`).
-    """
-    frames = []
-    with _Bag(path) as bag:
-        for _, message in bag.messages(RANGES, TYPES[RANGES], salvage):
-            try:
-                ranges, tag_ranges, _ = config.link_matrices(list(message.name),
-                                                             message.position)
-            except ValueError as exc:
-                raise BagError(f'{path}: a /uwb/ranges message is malformed: {exc}') from None
-            frames.append((_stamp_ns(message), ranges, tag_ranges))
-    return frames
-
-
-def read_truth(path, salvage=False):
-    """{stamp_ns: (p, 3) joints} from ``/arm_posture/ground_truth``, or {} without it."""
-    with _Bag(path) as bag:
-        if not any(c.topic == TRUTH for c in bag.reader.connections):
-            return {}
-        return {_stamp_ns(m): contract.joints_of(m)
-                for _, m in bag.messages(TRUTH, TYPES[TRUTH], salvage)}
 
 
 def info(path):

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from epp_ros.core import BoomModel, PostureEstimator, RANGE_METHODS
 from epp_ros.core.simulate import random_posture, RangeNoise, truck_pump, working_cycle, xie3dim
+from epp_ros.tools.bench import method_estimate
 import numpy as np
 import pytest
 import yaml
@@ -73,12 +74,6 @@ def test_arm_lengths_are_held_under_noise(geometry, method):
                                    atol=1e-6)
 
 
-def estimate_of(estimator, ranges):
-    """Return the method's estimate of a frame, whether the integrity checks pass it or not."""
-    estimator.update(ranges)
-    return estimator.last_diagnostics['estimate']
-
-
 def test_noise_degrades_gracefully_and_lengths_help():
     """EPP1 < EPP2 < CEPP in error at sigma = 1 m on the authors' geometry (the paper's order)."""
     model, joints = xie3dim()
@@ -86,8 +81,9 @@ def test_noise_degrades_gracefully_and_lengths_help():
     frames = [RangeNoise(sigma=1.0).apply(model.ranges(joints), rng)[0] for _ in range(30)]
     rmse = {}
     for method in BOOM_METHODS:
-        errors = [np.mean(np.sum((estimate_of(PostureEstimator(model, method, sigma=1.0), f)
-                                  - joints) ** 2, 1)) for f in frames]
+        estimator = PostureEstimator(model, method, sigma=1.0)
+        errors = [np.mean(np.sum((method_estimate(estimator, {'ranges': f}) - joints) ** 2, 1))
+                  for f in frames]
         rmse[method] = np.sqrt(np.mean(errors))
     assert rmse['cepp'] < rmse['epp2'] < rmse['epp1'] < 3.0
 
@@ -219,8 +215,8 @@ def test_cepp_follows_a_slewing_boom_under_noise():
         estimator = PostureEstimator(model, 'cepp', predict_slew=predict, sigma=0.05)
         sq, reacquired[predict] = [], 0
         for joints in trajectory.joints:
-            estimate = estimate_of(estimator, RangeNoise(sigma=0.05).apply(
-                model.ranges(joints), rng)[0])
+            estimate = method_estimate(estimator, {'ranges': RangeNoise(sigma=0.05).apply(
+                model.ranges(joints), rng)[0]})
             sq.append(np.mean(np.sum((estimate - joints) ** 2, axis=1)))
             reacquired[predict] += estimator.last_diagnostics['reacquired']
         errors[predict] = np.sqrt(np.mean(sq))

@@ -18,6 +18,7 @@ from epp_ros.core.bounds import crlb, fisher_information
 from epp_ros.core.measurements import Measurements, Residuals, SensorNoise
 from epp_ros.core.simulate import (AngleNoise, observe, random_posture, RangeNoise, truck_pump,
                                    working_cycle)
+from epp_ros.tools.bench import method_estimate
 from monte_carlo import assert_mse_at_bound
 import numpy as np
 import pytest
@@ -148,12 +149,6 @@ def test_a_too_long_tag_tag_range_is_flagged_as_nlos():
     assert not estimator.last_diagnostics['nlos_links'].any()
 
 
-def estimate_of(estimator, ranges):
-    """Return the method's estimate of a frame, whether the integrity checks pass it or not."""
-    estimator.update(ranges)
-    return estimator.last_diagnostics['estimate']
-
-
 def test_multiplicative_noise_option_weights_long_ranges_less():
     model = truck_pump()
     rng = np.random.default_rng(7)
@@ -165,8 +160,9 @@ def test_multiplicative_noise_option_weights_long_ranges_less():
     for options in ({'sigma': 1e-3, 'eta': eta}, {'sigma': 0.3}):
         estimator = PostureEstimator(model, 'chain', **options)
         estimator.update(model.ranges(joints))
-        errors[len(options)] = np.mean([np.sum((estimate_of(estimator, RangeNoise(eta=eta).apply(
-            model.ranges(joints), rng)[0]) - joints) ** 2) / 5 for _ in range(300)])
+        errors[len(options)] = np.mean([np.sum((method_estimate(estimator, {
+            'ranges': RangeNoise(eta=eta).apply(model.ranges(joints), rng)[0]}) - joints) ** 2)
+            / 5 for _ in range(300)])
     assert np.sqrt(errors[2]) < 1.1 * bound.rmse
     assert errors[2] < errors[1]
 
@@ -255,7 +251,7 @@ def test_ignoring_the_offset_costs_accuracy():
     errors = {}
     postures = [random_posture(truth_model, rng)[2] for _ in range(5)]
     for name, model in (('modelled', truth_model), ('ignored', wrong_model)):
-        errors[name] = max(np.abs(estimate_of(PostureEstimator(model, 'chain', **EXACT),
-                                              truth_model.ranges(joints)) - joints).max()
-                           for joints in postures)
+        errors[name] = max(np.abs(method_estimate(PostureEstimator(model, 'chain', **EXACT),
+                                                  {'ranges': truth_model.ranges(joints)})
+                                  - joints).max() for joints in postures)
     assert errors['modelled'] < 1e-6 < 0.1 < errors['ignored']

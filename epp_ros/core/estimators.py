@@ -302,22 +302,19 @@ ESTIMATOR_OPTIONS = {'sigma': 0.1, 'eta': 0.0, 'tag_sigma': None, 'pitch_sigma':
 
 def accepted_options(method):
     """Names of the keyword options ``PostureEstimator(model, method, ...)`` takes."""
-    names = set(ESTIMATOR_OPTIONS)
+    return set(ESTIMATOR_OPTIONS) | _constructor_names(method)
+
+
+def _constructor_names(method):
+    """Names of the options the method's own constructor (and its bases') take."""
+    names = set()
     for cls in METHODS[method].__mro__:
         if '__init__' in vars(cls):
             names |= {name for name, parameter in
                       inspect.signature(cls.__init__).parameters.items()
-                      if parameter.kind == parameter.KEYWORD_ONLY
-                      or (parameter.kind == parameter.POSITIONAL_OR_KEYWORD
-                          and name not in ('self', 'model'))}
-    return names
-
-
-def _constructor_names(method):
-    names = set()
-    for cls in METHODS[method].__mro__:
-        if '__init__' in vars(cls):
-            names |= set(inspect.signature(cls.__init__).parameters) - {'self', 'model'}
+                      if parameter.kind in (parameter.KEYWORD_ONLY,
+                                            parameter.POSITIONAL_OR_KEYWORD)
+                      and name not in ('self', 'model')}
     return names
 
 

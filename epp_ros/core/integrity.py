@@ -408,6 +408,11 @@ class Integrity:
                 std[k] = math.sqrt(np.sum(1.0 / values))
         return std
 
+    def _near(self, joint_std):
+        """Per joint, metres: alternatives closer than this do not matter (p,)."""
+        return np.maximum(self.limits.ambiguity_distance,
+                          3.0 * np.nan_to_num(joint_std, posinf=0.0))
+
     def ambiguous_joints(self, joints, measurements, joint_std, slew, reach=None):
         """
         Joints (0-based) with another position about as likely, and one such position.
@@ -419,8 +424,7 @@ class Integrity:
         last accepted posture (``reach``: that posture and the distances, see
         :meth:`reach`), when it could have got there.
         """
-        near = np.maximum(self.limits.ambiguity_distance,
-                          3.0 * np.nan_to_num(joint_std, posinf=0.0))
+        near = self._near(joint_std)
         p = self.model.n_sections
         tip = self._tip_circle(joints, slew)
         positions = np.vstack([fold_alternatives(self.model, joints), tip])
@@ -499,8 +503,7 @@ class Integrity:
         candidates = [self.mirrors(joints, slew)]
         candidates += [np.asarray(a, dtype=float)[None] for a in alternatives]
         candidates = np.concatenate(candidates)
-        near = np.maximum(self.limits.ambiguity_distance,
-                          3.0 * np.nan_to_num(joint_std, posinf=0.0))
+        near = self._near(joint_std)
         far = _norm(candidates - joints) > near                               # (n, p)
         keep = far.any(axis=1)
         if reach is not None:

@@ -47,7 +47,6 @@ reason otherwise) and applies from the next frame; a new ``method`` starts cold,
 """
 from collections import Counter
 from dataclasses import dataclass
-import math
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -55,6 +54,7 @@ from epp_ros.angles import AngleSamples
 from epp_ros.config import PUMP_PARAMETERS
 from epp_ros.contract import ANGLES, DIAGNOSTICS, MARKERS, POSTURE, RANGES
 from epp_ros.core import METHODS, PostureEstimator, RANGE_METHODS
+from epp_ros.core.estimators import ESTIMATOR_OPTIONS
 from epp_ros.core.frame_policy import ADMIT, CLOCK_JUMP, FramePolicy
 from epp_ros.core.integrity import IntegrityLimits, Thresholds
 from epp_ros.health import assess, grade
@@ -100,8 +100,14 @@ class Setting:
         return extra
 
 
-def _metres(description, default):
-    return Setting(default, description, True, 1e-6, 1e3)
+def _metres(name, description):
+    """Declare a threshold in metres, its default from ``core.integrity.Thresholds``."""
+    return Setting(getattr(Thresholds, name), description, True, 1e-6, 1e3)
+
+
+def _told(option, description, low, high):
+    """Declare what the estimator is told, its default from ``ESTIMATOR_OPTIONS``."""
+    return Setting(float(ESTIMATOR_OPTIONS[option]), description, True, low, high)
 
 
 #: The node's parameters. Thresholds are metres; a frame at ERROR is not published.
@@ -110,22 +116,23 @@ SETTINGS = {
     'reset_after_failures': Setting(10, 'Frames in a row that cannot be solved or do not fit '
                                         'before the estimator starts cold.', True, 1, 100000),
     'publish_markers': Setting(True, 'Also publish arm_posture/markers for RViz.'),
-    'arm_length_warn': _metres('Section length or plane error for WARN, m.', 0.05),
-    'arm_length_error': _metres('Section length or plane error for ERROR, m.', 0.5),
-    'residual_warn': _metres('Range residual RMS for WARN, m.', 0.5),
-    'residual_error': _metres('Range residual RMS for ERROR, m.', 2.0),
-    'predicted_rmse_warn': _metres('Predicted RMSE (Cramer-Rao bound) for WARN, m.', 0.5),
-    'predicted_rmse_error': _metres('Predicted RMSE for ERROR, m.', 2.0),
-    'range_sigma': Setting(0.1, 'UWB range standard deviation, m.', True, 1e-6, 100.0),
-    'nlos_fraction': Setting(0.1, 'Prior probability that a range is NLOS.', True, 0.0, 0.99),
-    'nlos_gamma': Setting(1.0, 'Mean NLOS excess, m.', True, 1e-3, 100.0),
-    'tag_sigma': Setting(0.1, 'Tag-tag range standard deviation, m.', True, 1e-6, 100.0),
-    'pitch_sigma': Setting(math.radians(0.5), 'Inclinometer standard deviation, rad.', True,
-                           1e-6, 1.0),
-    'slew_sigma': Setting(math.radians(0.5), 'Slew encoder standard deviation, rad.', True,
-                          1e-6, 1.0),
-    'lowest_joint': Setting(-0.5, 'No joint is below this height, m (ground z = 0).', True,
-                            -1e3, 1e3),
+    'arm_length_warn': _metres('arm_length_warn', 'Section length or plane error for WARN, m.'),
+    'arm_length_error': _metres('arm_length_error',
+                                'Section length or plane error for ERROR, m.'),
+    'residual_warn': _metres('residual_warn', 'Range residual RMS for WARN, m.'),
+    'residual_error': _metres('residual_error', 'Range residual RMS for ERROR, m.'),
+    'predicted_rmse_warn': _metres('predicted_rmse_warn',
+                                   'Predicted RMSE (Cramer-Rao bound) for WARN, m.'),
+    'predicted_rmse_error': _metres('predicted_rmse_error', 'Predicted RMSE for ERROR, m.'),
+    'range_sigma': _told('sigma', 'UWB range standard deviation, m.', 1e-6, 100.0),
+    'nlos_fraction': _told('nlos_fraction', 'Prior probability that a range is NLOS.', 0.0,
+                           0.99),
+    'nlos_gamma': _told('nlos_gamma', 'Mean NLOS excess, m.', 1e-3, 100.0),
+    'tag_sigma': _told('sigma', 'Tag-tag range standard deviation, m.', 1e-6, 100.0),
+    'pitch_sigma': _told('pitch_sigma', 'Inclinometer standard deviation, rad.', 1e-6, 1.0),
+    'slew_sigma': _told('slew_sigma', 'Slew encoder standard deviation, rad.', 1e-6, 1.0),
+    'lowest_joint': _told('lowest_joint', 'No joint is below this height, m (ground z = 0).',
+                          -1e3, 1e3),
     'max_angular_rate': Setting(IntegrityLimits.max_angular_rate, 'Fastest slew or pitch '
                                 'rate of the boom, rad/s: rules out jumps and folds.', True,
                                 1e-4, 100.0),
