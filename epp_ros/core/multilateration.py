@@ -22,7 +22,7 @@ scalar multiplier.
 """
 import numpy as np
 
-__all__ = ['srls', 'intersect_spheres']
+__all__ = ['srls', 'intersect_spheres', 'cold_start_guess']
 
 
 def srls(anchors, ranges, *, tol=1e-12, max_iter=200):
@@ -138,3 +138,67 @@ def intersect_spheres(centres, radii):
     z = np.sqrt(max(r1 ** 2 - x ** 2 - y ** 2, 0.0))
     points = base + x * ex + y * ey + np.array([[z], [-z]]) * ez
     return points[np.argsort(-points[:, 2])]
+
+
+def cold_start_guess(model, ranges):
+    """
+    Joint positions from this frame's ranges alone, to seed a solver without a previous pose.
+
+    Each tag is located by SR-LS from its anchor ranges; a tag with too few of them also uses
+    its already located neighbours (or the base pivot) as spheres of radius the section
+    length, repeated outward until nothing more can be located. Tags still unlocated take
+    the position of the nearest located joint along the chain; they only seed the solver.
+
+    Returns
+    -------
+    joints : ndarray, shape (p, 3), or None when no tag can be located.
+
+    """
+    p = model.n_sections
+    lengths = model.arm_lengths
+    joints = np.full((p, 3), np.nan)
+
+    def neighbour_spheres(k):
+        centres, radii = [], []
+        # A pivot off the slew axis moves with the unknown slew: no sphere around it.
+        inner = (model.base if model.pivot_offset == 0.0 else np.full(3, np.nan)) if k == 0 \
+            else joints[k - 1]
+        if np.isfinite(inner[0]):
+            centres.append(inner)
+            radii.append(lengths[k])
+        if k + 1 < p and np.isfinite(joints[k + 1, 0]):
+            centres.append(joints[k + 1])
+            radii.append(lengths[k + 1])
+        return centres, radii
+
+    for use_neighbours in (False, True):
+        progress = True
+        while progress:
+            progress = False
+            for k in np.flatnonzero(~np.isfinite(joints[:, 0])):
+                valid = np.isfinite(ranges[k])
+                centres, radii = neighbour_spheres(k) if use_neighbours else ([], [])
+                centres = np.vstack([model.anchors[valid]] + [np.reshape(centres, (-1, 3))])
+                radii = np.concatenate([ranges[k, valid], radii])
+                position = _locate(centres, radii, allow_three=use_neighbours)
+                if position is not None:
+                    joints[k] = position
+                    progress = use_neighbours
+    located = np.flatnonzero(np.isfinite(joints[:, 0]))
+    if located.size == 0:
+        return None
+    for k in np.setdiff1d(np.arange(p), located):
+        joints[k] = joints[located[np.argmin(np.abs(located - k))]]
+    return joints
+
+
+def _locate(centres, radii, allow_three):
+    """Return a point at the given distances from distinct centres; the upper one if ambiguous."""
+    _, first = np.unique(np.round(centres, 9), axis=0, return_index=True)
+    first = np.sort(first)
+    centres, radii = centres[first], radii[first]
+    position = srls(centres, radii) if radii.size >= 4 else None
+    if position is None and allow_three and radii.size >= 3:
+        candidates = intersect_spheres(centres[:3], radii[:3])
+        position = None if candidates is None else candidates[0]
+    return position
