@@ -219,7 +219,8 @@ class PostureEstimator:
         # Nothing known yet: a straight horizontal boom along +x, flagged invalid.
         return self.model.forward_kinematics(0.0, np.zeros(self.model.n_sections))
 
-    def update(self, ranges, *, tag_ranges=None, pitches=None, slew=None, stamp=None):
+    def update(self, ranges, *, tag_ranges=None, pitches=None, slew=None, stamp=None,
+               range_stamps=None):
         """
         Estimate the joint positions from one frame of measurements.
 
@@ -237,6 +238,9 @@ class PostureEstimator:
         stamp : float, optional
             The frame's time, seconds: how far the boom can have moved since the last
             accepted posture. Without it frames are ``integrity.frame_period`` apart.
+        range_stamps : array_like, shape (p,), optional
+            When each tag's row of ``ranges`` was measured, seconds on the clock of
+            ``stamp``; NaN: at ``stamp``. Methods without a motion model ignore it.
 
         Inputs a method does not use are listed in ``last_diagnostics["ignored_inputs"]``.
 
@@ -258,6 +262,8 @@ class PostureEstimator:
                        'reacquired': False, 'iterations': 0,
                        'ignored_inputs': [name for name in measurements.present()
                                           if name not in self._solver.inputs]}
+        if range_stamps is not None and 'range_stamps' not in self._solver.inputs:
+            diagnostics['ignored_inputs'].append('range_stamps')
         if not self._solver.enough_information(measurements):
             return self._reject('insufficient_data', diagnostics, measurements, start)
         solved = self._solve(measurements, warm=self._warm is not None)
