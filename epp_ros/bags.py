@@ -17,9 +17,10 @@ rosbag2 files without ROS: synthesise, read, evaluate and describe them (``rosba
 
 Bags are standard rosbag2 (metadata version 9, MCAP or sqlite3 storage, explicit QoS per
 topic), so that ``ros2 bag play``/``record`` on a full ROS install read and write the same.
-Topics: ``/uwb/ranges`` (``sensor_msgs/JointState`` exactly as uwb_driver publishes it),
-``/arm_posture/ground_truth`` and ``/arm_posture`` (``geometry_msgs/PoseArray``), and
-optionally ``/uwb/raw`` (``std_msgs/String``, the devices' lines).
+Topics: ``/uwb/ranges`` (``sensor_msgs/JointState`` as uwb_driver publishes it; ``effort``
+the ranges' ages where known, see ``contract``), ``/arm_posture/ground_truth`` and
+``/arm_posture`` (``geometry_msgs/PoseArray``), and optionally ``/uwb/raw``
+(``std_msgs/String``, the devices' lines).
 """
 from array import array
 import contextlib
@@ -76,11 +77,13 @@ def _header(stamp_ns, frame_id):
         frame_id=frame_id)
 
 
-def _ranges_message(stamp_ns, frame_id, names, ranges):
+def _ranges_message(stamp_ns, frame_id, names, ranges, ages=None):
+    """Return a ``uwb/ranges`` message; ``ages`` (s, as ``ranges``) fill ``effort``."""
     empty = np.zeros(0, dtype=np.float64)
+    effort = empty if ages is None else np.asarray(ages, dtype=np.float64).ravel()
     return TYPESTORE.types[TYPES[RANGES]](
         header=_header(stamp_ns, frame_id), name=list(names),
-        position=np.asarray(ranges, dtype=np.float64).ravel(), velocity=empty, effort=empty)
+        position=np.asarray(ranges, dtype=np.float64).ravel(), velocity=empty, effort=effort)
 
 
 def _posture_message(stamp_ns, frame_id, base, joints):
@@ -125,10 +128,7 @@ class _BagWriter:
 def synthesize(path, config, duration=60.0, rate=10.0, sigma=0.1, nlos=0.0, drop=0.0,
                seed=0, storage='mcap', raw_protocol=None, start_ns=None):
     """
-    Write a simulated working cycle as a bag.
-
-    Every cycle gives ``/uwb/ranges`` and ``/arm_posture/ground_truth`` with the same stamp
-    (and, with ``raw_protocol``, the devices' lines on ``/uwb/raw``).
+    Write a simulated working cycle as a bag (:func:`write_cycles`).
 
     Returns
     -------
@@ -141,13 +141,41 @@ def synthesize(path, config, duration=60.0, rate=10.0, sigma=0.1, nlos=0.0, drop
     trajectory = working_cycle(model, duration, rate, rng=np.random.default_rng(seed))
     noise = RangeNoise(sigma=sigma, nlos_fraction=nlos, nlos_gamma=2.0, dropout=drop)
     start_ns = time.time_ns() if start_ns is None else int(start_ns)
+    cycles = ((start_ns + int(round(seconds * 1e9)), noise.apply(model.ranges(joints), rng)[0],
+               joints, None) for seconds, joints in zip(trajectory.times, trajectory.joints))
+    return write_cycles(path, config, cycles, storage, raw_protocol)
+
+
+def write_cycles(path, config, cycles, storage='mcap', raw_protocol=None):
+    """
+    Write simulated cycles: ``/uwb/ranges`` and ``/arm_posture/ground_truth``, same stamp.
+
+    Parameters
+    ----------
+    path : path
+        The bag to create (a directory).
+    config : epp_ros.config.PumpConfig
+        The pump: frame id and link names of the messages.
+    cycles : iterable of (int, ndarray, ndarray, ndarray or None)
+        ``(stamp_ns, ranges (p, m) metres, true joints (p, 3) metres, ages)``; ``ages``
+        (p, m) seconds before the stamp each range was measured, or None (at the stamp).
+    storage : str
+        ``'mcap'`` or ``'sqlite3'``.
+    raw_protocol : str, optional
+        Also write the devices' lines of that format on ``/uwb/raw``.
+
+    Returns
+    -------
+    dict
+        Messages written per topic.
+
+    """
+    model = config.model()
     counts = {}
     with _BagWriter(path, storage) as bag:
-        for cycle, (seconds, joints) in enumerate(zip(trajectory.times, trajectory.joints)):
-            stamp = start_ns + int(round(seconds * 1e9))
-            ranges, _ = noise.apply(model.ranges(joints), rng)
+        for cycle, (stamp, ranges, joints, ages) in enumerate(cycles):
             messages = [(RANGES, _ranges_message(stamp, config.frame_id, config.link_names,
-                                                 ranges)),
+                                                 ranges, ages)),
                         (TRUTH, _posture_message(stamp, config.frame_id,
                                                  model.pivot_of(joints), joints))]
             if raw_protocol:
@@ -159,7 +187,7 @@ def synthesize(path, config, duration=60.0, rate=10.0, sigma=0.1, nlos=0.0, drop
     return counts
 
 
-def write_frames(path, config, frames, storage='mcap'):
+def write_frames(path, config, frames, storage='mcap', ages=None):
     """
     Write range frames as ``/uwb/ranges``, exactly as uwb_driver publishes them.
 
@@ -173,17 +201,29 @@ def write_frames(path, config, frames, storage='mcap'):
         ``(stamp_ns, ranges)`` with ranges (p, m) in metres, NaN where missing.
     storage : str
         ``'mcap'`` or ``'sqlite3'``.
+    ages : iterable of ndarray, shape (p, m), optional
+        One per frame, in order: seconds before its stamp each range was measured
+        (``effort``, ``contract.range_ages``). Without them ``effort`` is empty: every
+        range at its frame's stamp.
 
     Returns
     -------
     int
         Messages written.
 
+    Raises
+    ------
+    ValueError
+        When ``ages`` is given and not one per frame.
+
     """
     count = 0
+    per_frame = ((*frame, None) for frame in frames) if ages is None \
+        else ((*frame, age) for frame, age in zip(frames, ages, strict=True))
     with _BagWriter(path, storage) as bag:
-        for stamp_ns, ranges in frames:
-            message = _ranges_message(stamp_ns, config.frame_id, config.link_names, ranges)
+        for stamp_ns, ranges, frame_ages in per_frame:
+            message = _ranges_message(stamp_ns, config.frame_id, config.link_names, ranges,
+                                      frame_ages)
             bag.write(RANGES, stamp_ns, _serialize(message))
             count += 1
     return count
@@ -330,8 +370,8 @@ class _Evaluation:
         self.frames += 1
         stamp = _stamp_ns(message)
         try:
-            ranges, tag_ranges, _ = self.config.link_matrices(list(message.name),
-                                                              message.position)
+            links = self.config.link_frame(list(message.name), message.position,
+                                           message.effort)
         except ValueError as exc:
             raise BagError(f'a /uwb/ranges message is malformed: {exc}') from None
         decision = self.policy.admit(stamp * 1e-9)
@@ -341,7 +381,9 @@ class _Evaluation:
         if decision == CLOCK_JUMP:
             self.estimator.reset()
         start = time.perf_counter()
-        joints = self.estimator.update(ranges, tag_ranges=tag_ranges, stamp=stamp * 1e-9)
+        joints = self.estimator.update(links.ranges, tag_ranges=links.tag_ranges,
+                                       stamp=stamp * 1e-9,
+                                       range_stamps=links.range_stamps(stamp * 1e-9))
         self.elapsed += time.perf_counter() - start
         diagnostics = self.estimator.last_diagnostics
         if not diagnostics['valid']:        # the node's publishing policy: the estimator's

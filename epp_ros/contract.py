@@ -21,7 +21,13 @@ bag tools rosbags ones (``bags.py``), and decoding works on either kind of messa
 
 - ``uwb/ranges`` (``sensor_msgs/JointState``): ``name[i] = "<tag>:<anchor>"`` (then any
   ``"<tag>:<tag>"``), ``position[i]`` the range in metres, NaN where not reported this cycle;
-  stamped with the receive time of the newest range.
+  stamped with the receive time of the newest range. ``effort[i]`` is the age of range i:
+  how long before the stamp it was measured, seconds, >= 0, NaN where the range is missing
+  (:func:`range_ages`, :func:`ages_of`). Tags range in their own TDMA slots, so one message
+  mixes instants, and a moving boom needs each range's time; only common_interfaces
+  messages are used and JointState has no per-entry stamp, hence ``effort``. An empty
+  ``effort`` (older bags, other publishers) means every range was measured at the stamp;
+  ``velocity`` stays empty.
 - ``arm_posture`` and ``arm_posture/ground_truth`` (``geometry_msgs/PoseArray``): the base
   pivot, then joints 1..p, each pose's x-axis along its section (:func:`posture_poses`).
 - ``arm_posture/markers`` (``visualization_msgs/MarkerArray``), ``boom_angles``
@@ -38,7 +44,7 @@ import numpy as np
 
 __all__ = ['Topic', 'RANGES', 'RANGES_INPUT', 'ANGLES', 'POSTURE', 'MARKERS', 'TRUTH',
            'DIAGNOSTICS', 'RAW', 'posture_poses', 'points_of', 'joints_of', 'stamp_parts',
-           'stamp_seconds']
+           'stamp_seconds', 'range_ages', 'ages_of']
 
 
 @dataclass(frozen=True)
@@ -112,3 +118,59 @@ def stamp_parts(seconds):
 def stamp_seconds(stamp):
     """Seconds of a ``builtin_interfaces/Time`` (rclpy or rosbags)."""
     return stamp.sec + 1e-9 * stamp.nanosec
+
+
+def range_ages(stamp, measured):
+    """
+    Return the ``effort`` of a ``uwb/ranges`` message: the age of each of its ranges.
+
+    Parameters
+    ----------
+    stamp : float
+        The message's stamp, seconds.
+    measured : array_like, shape (n,)
+        When each range was measured, seconds on the clock of ``stamp``; NaN for a
+        missing range.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        ``stamp - measured`` in seconds, at least 0, NaN where ``measured`` is NaN.
+
+    """
+    measured = np.asarray(measured, dtype=float)
+    with np.errstate(invalid='ignore'):
+        return np.where(np.isfinite(measured), np.maximum(stamp - measured, 0.0), np.nan)
+
+
+def ages_of(effort, count):
+    """
+    Return the ages of a ``uwb/ranges`` message's ranges, or None when it carries none.
+
+    Parameters
+    ----------
+    effort : sequence of float
+        The message's ``effort``, seconds (:func:`range_ages`).
+    count : int
+        The message's ranges (``len(name)``).
+
+    Returns
+    -------
+    ndarray, shape (count,), or None
+        Seconds before the stamp each range was measured; NaN where unknown (a negative or
+        non-finite age). None for an empty ``effort``: every range at the stamp.
+
+    Raises
+    ------
+    ValueError
+        When ``effort`` is neither empty nor one age per range.
+
+    """
+    if len(effort) == 0:
+        return None
+    if len(effort) != count:
+        raise ValueError(f'{len(effort)} ages (effort) for {count} ranges: '
+                         'need one per range or none')
+    ages = np.asarray(effort, dtype=float)
+    with np.errstate(invalid='ignore'):
+        return np.where(np.isfinite(ages) & (ages >= 0), ages, np.nan)

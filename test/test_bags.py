@@ -20,6 +20,7 @@ import time
 
 from epp_ros import bags
 from epp_ros.config import load_pump_config
+from epp_ros.core import METHODS
 from epp_ros.nodes.common import to_seconds
 import numpy as np
 import pytest
@@ -189,3 +190,63 @@ def test_eval_refuses_an_existing_output_before_it_starts(tmp_path):
     (tmp_path / 'taken').mkdir()
     with pytest.raises(bags.BagError, match='taken exists already'):
         bags.evaluate(tmp_path / 'no_such_bag', CONFIG, 'chain', out=tmp_path / 'taken')
+
+
+class SpyEstimator(bags.PostureEstimator):
+    """A PostureEstimator that records what each frame gave it."""
+
+    calls = []
+
+    def update(self, ranges, **inputs):
+        joints = super().update(ranges, **inputs)
+        self.calls.append((inputs['stamp'], inputs.get('range_stamps'),
+                           list(self.last_diagnostics['ignored_inputs'])))
+        return joints
+
+
+def frames_with_ages(count=5):
+    """Return noiseless frames (stamp_ns, ranges) and their ages, tag k measured later."""
+    model = CONFIG.model()
+    pitches = np.radians([55.0, 30.0, 0.0, -20.0, -45.0])
+    stamps = [1_000_000_000_000 + 100_000_000 * k for k in range(count)]
+    ranges = [model.ranges(model.forward_kinematics(0.3 + 0.01 * k, pitches))
+              for k in range(count)]
+    ages = []
+    for k in range(count):
+        age = np.repeat(0.02 * np.arange(4, -1, -1.0)[:, None], 6, axis=1) + 0.001 * k
+        age[0, 0] = np.nan                          # an unknown age: the others decide
+        age[1, 2] = -1.0                            # a bad age: unknown too
+        ages.append(age)
+    return list(zip(stamps, ranges)), ages
+
+
+@pytest.mark.parametrize('with_ages', [True, False])
+def test_eval_gives_the_estimator_each_tags_measurement_time(with_ages, monkeypatch,
+                                                             tmp_path):
+    frames, ages = frames_with_ages()
+    bag = tmp_path / 'aged'
+    bags.write_frames(bag, CONFIG, frames, ages=ages if with_ages else None)
+    stored = decoded(bag, bags.RANGES)
+    assert [len(m.effort) for m in stored] == [30 if with_ages else 0] * len(frames)
+    monkeypatch.setattr(SpyEstimator, 'calls', [])
+    monkeypatch.setattr(bags, 'PostureEstimator', SpyEstimator)
+    result = bags.evaluate(bag, CONFIG, 'chain')
+    assert result['frames'] == len(SpyEstimator.calls) == len(frames) and result['solved']
+    used = 'range_stamps' in METHODS['chain'].inputs
+    for (stamp_ns, _), age, (stamp, range_stamps, ignored) in zip(frames, ages,
+                                                                  SpyEstimator.calls):
+        assert stamp == pytest.approx(stamp_ns * 1e-9, abs=1e-9)
+        if not with_ages:
+            assert range_stamps is None and 'range_stamps' not in ignored
+            continue
+        expected = stamp - np.array([np.median(row[np.isfinite(row) & (row >= 0)])
+                                     for row in age])
+        np.testing.assert_allclose(range_stamps, expected, atol=1e-9)
+        assert range_stamps[0] < range_stamps[4] == pytest.approx(stamp, abs=0.01)
+        assert ('range_stamps' in ignored) == (not used)
+
+
+def test_ages_must_come_one_per_frame(tmp_path):
+    frames, ages = frames_with_ages(3)
+    with pytest.raises(ValueError):
+        bags.write_frames(tmp_path / 'short', CONFIG, frames, ages=ages[:2])

@@ -63,6 +63,64 @@ def test_labelled_ranges_are_arranged_by_name_in_any_order():
         config.link_matrices(['joint1:turret', 'joint1:cab'], [1.0])
 
 
+def test_range_ages_reduce_to_the_median_of_each_tags_known_ages():
+    config = load_pump_config(PUMP_YAML)
+    nan = float('nan')
+    # Any order; joint2's ages 0.01, 0.03, 0.05 (median 0.03); the age of its missing range
+    # and of a tag-tag range do not count; joint4 has only unknown ages.
+    links = [('joint2:cab', 4.0, 0.05), ('joint1:turret', 2.0, 0.02),
+             ('joint2:turret', 3.0, 0.01), ('joint2:outrigger_fl', nan, 0.9),
+             ('joint2:joint3', 7.1, 0.5), ('joint2:outrigger_fr', 3.5, 0.03),
+             ('joint4:turret', 5.0, -0.01), ('joint4:cab', 5.5, nan),
+             ('joint4:outrigger_fl', 5.2, float('inf')), ('crane:turret', 1.0, 0.7)]
+    names, values, ages = (list(column) for column in zip(*links))
+    frame = config.link_frame(names, values, ages)
+    assert frame.ages.shape == (5,) and frame.unknown == 1
+    np.testing.assert_allclose(frame.ages[:2], [0.02, 0.03])
+    assert np.isnan(frame.ages[2:]).all()
+    ranges, tag_ranges, unknown = config.link_matrices(names, values)
+    np.testing.assert_array_equal(frame.ranges, ranges)
+    np.testing.assert_array_equal(frame.tag_ranges, tag_ranges)
+    np.testing.assert_allclose(frame.range_stamps(100.0)[:2], [99.98, 99.97])
+    assert np.isnan(frame.range_stamps(100.0)[2:]).all()
+
+
+def test_a_message_without_ages_has_none_and_a_wrong_count_is_malformed():
+    config = load_pump_config(PUMP_YAML)
+    names, values = ['joint1:turret', 'joint1:cab'], [1.0, 2.0]
+    for ages in (None, [], np.zeros(0)):
+        frame = config.link_frame(names, values, ages)
+        assert frame.ages is None and frame.range_stamps(5.0) is None
+        assert frame.ranges[0, 0] == 1.0 and frame.ranges[0, 5] == 2.0
+    with pytest.raises(ValueError, match='1 ages \\(effort\\) for 2 ranges'):
+        config.link_frame(names, values, [0.01])
+    with pytest.raises(ValueError, match='3 ages'):
+        config.link_frame(names, values, [0.01, 0.02, 0.03])
+
+
+def test_range_ages_round_trip_through_the_contract():
+    from epp_ros import contract
+    config = load_pump_config(PUMP_YAML)
+    rng = np.random.default_rng(1)
+    stamp = 1000.0
+    received = stamp - rng.uniform(0.0, 0.1, size=(5, 6))
+    received[3, :] = np.nan                                     # joint4 silent
+    ranges = np.where(np.isfinite(received), 5.0, np.nan)
+    effort = contract.range_ages(stamp, received.ravel())
+    assert np.isnan(effort[18:24]).all() and (effort[np.isfinite(effort)] >= 0).all()
+    order = rng.permutation(30)                                 # names in any order
+    names = [config.link_names[i] for i in order]
+    frame = config.link_frame(names, ranges.ravel()[order], effort[order])
+    np.testing.assert_array_equal(frame.ranges, ranges)
+    expected = np.median(stamp - received, axis=1)
+    np.testing.assert_allclose(np.delete(frame.ages, 3), np.delete(expected, 3), atol=1e-9)
+    assert np.isnan(frame.ages[3])
+    np.testing.assert_allclose(np.delete(frame.range_stamps(stamp), 3),
+                               np.delete(np.median(received, axis=1), 3), atol=1e-9)
+    # A range received after the stamp (a clock step) is at the stamp, not in the future.
+    assert contract.range_ages(stamp, [stamp + 0.5])[0] == 0.0
+
+
 def test_default_path_finds_the_packaged_file():
     assert load_pump_config() == load_pump_config(PUMP_YAML)
 

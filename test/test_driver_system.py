@@ -46,6 +46,7 @@ def check_ranges_against_truth(listener, config, since, tolerance):
               if first + 0.15 <= to_seconds(f.header.stamp) <= last]
     assert len(frames) >= 3
     for frame in frames:
+        check_range_ages(frame)
         assert list(frame.name) == config.link_names
         assert frame.header.frame_id == config.frame_id
         assert abs(to_seconds(frame.header.stamp) - time.time()) < 30
@@ -55,6 +56,16 @@ def check_ranges_against_truth(listener, config, since, tolerance):
             reported = np.isfinite(measured[row])
             errors = np.abs(true_ranges[:, row, reported] - measured[row, reported])
             assert errors.max(axis=1).min() <= tolerance
+
+
+def check_range_ages(frame, frame_period=0.1, slack=0.1):
+    """Check one age (``effort``, s) per range: finite, >= 0 and within a cycle where it is."""
+    ranges, ages = np.array(frame.position), np.array(frame.effort)
+    assert ages.shape == ranges.shape
+    reported = np.isfinite(ranges)
+    assert np.isfinite(ages[reported]).all() and np.isnan(ages[~reported]).all()
+    assert (ages[reported] >= 0).all() and (ages[reported] < frame_period + slack).all()
+    assert ages[reported].min() < 1e-3                  # the stamp is the newest range's
 
 
 TREK_YAML = {

@@ -14,6 +14,9 @@
 
 """Emulated device lines decode back to the ranges they were made from."""
 import os
+from pathlib import Path
+import subprocess
+import sys
 
 from epp_ros.config import load_pump_config, pump_config_from_parameters
 from epp_ros.core.simulate import random_posture, RangeNoise
@@ -171,3 +174,101 @@ def test_the_emulator_speaks_every_format_and_the_driver_reads_it_back(protocol)
     np.testing.assert_array_equal(np.isnan(frame.ranges), np.isnan(ranges))
     np.testing.assert_allclose(frame.ranges, ranges, atol=0.005 + 1e-9)
     assert set(assembler.dropped) <= {'raw_range'}
+
+
+def console_script(name):
+    return str(Path(sys.executable).parent / name)
+
+
+def test_emulator_draws_from_the_field_simulator_with_field_or_joystick():
+    from epp_ros.core.simulate import FieldSimulator, JoystickMotion
+    from epp_ros.nodes import emulator
+    model = CONFIG.model()
+    args = emulator.parse_args(['--pty', '--field', 'tdma,dropouts', '--motion', 'joystick'])
+    assert args.field == 'tdma,dropouts' and args.motion == 'joystick'
+    measure = emulator.range_source(args, model, np.random.default_rng(0))
+    motion = emulator.ForthAndBack(
+        JoystickMotion(model, emulator.PLAYBACK_S, np.random.default_rng(0)),
+        emulator.PLAYBACK_S)
+    simulator = FieldSimulator(model, emulator.effects_of(args), np.random.default_rng(0),
+                               frame_period=0.1)
+    for cycle in range(20):
+        ranges, joints = measure(cycle)
+        frame = simulator.frame(motion, cycle / 10.0)
+        np.testing.assert_array_equal(ranges, frame.ranges)
+        np.testing.assert_allclose(joints, frame.joints, rtol=1e-12)
+    # Played forth and back: the boom never jumps, the noise keeps going.
+    folded = emulator.ForthAndBack(motion.motion, 10.0)
+    np.testing.assert_allclose(folded.joints([3.0, 17.0, 23.0, -3.0]),
+                               motion.joints([3.0, 3.0, 3.0, 3.0]), rtol=1e-12)
+    # Joystick without --field: the usual noise options, through the simulator.
+    args = emulator.parse_args(['--pty', '--motion', 'joystick', '--drop', '0.5'])
+    effects = emulator.effects_of(args)
+    assert (effects.sigma, effects.link_dropout, effects.nlos_duration) == (0.05, 0.5, 0.0)
+
+
+def test_emulator_without_field_draws_as_before():
+    from epp_ros.core.simulate import working_cycle
+    from epp_ros.nodes import emulator
+    model = CONFIG.model()
+    args = emulator.parse_args(['--pty', '--seed', '3', '--sigma', '0.2', '--nlos', '0.1'])
+    rng = np.random.default_rng(3)
+    measure = emulator.range_source(args, model, np.random.default_rng(3))
+    trajectory = working_cycle(model, 600.0, 10.0, rng=np.random.default_rng(3))
+    noise = RangeNoise(sigma=0.2, nlos_fraction=0.1, nlos_gamma=2.0)
+    for cycle in range(5):
+        ranges, joints = measure(cycle)
+        np.testing.assert_array_equal(joints, trajectory.joints[cycle])
+        np.testing.assert_array_equal(ranges, noise.apply(model.ranges(joints), rng)[0])
+    assert emulator.parse_args(['--pty']).sigma == 0.05
+
+
+@pytest.mark.parametrize('argv, says', [
+    (['uwb_emulator', '--pty', '--field', 'fog'], "unknown field effect 'fog'"),
+    (['uwb_emulator', '--pty', '--field', 'tdma', '--sigma', '0.1'], '--field'),
+    (['uwb_emulator', '--pty', '--motion', 'dance'], '--motion'),
+    (['epp_bag', 'synth', 'OUT', '--field', 'tdma,fog'], "unknown field effect 'fog'"),
+    (['epp_bag', 'synth', 'OUT', '--field', 'tdma', '--nlos', '0.1'], '--field'),
+])
+def test_bad_field_options_give_one_line_and_status_2(argv, says, tmp_path):
+    args = [console_script(argv[0])] + [str(tmp_path / a) if a == 'OUT' else a
+                                        for a in argv[1:]]
+    result = subprocess.run(args, capture_output=True, text=True, timeout=60)
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert 'error' in lines[0] and says in lines[0]
+    assert not (tmp_path / 'OUT').exists()
+
+
+def test_synth_writes_a_field_bag_with_its_truth(tmp_path):
+    from epp_ros import bags, contract
+    from epp_ros.core.simulate import WorkingMotion
+    bag = tmp_path / 'field'
+    result = subprocess.run([console_script('epp_bag'), 'synth', str(bag), '--field',
+                             'nlos_persistent,tdma', '--duration', '2', '--seed', '4',
+                             '--start', '1000'], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    messages, damage = bags.read_all(bag)
+    assert damage.intact
+    by_topic = {}
+    for topic, msgtype, t_ns, raw, _ in messages:
+        by_topic.setdefault(topic, []).append(
+            (t_ns, bags.TYPESTORE.deserialize_cdr(raw, msgtype)))
+    assert {topic: len(found) for topic, found in by_topic.items()} == \
+        {bags.RANGES: 20, bags.TRUTH: 20}
+    model = CONFIG.model()
+    motion = WorkingMotion(model, np.random.default_rng(4))       # drawn first, as synth does
+    for index, (t_ns, message) in enumerate(by_topic[bags.TRUTH]):
+        assert t_ns == 1000 * 10 ** 9 + index * 10 ** 8
+        np.testing.assert_allclose(contract.joints_of(message), motion.joints(index / 10.0),
+                                   atol=1e-9)
+    ranges = np.array([message.position for _, message in by_topic[bags.RANGES]])
+    assert ranges.shape == (20, 30) and np.isfinite(ranges).any()
+
+
+def test_emulator_runs_with_field_effects_and_joystick():
+    result = subprocess.run([console_script('uwb_emulator'), '--pty', '--field',
+                             'nlos_persistent,tdma,dropouts', '--motion', 'joystick',
+                             '--duration', '1'], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith('PTY ')

@@ -168,3 +168,39 @@ def test_records_that_name_no_anchor_take_the_source_anchor():
     assembler.add(record, 1.0, source_tag=TAGS[1])
     (frame,) = assembler.poll(2.0)
     assert frame.ranges[1, 2] == 3.5 and assembler.dropped == {'no_anchor': 1}
+
+
+def test_each_range_keeps_its_receive_time_and_is_published_with_its_age():
+    from epp_ros import contract
+    assembler = FrameAssembler(CONFIG)
+    # Tags in their TDMA slots: tag k's line arrives 20 ms after tag k-1's.
+    for row, tag in enumerate(TAGS[:-1]):
+        records = [RangeRecord(anchor, 5.0, tag=tag) for anchor in ANCHORS]
+        assembler.add_line(records, 10.0 + 0.02 * row, whole=True)
+    assembler.add(RangeRecord(TAGS[1], 7.2, tag=TAGS[0]), 10.01)            # tag-tag
+    (frame,) = assembler.poll(10.2)                                     # the last tag silent
+    expected = np.full((5, 6), np.nan)
+    expected[:4] = (10.0 + 0.02 * np.arange(4))[:, None]
+    np.testing.assert_array_equal(frame.received, expected)
+    assert frame.tag_received[0, 1] == 10.01 and np.isfinite(frame.tag_received).sum() == 1
+    assert frame.stamp == 10.06
+    names, ranges, ages = frame.labelled(CONFIG)
+    assert names == CONFIG.link_names + ['joint1:joint2'] and len(ranges) == len(ages) == 31
+    np.testing.assert_allclose(ages[:24], np.repeat([0.06, 0.04, 0.02, 0.0], 6), atol=1e-12)
+    assert np.isnan(ages[24:30]).all() and np.isnan(ranges[24:30]).all()
+    assert ages[30] == pytest.approx(0.05) and ranges[30] == 7.2
+    # The estimators read back each tag's time of measurement.
+    links = CONFIG.link_frame(names, ranges, ages)
+    np.testing.assert_allclose(links.range_stamps(frame.stamp)[:4], [10.0, 10.02, 10.04, 10.06])
+    assert np.isnan(links.ages[4])
+    assert contract.ages_of(ages, len(names)).shape == (31,)
+
+
+def test_a_raised_stamp_keeps_the_receive_times_so_ages_stay_true():
+    assembler = FrameAssembler(CONFIG)
+    first = full_cycle(assembler, 100.0)
+    (second,) = full_cycle(assembler, 100.0)               # the same read: stamp raised 1 us
+    assert second.stamp > first[0].stamp and (second.received == 100.0).all()
+    _, _, ages = second.labelled(CONFIG)
+    np.testing.assert_allclose(ages, second.stamp - 100.0)
+    assert min(ages) > 0

@@ -20,7 +20,8 @@ message per ranging cycle, as a stamped, labelled range array: ``name[i] = "<tag
 (config names), ``position[i]`` the range in metres or NaN where the pair did not report this
 cycle, then ``"<tag>:<tag>"`` for each tag-tag range reported this cycle (a record whose
 anchor id is another configured tag's), ``header.stamp`` the receive time of the newest
-range, ``velocity`` and ``effort`` empty. It never publishes on ``joint_states``.
+range, ``effort[i]`` how long before the stamp range i was received (s, NaN where missing),
+``velocity`` empty (``epp_ros.contract``). It never publishes on ``joint_states``.
 Diagnostics at 1 Hz on ``/diagnostics``. Stamps, frame timing and ages are read from the
 node's clock, so ``use_sim_time`` (with ``/clock``) is followed.
 """
@@ -37,7 +38,6 @@ from epp_ros.uwb.decoder import LineDecoder
 from epp_ros.uwb.formats import fits_slots, FORMATS
 from epp_ros.uwb.frames import FrameAssembler
 from epp_ros.uwb.source import open_source
-import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
@@ -147,11 +147,7 @@ class UwbDriver(Node):
         message = JointState()
         message.header.stamp = to_time(frame.stamp)
         message.header.frame_id = self.config.frame_id
-        rows, columns = np.nonzero(np.isfinite(frame.tag_ranges))
-        message.name = self.link_names + [self.config.tag_link_name(row, column)
-                                          for row, column in zip(rows, columns)]
-        message.position = ([float(v) for v in frame.ranges.ravel()]
-                            + [float(v) for v in frame.tag_ranges[rows, columns]])
+        message.name, message.position, message.effort = frame.labelled(self.config)
         self.publisher.publish(message)
         self._last_frame = self._now()
 

@@ -15,22 +15,31 @@
 """
 uwb_emulator: a simulated pump whose UWB modules talk like the real ones.
 
-The boom follows a working cycle; each cycle's noisy ranges are written, in any format of
-the registry (:data:`epp_ros.uwb.formats.FORMATS`), to a pseudo-terminal (like a USB-UART)
-or to TCP clients (like the ESP8266 WiFi bridge). The first stdout lines say where:
+The boom follows a working cycle, or with ``--motion joystick`` an operator's joysticks;
+each cycle's noisy ranges are written, in any format of the registry
+(:data:`epp_ros.uwb.formats.FORMATS`), to a pseudo-terminal (like a USB-UART) or to TCP
+clients (like the ESP8266 WiFi bridge). The first stdout lines say where:
 ``PTY <device path>`` or ``TCP <url>``, one per channel (formats that do not name the tag
 need one channel per tag, formats that name no device one per tag-anchor pair; the ids the
 lines leave out follow). With ``--truth`` the true posture is published as
 ``geometry_msgs/PoseArray`` on ``arm_posture/ground_truth`` (base first, then joints 1..p),
 stamped with the node's clock (simulated time with ``use_sim_time``), which also paces the
 cycles and measures ``--duration``.
+
+The ranges carry ``--sigma``/``--nlos``/``--drop`` noise, drawn anew each cycle. With
+``--field NAMES`` (presets of :data:`epp_ros.core.simulate.FIELD_EFFECTS`, comma-separated)
+or ``--motion joystick`` they come from :class:`epp_ros.core.simulate.FieldSimulator`
+instead: the presets' effects, or, without ``--field``, the same noise as above. ``--field``
+replaces the noise options, so giving both is refused.
 """
+import argparse
 import sys
 
 from epp_ros import contract
 from epp_ros.arguments import host_port, integer, number, Parser
 from epp_ros.config import ConfigError, load_pump_config
-from epp_ros.core.simulate import RangeNoise, working_cycle
+from epp_ros.core.simulate import (FIELD_EFFECTS, field_effects, FieldEffects, FieldSimulator,
+                                   make_motion, Motion, MOTIONS, RangeNoise, working_cycle)
 from epp_ros.nodes.common import posture_message, POSTURE_QOS, run_node
 from epp_ros.nodes.stopping import shutdown_on_signals
 from epp_ros.uwb.emulation import channel_devices, corrupt, cycle_lines, PtyOutput, TcpOutput
@@ -39,6 +48,25 @@ from geometry_msgs.msg import PoseArray
 import numpy as np
 from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
+
+
+#: The noise options' defaults (None when parsed: --field refuses them when given).
+NOISE_DEFAULTS = {'sigma': 0.05, 'nlos': 0.0, 'drop': 0.0}
+
+#: Metres: mean NLOS excess of --nlos.
+NLOS_GAMMA = 2.0
+
+#: Seconds of motion played forth and back, so that the boom never jumps.
+PLAYBACK_S = 600.0
+
+
+def field_names(text):
+    """Return ``text`` if it names presets of ``FIELD_EFFECTS`` (an argparse type)."""
+    try:
+        field_effects(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
 
 
 def parse_args(argv):
@@ -57,12 +85,19 @@ def parse_args(argv):
     parser.add_argument('--config', help='pump description (default: the packaged pump.yaml)')
     parser.add_argument('--rate', type=number(0, 1000, low_open=True), default=10.0,
                         help='ranging cycles per second')
-    parser.add_argument('--sigma', type=number(0, 100), default=0.05,
-                        help='range noise, metres')
-    parser.add_argument('--nlos', type=number(0, 1), default=0.0,
-                        help='fraction of NLOS links (exponential excess, mean 2 m)')
-    parser.add_argument('--drop', type=number(0, 1), default=0.0,
-                        help='link dropout probability')
+    parser.add_argument('--sigma', type=number(0, 100),
+                        help=f'range noise, metres (default {NOISE_DEFAULTS["sigma"]:g})')
+    parser.add_argument('--nlos', type=number(0, 1),
+                        help='fraction of NLOS links (exponential excess, mean 2 m; '
+                             'default 0)')
+    parser.add_argument('--drop', type=number(0, 1),
+                        help='link dropout probability (default 0)')
+    parser.add_argument('--field', metavar='NAMES', type=field_names,
+                        help='simulate field effects instead of --sigma/--nlos/--drop: '
+                             'comma-separated presets of ' + ', '.join(FIELD_EFFECTS))
+    parser.add_argument('--motion', choices=MOTIONS, default='working',
+                        help='working: the smooth pouring cycle; joystick: abrupt starts, '
+                             'stops and reversals (default working)')
     parser.add_argument('--garbage', type=number(0, 1), default=0.0,
                         help='probability that a line is corrupted or noise is sent')
     parser.add_argument('--truth', action='store_true',
@@ -71,9 +106,66 @@ def parse_args(argv):
                         help='stop after seconds')
     parser.add_argument('--seed', type=integer(0, 2 ** 63 - 1), default=0)
     args = parser.parse_args(argv)
+    given = [f'--{name}' for name in NOISE_DEFAULTS if getattr(args, name) is not None]
+    if args.field and given:
+        parser.error(f'--field sets the range errors itself: give it or {"/".join(given)}, '
+                     'not both')
+    for name, default in NOISE_DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, default)
     if args.tcp:
         args.host, args.port = args.tcp
     return args
+
+
+class ForthAndBack(Motion):
+    """A motion played forth and back over ``span`` seconds: endless, and never jumping."""
+
+    def __init__(self, motion, span):
+        self.model, self.motion, self.span = motion.model, motion, span
+
+    def angles(self, times):
+        """Return the angles of the motion at ``times`` folded into [0, span], seconds."""
+        times = np.asarray(times, dtype=float)
+        return self.motion.angles(self.span - np.abs(np.mod(times, 2 * self.span) - self.span))
+
+
+def range_source(args, model, rng):
+    """
+    Return the emulated devices' measurements: ``cycle -> (ranges (p, m), joints (p, 3))``.
+
+    Cycle n is at ``n / args.rate`` seconds; ``joints`` is the true posture then, metres.
+    ``rng`` draws the noise; the motion has its own generator seeded with ``args.seed``.
+    """
+    if args.field is None and args.motion == 'working':
+        trajectory = working_cycle(model, PLAYBACK_S, args.rate,
+                                   rng=np.random.default_rng(args.seed))
+        noise = RangeNoise(sigma=args.sigma, nlos_fraction=args.nlos, nlos_gamma=NLOS_GAMMA,
+                           dropout=args.drop)
+        count = len(trajectory.times)
+
+        def measure(cycle):
+            index = cycle % (2 * count - 2)
+            joints = trajectory.joints[index if index < count else 2 * count - 2 - index]
+            return noise.apply(model.ranges(joints), rng)[0], joints
+        return measure
+    motion = ForthAndBack(make_motion(args.motion, model, PLAYBACK_S,
+                                      np.random.default_rng(args.seed)), PLAYBACK_S)
+    simulator = FieldSimulator(model, effects_of(args), rng, frame_period=1.0 / args.rate)
+
+    def measure(cycle):
+        frame = simulator.frame(motion, cycle / args.rate)
+        return frame.ranges, frame.joints
+    return measure
+
+
+def effects_of(args):
+    """Return the field effects of ``--field``, or else of ``--sigma/--nlos/--drop``."""
+    if args.field:
+        return field_effects(args.field)
+    # nlos_duration 0: each link blocked anew each cycle, as RangeNoise does.
+    return FieldEffects(sigma=args.sigma, nlos_fraction=args.nlos, nlos_duration=0.0,
+                        nlos_gamma=NLOS_GAMMA, link_dropout=args.drop)
 
 
 def open_outputs(args, config):
@@ -113,10 +205,7 @@ class UwbEmulator(Node):
         self.args, self.config, self.outputs = args, config, outputs
         self.model = config.model()
         self.rng = np.random.default_rng(args.seed)
-        self.trajectory = working_cycle(self.model, 600.0, args.rate,
-                                        rng=np.random.default_rng(args.seed))
-        self.noise = RangeNoise(sigma=args.sigma, nlos_fraction=args.nlos, nlos_gamma=2.0,
-                                dropout=args.drop)
+        self.measure = range_source(args, self.model, self.rng)
         self.truth = (self.create_publisher(PoseArray, contract.TRUTH.name, POSTURE_QOS)
                       if args.truth else None)
         self.cycle = 0
@@ -131,11 +220,7 @@ class UwbEmulator(Node):
         if self.args.duration is not None and \
                 (now - self.started).nanoseconds * 1e-9 >= self.args.duration:
             raise SystemExit(0)
-        # Play the cycle forth and back: the boom never jumps.
-        count = len(self.trajectory.times)
-        index = self.cycle % (2 * count - 2)
-        joints = self.trajectory.joints[index if index < count else 2 * count - 2 - index]
-        ranges, _ = self.noise.apply(self.model.ranges(joints), self.rng)
+        ranges, joints = self.measure(self.cycle)
         stamp = now.to_msg()
         ending = '' if self.args.no_newline else '\r\n'
         for channel, line in cycle_lines(self.config, ranges, self.args.protocol, self.cycle):

@@ -297,16 +297,16 @@ class PostureEstimatorNode(Node):
             self.counts['clock_jumps'] += 1
             self.estimator.reset()
         try:
-            ranges, tag_ranges, unknown = self.config.link_matrices(message.name,
-                                                                    message.position)
+            frame = self.config.link_frame(message.name, message.position, message.effort)
         except ValueError:
             self.counts['malformed'] += 1
             return
-        self.counts['unknown_links'] += unknown
+        self.counts['unknown_links'] += frame.unknown
         self.last_frame_time = self._now()
         slew, pitches = (None, None) if self.angles is None else self.angles.at(stamp)
-        joints = self.estimator.update(ranges, tag_ranges=tag_ranges, pitches=pitches,
-                                       slew=slew, stamp=stamp)
+        joints = self.estimator.update(frame.ranges, tag_ranges=frame.tag_ranges,
+                                       pitches=pitches, slew=slew, stamp=stamp,
+                                       range_stamps=frame.range_stamps(stamp))
         self._count(self.estimator.last_diagnostics)
         if not self.estimator.last_diagnostics['valid']:   # the estimator's decision
             return

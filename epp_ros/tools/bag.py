@@ -16,7 +16,8 @@
 epp_bag: synthesise, record, replay, evaluate and describe rosbag2 files.
 
     epp_bag synth OUT [--storage mcap|sqlite3] [--duration S] [--sigma M] [--nlos F]
-                      [--drop F] [--seed N] [--config FILE] [--raw PROTOCOL] [--start S]
+                      [--drop F] [--field NAMES] [--motion working|joystick] [--seed N]
+                      [--config FILE] [--raw PROTOCOL] [--start S]
     epp_bag record OUT [--topics T ...] [--duration S] [--storage ...]
     epp_bag play BAG [--rate R] [--loop] [--fast] [--topics T ...] [--clock [HZ]]
     epp_bag eval BAG [--method M] [--config FILE] [--out BAG] [--plot FILE.png] [--json]
@@ -24,6 +25,12 @@ epp_bag: synthesise, record, replay, evaluate and describe rosbag2 files.
 
 A bag that cannot be used (missing, truncated, without the topic, another message type)
 gives one error line and exit status 2.
+
+synth draws each cycle's ranges with ``--sigma``/``--nlos``/``--drop`` noise; with
+``--field NAMES`` (comma-separated presets of ``epp_ros.core.simulate.FIELD_EFFECTS``) or
+``--motion joystick`` from ``epp_ros.core.simulate.FieldSimulator`` instead, with the
+presets' effects or, without ``--field``, the same noise. ``--field`` replaces the noise
+options: giving both is refused.
 """
 import argparse
 import importlib
@@ -36,11 +43,25 @@ from epp_ros import bags, contract
 from epp_ros.arguments import integer, number, Parser
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core import RANGE_METHODS
+from epp_ros.core.simulate import (FIELD_EFFECTS, field_effects, FieldEffects, FieldSimulator,
+                                   make_motion, MOTIONS)
 from epp_ros.uwb.formats import FORMATS
 import numpy as np
 
 DEFAULT_RECORD = [bags.RANGES, bags.POSTURE, bags.TRUTH, contract.DIAGNOSTICS.absolute]
 CLOCK_HZ = 40.0         # /clock rate of `play --clock`, as ros2 bag play's default
+#: synth's noise options' defaults (None when parsed: --field refuses them when given).
+NOISE_DEFAULTS = {'sigma': 0.1, 'nlos': 0.0, 'drop': 0.0}
+NLOS_GAMMA = 2.0        # metres, mean NLOS excess of --nlos, as bags.synthesize's
+
+
+def field_names(text):
+    """Return ``text`` if it names presets of ``FIELD_EFFECTS`` (an argparse type)."""
+    try:
+        field_effects(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
 
 
 def parse_args(argv):
@@ -53,9 +74,18 @@ def parse_args(argv):
     synth.add_argument('--storage', choices=sorted(bags.STORAGES), default='mcap')
     synth.add_argument('--duration', type=number(0, 86400, low_open=True), default=60.0)
     synth.add_argument('--rate', type=number(0, 1000, low_open=True), default=10.0)
-    synth.add_argument('--sigma', type=number(0, 100), default=0.1)
-    synth.add_argument('--nlos', type=number(0, 1), default=0.0)
-    synth.add_argument('--drop', type=number(0, 1), default=0.0)
+    synth.add_argument('--sigma', type=number(0, 100),
+                       help=f'range noise, metres (default {NOISE_DEFAULTS["sigma"]:g})')
+    synth.add_argument('--nlos', type=number(0, 1),
+                       help=f'fraction of NLOS links (exponential excess, mean {NLOS_GAMMA:g} '
+                            'm; default 0)')
+    synth.add_argument('--drop', type=number(0, 1), help='link dropout probability (default 0)')
+    synth.add_argument('--field', metavar='NAMES', type=field_names,
+                       help='simulate field effects instead of --sigma/--nlos/--drop: '
+                            'comma-separated presets of ' + ', '.join(FIELD_EFFECTS))
+    synth.add_argument('--motion', choices=MOTIONS, default='working',
+                       help='working: the smooth pouring cycle; joystick: abrupt starts, '
+                            'stops and reversals (default working)')
     synth.add_argument('--seed', type=integer(0, 2 ** 63 - 1), default=0)
     synth.add_argument('--config')
     synth.add_argument('--raw', choices=list(FORMATS),
@@ -98,16 +128,72 @@ def parse_args(argv):
     show = commands.add_parser('info', help='topics, counts, duration')
     show.add_argument('bag')
     args = parser.parse_args(argv)
+    if args.command == 'synth':
+        _settle_noise_options(synth, args)
     return args
+
+
+def _settle_noise_options(parser, args):
+    """Refuse --field with the noise options it replaces; fill in their defaults."""
+    given = [f'--{name}' for name in NOISE_DEFAULTS if getattr(args, name) is not None]
+    if args.field and given:
+        parser.error(f'--field sets the range errors itself: give it or {"/".join(given)}, '
+                     'not both')
+    for name, default in NOISE_DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, default)
 
 
 def run_synth(args):
     config = load_pump_config(args.config)
-    start_ns = None if args.start is None else int(round(args.start * 1e9))
-    counts = bags.synthesize(args.out, config, args.duration, args.rate, args.sigma,
-                             args.nlos, args.drop, args.seed, args.storage, args.raw,
-                             start_ns=start_ns)
+    start_ns = time.time_ns() if args.start is None else int(round(args.start * 1e9))
+    if args.field or args.motion != 'working':
+        counts = synthesize_field(args, config, start_ns)
+    else:
+        counts = bags.synthesize(args.out, config, args.duration, args.rate, args.sigma,
+                                 args.nlos, args.drop, args.seed, args.storage, args.raw,
+                                 start_ns=start_ns)
     print(f'wrote {args.out}: ' + ', '.join(f'{t} {n}' for t, n in counts.items()))
+
+
+def effects_of(args):
+    """Return the field effects of ``--field``, or else of ``--sigma/--nlos/--drop``."""
+    if args.field:
+        return field_effects(args.field)
+    # nlos_duration 0: each link blocked anew each cycle, as bags.synthesize does.
+    return FieldEffects(sigma=args.sigma, nlos_fraction=args.nlos, nlos_duration=0.0,
+                        nlos_gamma=NLOS_GAMMA, link_dropout=args.drop)
+
+
+def synthesize_field(args, config, start_ns):
+    """
+    Write a field simulation as a bag, with the topics and stamps of ``bags.synthesize``.
+
+    One generator seeded with ``--seed`` draws the motion (a working cycle the same as
+    ``bags.synthesize``'s), then the field. Every cycle gives ``/uwb/ranges``, with each
+    range's measurement time (TDMA slots) as its age, and the true posture at its stamp on
+    ``/arm_posture/ground_truth`` (and, with ``--raw``, the devices' lines on ``/uwb/raw``).
+
+    Returns
+    -------
+    dict
+        Messages written per topic.
+
+    """
+    model = config.model()
+    rng = np.random.default_rng(args.seed)
+    motion = make_motion(args.motion, model, args.duration, rng)
+    simulator = FieldSimulator(model, effects_of(args), rng, frame_period=1.0 / args.rate)
+
+    def cycles():
+        for cycle in range(int(round(args.duration * args.rate))):
+            frame = simulator.frame(motion, cycle / args.rate)
+            ages = np.broadcast_to((frame.stamp - frame.range_stamps)[:, None],
+                                   frame.ranges.shape)
+            yield (start_ns + int(round(frame.stamp * 1e9)), frame.ranges, frame.joints,
+                   np.where(np.isfinite(frame.ranges), ages, np.nan))
+
+    return bags.write_cycles(args.out, config, cycles(), args.storage, args.raw)
 
 
 def run_info(args):

@@ -23,11 +23,13 @@ whose lines carry all of a tag's ranges (``WHOLE_TAG_LINES``) a tag's line also 
 missing pairs, so the cycle closes as soon as every tag has reported. A pair (or a whole
 tag) that reports again before its cycle closed starts the next cycle (the devices have
 moved on), so no range that arrived whole is lost. Unused ranges are counted by reason.
+Each range keeps its receive time, which ``uwb/ranges`` carries as its age (``contract``).
 """
 from collections import Counter
 from dataclasses import dataclass
 import math
 
+from epp_ros import contract
 import numpy as np
 
 __all__ = ['Frame', 'FrameAssembler']
@@ -46,6 +48,37 @@ class Frame:
     rx_power: np.ndarray
     #: (p, p) metres from tag row to tag column, NaN where none
     tag_ranges: np.ndarray
+    #: (p, m) receive time of each range, seconds on the clock of ``stamp``, NaN where none
+    received: np.ndarray
+    #: (p, p) receive time of each tag-tag range, seconds, NaN where none
+    tag_received: np.ndarray
+
+    def labelled(self, config):
+        """
+        Return the frame as ``uwb/ranges`` carries it (``epp_ros.contract``).
+
+        Parameters
+        ----------
+        config : epp_ros.config.PumpConfig
+            The pump: the names of the links.
+
+        Returns
+        -------
+        names : list of str
+            Every ``"<tag>:<anchor>"`` pair, tag-major, then ``"<tag>:<tag>"`` for each
+            tag-tag range reported.
+        ranges : list of float
+            Metres, NaN where a pair did not report.
+        ages : list of float
+            Seconds before ``stamp`` each range was received, NaN where it is missing.
+
+        """
+        rows, columns = np.nonzero(np.isfinite(self.tag_ranges))
+        names = config.link_names + [config.tag_link_name(row, column)
+                                     for row, column in zip(rows, columns)]
+        ranges = np.concatenate([self.ranges.ravel(), self.tag_ranges[rows, columns]])
+        received = np.concatenate([self.received.ravel(), self.tag_received[rows, columns]])
+        return names, ranges.tolist(), contract.range_ages(self.stamp, received).tolist()
 
 
 class FrameAssembler:
@@ -89,6 +122,8 @@ class FrameAssembler:
         self._ranges = np.full(self.shape, np.nan)
         self._rx_power = np.full(self.shape, np.nan)
         self._tag_ranges = np.full((self.shape[0], self.shape[0]), np.nan)
+        self._received = np.full(self.shape, np.nan)
+        self._tag_received = np.full(self._tag_ranges.shape, np.nan)
         self._opened = None
         self._newest = None
         self._tags_done = set()
@@ -97,7 +132,8 @@ class FrameAssembler:
         # Stamps strictly increase: lines of two cycles can arrive in one read.
         stamp = self._newest if self._last_stamp is None else \
             max(self._newest, self._last_stamp + 1e-6)
-        frame = Frame(stamp, self._ranges, self._rx_power, self._tag_ranges)
+        frame = Frame(stamp, self._ranges, self._rx_power, self._tag_ranges, self._received,
+                      self._tag_received)
         self._last_stamp = stamp
         self.frames += 1
         self._reset()
@@ -136,6 +172,7 @@ class FrameAssembler:
         if self._opened is None:
             self._opened = stamp
         self._values(tag_link)[index] = record.range_m
+        (self._tag_received if tag_link else self._received)[index] = stamp
         if record.rx_power_dbm is not None and not tag_link:
             self._rx_power[row, column] = record.rx_power_dbm
         self._newest = stamp if self._newest is None else max(self._newest, stamp)

@@ -1,0 +1,332 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The field simulator: each effect does what it says, alone and together."""
+from epp_ros.core import BoomModel, PostureEstimator
+from epp_ros.core.simulate import (FIELD_EFFECTS, field_effects, FieldEffects, FieldSimulator,
+                                   JoystickMotion, Motion, simulate_field, truck_pump,
+                                   WorkingMotion)
+import numpy as np
+import pytest
+
+#: Standard errors a statistic may be off by before a test calls it wrong.
+TOLERANCE_SE = 5.0
+
+
+class Still(Motion):
+    """A boom that stands still."""
+
+    def __init__(self, model, slew=0.3, pitch=np.radians(30.0)):
+        self.model, self.slew = model, slew
+        self.pitches = np.full(model.n_sections, pitch)
+
+    def angles(self, times):
+        times = np.asarray(times, dtype=float)
+        return (np.full(times.shape, self.slew),
+                np.broadcast_to(self.pitches, times.shape + self.pitches.shape).copy())
+
+
+def many_anchors(count, sections=5, length=4.0, seed=0):
+    """Return a boom with ``count`` anchors scattered around the truck: many links."""
+    anchors = np.random.default_rng(seed).uniform([-15, -15, 0], [15, 15, 5], (count, 3))
+    return BoomModel(np.full(sections, length), [0.0, 0.0, 3.5], anchors)
+
+
+def run(model, effects, frames, motion=None, seed=1, frame_period=0.1):
+    simulator = FieldSimulator(model, effects, np.random.default_rng(seed), frame_period)
+    motion = Still(model) if motion is None else motion
+    return simulator, [simulator.frame(motion, index * frame_period)
+                       for index in range(frames)]
+
+
+def true_ranges(simulator, frame):
+    return np.linalg.norm(frame.joints[:, None] - simulator.true_anchors[None], axis=-1)
+
+
+def stack(frames, name):
+    return np.array([getattr(frame, name) for frame in frames])
+
+
+def chain_statistics(states):
+    """Return the fraction of time bad and the mean bad run in frames, of (T, ...) states."""
+    states = states.reshape(len(states), -1)
+    entries = (states[1:] & ~states[:-1]).sum() + states[0].sum()
+    return states.mean(), states.sum() / entries
+
+
+def markov_run_frames(fraction, duration, frame_period):
+    """Return the mean bad run in frames of the sampled chain: 1 / P(bad -> good)."""
+    memory = duration * (1 - fraction)
+    decay = np.exp(-frame_period / memory) if memory > 0 else 0.0
+    return 1.0 / ((1 - fraction) * (1 - decay))
+
+
+def markov_fraction_se(fraction, duration, seconds, chains):
+    """Return the standard error of the time-averaged fraction of independent chains."""
+    memory = duration * (1 - fraction)
+    return np.sqrt(2 * fraction * (1 - fraction) * memory / seconds / chains)
+
+
+def test_range_sigma_grows_with_distance_as_asked():
+    model = truck_pump(n_anchors=7)
+    sigma0, slope, count = 0.05, 0.02, 2000
+    simulator, frames = run(model, FieldEffects(sigma=sigma0, sigma_per_metre=slope), count)
+    distances = true_ranges(simulator, frames[0]).ravel()
+    errors = (stack(frames, 'ranges') - true_ranges(simulator, frames[0])).reshape(count, -1)
+    spread = errors.std(axis=0, ddof=1)
+    se = spread / np.sqrt(2 * (count - 1))
+    assert np.ptp(distances) > 10.0                     # the slope is measurable
+    assert np.all(np.abs(errors.mean(axis=0)) < TOLERANCE_SE * spread / np.sqrt(count))
+    assert np.all(np.abs(spread - (sigma0 + slope * distances)) < TOLERANCE_SE * se)
+    # Weighted regression of the spread on the distance.
+    design = np.column_stack([np.ones_like(distances), distances]) / se[:, None]
+    fit, *_ = np.linalg.lstsq(design, spread / se, rcond=None)
+    covariance = np.linalg.inv(design.T @ design)
+    assert abs(fit[0] - sigma0) < TOLERANCE_SE * np.sqrt(covariance[0, 0])
+    assert abs(fit[1] - slope) < TOLERANCE_SE * np.sqrt(covariance[1, 1])
+
+
+def test_offsets_are_constant_per_device_and_add_up():
+    model = truck_pump()
+    effects = FieldEffects(sigma=0.0, tag_offset=0.1, anchor_offset=0.1)
+    simulator, frames = run(model, effects, 30, WorkingMotion(model, np.random.default_rng(2)))
+    expected = simulator.tag_offsets[:, None] + simulator.anchor_offsets[None, :]
+    for frame in frames:
+        np.testing.assert_allclose(frame.ranges - true_ranges(simulator, frame), expected,
+                                   atol=1e-9)
+    draws = [FieldSimulator(model, effects, np.random.default_rng(seed))
+             for seed in range(400)]
+    for offsets in (np.ravel([s.tag_offsets for s in draws]),
+                    np.ravel([s.anchor_offsets for s in draws])):
+        assert abs(offsets.std() - 0.1) < TOLERANCE_SE * 0.1 / np.sqrt(2 * offsets.size)
+        assert abs(offsets.mean()) < TOLERANCE_SE * 0.1 / np.sqrt(offsets.size)
+    assert not FieldSimulator(model).tag_offsets.any()                # off by default
+
+
+def test_moved_anchors_are_ranged_to_and_only_the_moving_ones_move():
+    model = truck_pump()
+    simulator, frames = run(model, FieldEffects(sigma=0.0, anchor_shift=0.2), 3)
+    assert model.base_anchor() == 0 and simulator.moving_anchors == (1, 2, 3, 4, 5)
+    np.testing.assert_array_equal(simulator.true_anchors[0], model.anchors[0])
+    assert np.all(np.linalg.norm(simulator.true_anchors[1:] - model.anchors[1:], axis=1) > 0)
+    for frame in frames:
+        np.testing.assert_allclose(frame.ranges, true_ranges(simulator, frame), atol=1e-12)
+        assert not np.allclose(frame.ranges[:, 1:], model.ranges(frame.joints)[:, 1:],
+                               atol=1e-3)
+    only = FieldSimulator(model, FieldEffects(anchor_shift=0.2, moving_anchors=(2,)))
+    moved = np.linalg.norm(only.true_anchors - model.anchors, axis=1) > 0
+    np.testing.assert_array_equal(moved, np.arange(6) == 2)
+    shifts = np.ravel([FieldSimulator(model, FieldEffects(anchor_shift=0.2),
+                                      np.random.default_rng(seed)).true_anchors[1:]
+                       - model.anchors[1:] for seed in range(300)])
+    assert abs(shifts.std() - 0.2) < TOLERANCE_SE * 0.2 / np.sqrt(2 * shifts.size)
+    with pytest.raises(ValueError, match='moving_anchors'):
+        FieldSimulator(model, FieldEffects(anchor_shift=0.2, moving_anchors=(6,)))
+
+
+def test_persistent_nlos_has_the_asked_fraction_duration_and_excess():
+    model = many_anchors(60)
+    fraction, duration, gamma, count, period = 0.2, 3.0, 1.0, 3000, 0.1
+    effects = FieldEffects(sigma=0.0, nlos_fraction=fraction, nlos_duration=duration,
+                           nlos_gamma=gamma)
+    simulator, frames = run(model, effects, count, frame_period=period)
+    blocked = stack(frames, 'nlos')
+    links = blocked[0].size
+    seen_fraction, seen_run = chain_statistics(blocked)
+    assert abs(seen_fraction - fraction) < TOLERANCE_SE * markov_fraction_se(
+        fraction, duration, count * period, links)
+    expected_run = markov_run_frames(fraction, duration, period)
+    entries = blocked.sum() / seen_run
+    assert abs(seen_run - expected_run) < TOLERANCE_SE * expected_run / np.sqrt(entries)
+    assert abs(expected_run * period - duration) < period          # the continuous mean
+    # The excess: exponential with mean gamma on blocked links, drawn anew each frame.
+    excess = stack(frames, 'ranges') - true_ranges(simulator, frames[0])
+    np.testing.assert_array_equal(excess[~blocked], 0.0)
+    assert excess[blocked].min() > 0
+    assert abs(excess[blocked].mean() - gamma) < TOLERANCE_SE * gamma / np.sqrt(blocked.sum())
+    both = blocked[1:] & blocked[:-1]
+    assert abs(np.corrcoef(excess[1:][both], excess[:-1][both])[0, 1]) < \
+        TOLERANCE_SE / np.sqrt(both.sum())
+    # The chains start in their stationary distribution.
+    first = np.ravel([FieldSimulator(model, effects, np.random.default_rng(seed))
+                      .frame(Still(model), 0.0).nlos for seed in range(40)])
+    assert abs(first.mean() - fraction) < TOLERANCE_SE * np.sqrt(
+        fraction * (1 - fraction) / first.size)
+
+
+def test_nlos_without_duration_is_drawn_anew_each_frame():
+    model = many_anchors(60)
+    _, frames = run(model, FieldEffects(nlos_fraction=0.2, nlos_duration=0.0), 500)
+    blocked = stack(frames, 'nlos')
+    _, seen_run = chain_statistics(blocked)
+    entries = blocked.sum() / seen_run
+    assert abs(seen_run - 1.25) < TOLERANCE_SE * 1.25 / np.sqrt(entries)   # 1 / (1 - f)
+
+
+def test_dropouts_silence_whole_rows_with_the_asked_fraction_and_duration():
+    sections, fraction, duration, count, period = 50, 0.1, 3.0, 5000, 0.3
+    model = BoomModel(np.full(sections, 0.4), [0.0, 0.0, 3.5],
+                      [[0, 0, 3.5], [5, 4, 0.4], [5, -4, 0.4], [-5, 0, 2.0]])
+    effects = FieldEffects(dropout_fraction=fraction, dropout_duration=duration)
+    _, frames = run(model, effects, count, frame_period=period)
+    ranges, silent = stack(frames, 'ranges'), stack(frames, 'silent')
+    np.testing.assert_array_equal(np.isnan(ranges), np.repeat(silent[..., None], 4, axis=2))
+    seen_fraction, seen_run = chain_statistics(silent)
+    assert abs(seen_fraction - fraction) < TOLERANCE_SE * markov_fraction_se(
+        fraction, duration, count * period, sections)
+    expected_run = markov_run_frames(fraction, duration, period)
+    entries = silent.sum() / seen_run
+    assert abs(seen_run - expected_run) < TOLERANCE_SE * expected_run / np.sqrt(entries)
+
+
+def test_link_dropouts_are_independent_single_ranges():
+    model = many_anchors(40)
+    _, frames = run(model, FieldEffects(link_dropout=0.3), 400)
+    missing = np.isnan(stack(frames, 'ranges'))
+    assert abs(missing.mean() - 0.3) < TOLERANCE_SE * np.sqrt(0.21 / missing.size)
+    again = missing[1:][missing[:-1]].mean()                    # no memory
+    assert abs(again - 0.3) < TOLERANCE_SE * np.sqrt(0.21 / missing[:-1].sum())
+    assert not missing.all(axis=2).any()                        # no whole rows
+
+
+def test_tdma_ranges_each_tag_at_its_slot_time():
+    model = truck_pump()
+    motion = JoystickMotion(model, 10.0, np.random.default_rng(3))
+    simulator = FieldSimulator(model, FieldEffects(sigma=0.0, tdma=True), frame_period=0.1)
+    for stamp in (1.0, 1.1, 1.2):
+        frame = simulator.frame(motion, stamp)
+        np.testing.assert_allclose(frame.range_stamps,
+                                   stamp - 0.1 + np.arange(1, 6) * 0.02, rtol=0, atol=1e-12)
+        assert frame.range_stamps[-1] == stamp
+        for tag, slot in enumerate(frame.range_stamps):
+            np.testing.assert_allclose(frame.ranges[tag],
+                                       model.ranges(motion.joints(slot))[tag], rtol=1e-12)
+        np.testing.assert_allclose(frame.joints, motion.joints(stamp), rtol=1e-12)
+        assert not np.allclose(frame.ranges[:-1], model.ranges(frame.joints)[:-1], atol=1e-3)
+    plain = FieldSimulator(model, FieldEffects(sigma=0.0), frame_period=0.1)
+    frame = plain.frame(motion, 1.0)
+    np.testing.assert_array_equal(frame.range_stamps, np.full(5, 1.0))
+    np.testing.assert_allclose(frame.ranges, model.ranges(frame.joints), rtol=1e-12)
+
+
+def test_inclinometer_bias_varies_slowly_with_the_asked_spread():
+    model, bias, period = truck_pump(), np.radians(2.0), 120.0
+    effects = FieldEffects(inclinometers=True, pitch_sigma=0.0, inclinometer_bias=bias,
+                           bias_period=period)
+    simulator, frames = run(model, effects, 1200, WorkingMotion(model), frame_period=0.1)
+    errors = stack(frames, 'pitches') - stack(frames, 'pitches_true')
+    np.testing.assert_allclose(errors, [simulator.inclinometer_bias(f.stamp) for f in frames],
+                               atol=1e-12)
+    # Slow: per frame it changes by at most 2 pi a T / period, yet it does change.
+    fastest = np.abs(simulator.bias_amplitude) * 2 * np.pi * 0.1 / period
+    assert np.all(np.abs(np.diff(errors, axis=0)) <= fastest + 1e-12)
+    assert np.all(np.ptp(errors, axis=0) > 0.5 * np.abs(simulator.bias_amplitude))
+    # At a random time, over runs and sections, its standard deviation is the asked one.
+    rng = np.random.default_rng(4)
+    samples = np.ravel([FieldSimulator(model, effects, np.random.default_rng(seed))
+                        .inclinometer_bias(rng.uniform(0, 1000)) for seed in range(600)])
+    spread = samples.std()
+    se = np.std(samples ** 2) / (2 * spread * np.sqrt(samples.size))
+    assert abs(spread - bias) < TOLERANCE_SE * se
+
+
+def test_angle_sensor_noise_and_inputs():
+    model = truck_pump()
+    effects = FieldEffects(inclinometers=True, slew_encoder=True)
+    _, frames = run(model, effects, 2000)
+    pitch_errors = (stack(frames, 'pitches') - stack(frames, 'pitches_true')).ravel()
+    sigma = effects.pitch_sigma
+    assert abs(pitch_errors.std() - sigma) < TOLERANCE_SE * sigma / np.sqrt(2 * 10000)
+    slew_errors = stack(frames, 'slew') - stack(frames, 'slew_true')
+    assert np.abs(slew_errors).max() <= effects.slew_error
+    uniform_sigma = effects.slew_error / np.sqrt(3.0)
+    assert abs(slew_errors.std() - uniform_sigma) < \
+        TOLERANCE_SE * uniform_sigma * np.sqrt(0.8 / 4 / 2000)        # kurtosis of uniform
+    inputs = frames[-1].inputs()
+    assert set(inputs) == {'ranges', 'stamp', 'range_stamps', 'pitches', 'slew'}
+    _, plain = run(model, FieldEffects(), 1)
+    assert set(plain[0].inputs()) == {'ranges', 'stamp', 'range_stamps'}
+    assert plain[0].pitches is None and plain[0].slew is None
+    estimator = PostureEstimator(model, 'chain')
+    joints = estimator.update(**frames[-1].inputs())
+    assert joints.shape == (5, 3)
+
+
+@pytest.mark.parametrize('field, value', [
+    ('sigma', -0.1), ('sigma', float('nan')), ('sigma_per_metre', float('inf')),
+    ('tag_offset', -1.0), ('anchor_offset', 'x'), ('anchor_shift', -0.2),
+    ('nlos_fraction', 1.5), ('nlos_duration', -1.0), ('nlos_gamma', -1.0),
+    ('dropout_fraction', -0.1), ('dropout_duration', float('nan')), ('link_dropout', 2.0),
+    ('pitch_sigma', -1.0), ('inclinometer_bias', -1.0), ('bias_period', 0.0),
+    ('slew_error', float('inf')), ('tdma', 'yes'), ('inclinometers', 1),
+    ('slew_encoder', None), ('moving_anchors', (-1,)), ('moving_anchors', (1, 1)),
+    ('moving_anchors', (1.5,)), ('moving_anchors', 3),
+])
+def test_field_effects_refuse_bad_values_naming_the_field(field, value):
+    with pytest.raises(ValueError, match=f'FieldEffects.{field} '):
+        FieldEffects(**{field: value})
+
+
+def test_field_effects_defaults_are_off_and_frozen():
+    effects = FieldEffects(moving_anchors=[2, 3])
+    assert effects.moving_anchors == (2, 3)
+    with pytest.raises(AttributeError):
+        effects.sigma = 1.0
+    model = truck_pump()
+    simulator, frames = run(model, FieldEffects(sigma=0.0), 5)
+    for frame in frames:
+        np.testing.assert_allclose(frame.ranges, model.ranges(frame.joints), rtol=1e-12)
+        assert not frame.nlos.any() and not frame.silent.any()
+
+
+def test_presets_and_their_combinations():
+    default = FieldEffects()
+    assert set(FIELD_EFFECTS) == {'sigma_high', 'sigma_low', 'sigma_distance',
+                                  'nlos_persistent', 'tdma', 'dropouts', 'offsets',
+                                  'anchors_moved', 'inclinometer_bias'}
+    assert all(preset != default for preset in FIELD_EFFECTS.values())
+    combined = field_effects('nlos_persistent, tdma,offsets')
+    assert (combined.nlos_fraction, combined.nlos_duration, combined.nlos_gamma) == \
+        (0.2, 3.0, 1.0)
+    assert combined.tdma and combined.tag_offset == combined.anchor_offset == 0.1
+    assert combined.sigma == default.sigma and combined.dropout_fraction == 0.0
+    assert field_effects(['sigma_high', 'sigma_low']).sigma == 0.3        # first one wins
+    assert field_effects(['sigma_low', 'sigma_high']).sigma == 0.01
+    distance = field_effects('sigma_distance')
+    assert (distance.sigma, distance.sigma_per_metre) == (0.03, 0.01)
+    bias = field_effects('inclinometer_bias')
+    assert bias.inclinometers and bias.inclinometer_bias == pytest.approx(np.radians(2.0))
+    assert field_effects('dropouts').dropout_fraction == 0.1
+    assert field_effects('anchors_moved').anchor_shift == 0.2
+    for names in ('sigma_high,fog', ['nope'], '', []):
+        with pytest.raises(ValueError, match='valid: sigma_high, sigma_low'):
+            field_effects(names)
+
+
+def test_simulate_field_stamps_and_reproducibility():
+    model = truck_pump()
+    motion = WorkingMotion(model, np.random.default_rng(5))
+    effects = field_effects('nlos_persistent,dropouts,offsets,sigma_distance')
+    frames = simulate_field(model, motion, 1.0, effects, np.random.default_rng(6))
+    np.testing.assert_allclose([f.stamp for f in frames], np.arange(10) * 0.1)
+    again = simulate_field(model, motion, 1.0, effects, np.random.default_rng(6))
+    for first, second in zip(frames, again):
+        np.testing.assert_array_equal(first.ranges, second.ranges)
+    assert len(simulate_field(model, motion, 2.0, frame_period=0.25)) == 8
+    simulator = FieldSimulator(model)
+    simulator.frame(motion, 1.0)
+    with pytest.raises(ValueError, match='increase'):
+        simulator.frame(motion, 1.0)
+    with pytest.raises(ValueError, match='frame_period'):
+        FieldSimulator(model, frame_period=0.0)
