@@ -42,8 +42,8 @@ from epp_ros.core.simulate import (AngleNoise, observe, random_posture, RangeNoi
                                    xie3dim)
 import numpy as np
 
-from .bench import (commit, markdown, method_estimate, run_frames, summarize, tracking_suite,
-                    xie3dim_suite)
+from .bench import (commit, markdown, method_estimate, published_options, run_frames, summarize,
+                    tracking_suite, xie3dim_suite)
 
 #: Table 1 of the paper: absolute arm-length error per segment (as printed, its segment 1
 #: may be the tip: it numbers points from the tip) and CPU seconds (MATLAB).
@@ -81,7 +81,8 @@ def paper_manipulator():
 
 
 def _estimators(model, methods, options):
-    return {m: PostureEstimator(model, m, **options.get(m, {})) for m in methods}
+    return {m: PostureEstimator(model, m, **published_options(m, options.get(m, {})))
+            for m in methods}
 
 
 def noise_sweep(kind, levels, runs, methods, seed):
