@@ -61,6 +61,13 @@ def report(diagnostics, lengths):
         values['predicted RMSE [m]'] = f'{diagnostics["predicted_rmse"]:.4f}'
         for k, std in enumerate(diagnostics['joint_std'], start=1):
             values[f'joint {k} predicted std [m]'] = f'{std:.4f}'
+    noise = diagnostics.get('noise')
+    if noise is not None:                   # learned while running, or as told
+        values['range sigma [m]'] = f'{noise.sigma:.4f}'
+        values['range sigma per metre'] = f'{noise.eta:.5f}'
+        values['NLOS fraction'] = f'{noise.nlos_fraction:.3f}'
+        values['NLOS mean excess [m]'] = f'{noise.nlos_gamma:.3f}'
+        values['noise learned from links'] = str(noise.links)
     if 'nlos_links' in diagnostics:
         values['NLOS links'] = str(int(np.sum(diagnostics['nlos_links'])))
     if 'chi_square' in diagnostics:

@@ -96,8 +96,8 @@ def test_cold_start_finds_the_global_fit_with_blocked_links():
                                      nlos_gamma=GAMMA)
         estimator.update(frame['ranges'])
         info = estimator.last_diagnostics
-        found = chain._loss(residuals.residuals(np.r_[info['slew'], info['pitches']])[0],
-                            residuals)[0]
+        found = chain.loss(residuals.residuals(np.r_[info['slew'], info['pitches']])[0],
+                           residuals)[0]
         from_truth = chain.fit(np.r_[slew, pitches], residuals)[1]
         assert found <= from_truth + 1e-6
         flagged = info['nlos_links']

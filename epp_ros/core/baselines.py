@@ -51,7 +51,7 @@ class _PerTagMethod:
                 return False
         return True
 
-    def reset(self):
+    def reset(self, joints=None):
         """No state between frames."""
 
 
@@ -88,6 +88,7 @@ class TPSMMethod:
 
     prior = 'unused'
     inputs = ('pitches', 'slew')
+    holds_chain = True          # the angles are the chain's
 
     def __init__(self, model):
         self.model = model
@@ -95,7 +96,7 @@ class TPSMMethod:
     def enough_information(self, measurements):
         return bool(np.isfinite(measurements.pitches).all() and np.isfinite(measurements.slew))
 
-    def reset(self):
+    def reset(self, joints=None):
         """No state between frames."""
 
     def solve(self, measurements, prior, warm=False):

@@ -36,6 +36,7 @@ fitted to the end, and from the best fit each joint is folded the other way and 
 tried at its other well-fitting pitches until nothing fits better.
 """
 from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -73,6 +74,15 @@ def canonical_angles(psi, pivot_offset=0.0):
     if pivot_offset == 0.0 and np.cos(psi[1]) < 0:
         psi = np.r_[psi[0] + np.pi, np.pi - psi[1:]]
     return wrap_angle(psi)
+
+
+class Fit(NamedTuple):
+    """A Levenberg–Marquardt fit: where it stopped and whether it had converged there."""
+
+    psi: np.ndarray             #: (p + 1,) slew and pitches, radians
+    cost: float                 #: the loss there
+    iterations: int
+    converged: bool             #: stopped by its tolerances, not by ``max_iter``
 
 
 class SearchExhausted(RuntimeError):
@@ -119,6 +129,7 @@ class ChainMethod:
     """
 
     prior = 'optional'          # one more start; the cold start finds the global solution
+    holds_chain = True
     #: How far, metres, a joint may sink below ``lowest_joint`` per unit of cost.
     GROUND_SIGMA = 0.05
     inputs = ('ranges', 'tag_ranges', 'pitches', 'slew')
@@ -144,6 +155,20 @@ class ChainMethod:
         self._carry = ([], 0)           # an exhausted search: its best fits, starts screened
         self._link_loss = (None, None)      # (Residuals, its ranges' bound NLOS loss)
 
+    def tune(self, *, sigma, eta, nlos_fraction, nlos_gamma, tag_sigma=None):
+        """
+        Take new range noise values (learned while running) from the next frame on.
+
+        ``tag_sigma`` None keeps the tag-tag ranges' sigma.
+        """
+        mixture = NlosMixture(float(nlos_fraction), float(nlos_gamma))
+        noise = SensorNoise(float(sigma), self.noise.tag_sigma if tag_sigma is None
+                            else float(tag_sigma), self.noise.pitch_sigma, self.noise.slew_sigma)
+        if not (np.isfinite(eta) and eta >= 0):
+            raise ValueError(f'eta: must be a finite number >= 0, got {eta!r}')
+        self.noise, self.nlos, self.eta = noise, mixture, float(eta)
+        self._link_loss = (None, None)
+
     def enough_information(self, measurements):
         """
         Judge whether a frame can fix the p + 1 unknowns.
@@ -156,12 +181,12 @@ class ChainMethod:
                     or np.isfinite(measurements.pitches[-1]))
         return bool(tip_seen) and measurements.count() >= self.model.n_sections + 1
 
-    def reset(self):
+    def reset(self, joints=None):
         """Forget an unfinished search (the warm start is the prior the chain is given)."""
         self._carry = ([], 0)
 
     # -- the least-squares problem --------------------------------------------------------
-    def _loss(self, scaled, residuals):
+    def loss(self, scaled, residuals):
         """
         Cost, its slope in the scaled residuals, Gauss-Newton weights, NLOS probabilities.
 
@@ -188,7 +213,7 @@ class ChainMethod:
         the ground, which a fit must respect rather than be discarded for.
         """
         scaled, geometry = residuals.residuals(psi)
-        cost, slope, weights, _ = self._loss(scaled, residuals)
+        cost, slope, weights, _ = self.loss(scaled, residuals)
         heights = geometry[2][:, 2]
         depth = np.maximum(self.lowest_joint - heights, 0.0) / self.GROUND_SIGMA
         return cost + 0.5 * float(depth @ depth), slope, weights, (geometry, depth)
@@ -207,7 +232,7 @@ class ChainMethod:
         return normal, gradient
 
     def fit(self, psi, residuals, max_iter=None):
-        """Levenberg–Marquardt from ``psi`` on a :class:`Residuals`; (psi, cost, iterations)."""
+        """Return the Levenberg–Marquardt :class:`Fit` from ``psi`` on a :class:`Residuals`."""
         max_iter = self.max_iter if max_iter is None else max_iter
         cost, slope, weights, state = self._evaluate(psi, residuals)
         damping = 1e-6
@@ -222,15 +247,15 @@ class ChainMethod:
                 if trial_cost <= cost or damping > 1e10:
                     break
                 damping *= 4.0
-            if trial_cost > cost:
-                return psi, cost, iteration
+            if trial_cost > cost:           # no step lowers the cost: a minimum
+                return Fit(psi, cost, iteration, True)
             stalled = cost - trial_cost <= 1e-6 * abs(trial_cost)     # of a chi-square ~ n
             psi, cost, slope, weights = trial, trial_cost, trial_slope, trial_weights
             state = trial_state
             damping = max(damping / 3.0, 1e-9)
             if stalled or np.max(np.abs(step)) <= self.tol:
-                return psi, cost, iteration
-        return psi, cost, max_iter
+                return Fit(psi, cost, iteration, True)
+        return Fit(psi, cost, max_iter, False)
 
     def cost(self, psi, residuals):
         """Return the fitted loss at angles ``psi`` (p + 1,) on a :class:`Residuals`."""
@@ -322,7 +347,7 @@ class ChainMethod:
         starts.extend(np.c_[slews[slew_index], pitches[slew_index, beam_index]])
         return starts
 
-    def _tip_alternatives(self, psi, measurements, range_sigma, candidates=72, most=2):
+    def tip_alternatives(self, psi, measurements, range_sigma, candidates=72, most=2):
         """
         Return the same posture with the tip section at its other well-fitting pitches.
 
@@ -346,7 +371,7 @@ class ChainMethod:
         minima = minima[far][np.argsort(cost[minima[far]])][:most]
         return [np.r_[psi[:-1], grid[i]] for i in minima]
 
-    def _folds(self, psi):
+    def folds(self, psi):
         """
         Return the same posture with one joint folded the other way.
 
@@ -378,7 +403,7 @@ class ChainMethod:
 
     def _search(self, measurements, residuals, guess, range_sigma, finish=3, rounds=3):
         """
-        Global fit from scratch: (psi, cost, iterations, the other fits it tried).
+        Global fit from scratch: its :class:`Fit`, and the other fits it tried (psi each).
 
         Every start takes a few iterations; the best ``finish`` are fitted to convergence.
         From the best, single-joint folds, single-section reversals and the tip's other fits
@@ -394,35 +419,36 @@ class ChainMethod:
         for done, start in enumerate(order):
             if iterations >= self.search_budget:
                 self._give_up(screened, resume + max(done - len(carried), 0))
-            psi, cost, used = self.fit(start, residuals, max_iter=self.screen_iterations)
+            psi, cost, used, _ = self.fit(start, residuals, max_iter=self.screen_iterations)
             screened.append((cost, psi))
             iterations += used
         self._carry = ([], 0)
         finished = []
         for _, start in sorted(screened, key=lambda t: t[0])[:finish]:
-            psi, cost, used = self.fit(start, residuals)
-            finished.append((cost, psi))
-            iterations += used
-        cost, psi = min(finished, key=lambda t: t[0])
-        tried = [fit for _, fit in screened + finished]
+            fit = self.fit(start, residuals)
+            finished.append(fit)
+            iterations += fit.iterations
+        best = min(finished, key=lambda fit: fit.cost)
+        psi, cost, converged = best.psi, best.cost, best.converged
+        tried = [psi for _, psi in screened] + [fit.psi for fit in finished]
         for _ in range(rounds):
             improved = False
-            for start in (self._folds(psi) + self._reversals(psi)
-                          + self._tip_alternatives(psi, measurements, range_sigma)):
+            for start in (self.folds(psi) + self._reversals(psi)
+                          + self.tip_alternatives(psi, measurements, range_sigma)):
                 if iterations >= 2 * self.search_budget:    # a fit is in hand: keep it
                     break
                 # Screened like the starts: only a move already fitting better is finished.
-                trial, trial_cost, used = self.fit(start, residuals,
-                                                   max_iter=2 * self.screen_iterations)
+                trial, trial_cost, used, _ = self.fit(start, residuals,
+                                                      max_iter=2 * self.screen_iterations)
                 iterations += used
                 tried.append(trial)
                 if trial_cost < cost - 1e-9:
-                    trial, trial_cost, used = self.fit(trial, residuals)
+                    trial, trial_cost, used, converged = self.fit(trial, residuals)
                     iterations += used
                     psi, cost, improved = trial, trial_cost, True
             if not improved:
                 break
-        return psi, cost, iterations, tried
+        return Fit(psi, cost, iterations, converged), tried
 
     def _give_up(self, screened, resume, keep=3):
         """Stop a search at its budget, keeping its best fits and where to go on from."""
@@ -451,23 +477,22 @@ class ChainMethod:
             distances = np.nan_to_num(measurements.ranges)
             noise = replace(noise, range_sigma=np.hypot(noise.range_sigma, self.eta * distances))
         residuals = Residuals(self.model, measurements, noise)
-        total_iterations = 0
-        lost = True
-        others = []
+        fit, lost, iterations, others = None, True, 0, []
         if warm and prior is not None:
             slew, pitches = angles_from_joints(self.model, prior)
-            psi, cost, total_iterations = self.fit(np.r_[slew, pitches], residuals)
-            lost = cost > 12.5 * residuals.size       # worse than 5 sigma RMS per residual
+            fit = self.fit(np.r_[slew, pitches], residuals)
+            iterations = fit.iterations
+            lost = fit.cost > 12.5 * residuals.size     # worse than 5 sigma RMS per residual
         if lost:
             range_sigma = np.broadcast_to(noise.range_sigma, measurements.ranges.shape)
-            found, found_cost, iterations, others = self._search(
-                measurements, residuals, None if warm else prior, range_sigma)
-            total_iterations += iterations
-            if not warm or found_cost < cost:
-                psi, cost = found, found_cost
-        psi = canonical_angles(psi, self.model.pivot_offset)
+            found, others = self._search(measurements, residuals, None if warm else prior,
+                                         range_sigma)
+            iterations += found.iterations
+            if fit is None or found.cost < fit.cost:
+                fit = found
+        psi = canonical_angles(fit.psi, self.model.pivot_offset)
         joints = self.model.forward_kinematics(psi[0], psi[1:])
-        info = {'iterations': total_iterations, 'converged': True, 'slew': float(psi[0]),
+        info = {'iterations': iterations, 'converged': fit.converged, 'slew': float(psi[0]),
                 'pitches': psi[1:].copy(), 'searched': lost,
                 # the search's runners-up: the integrity checks ask if they fit as well
                 'alternatives': self.model.forward_kinematics(

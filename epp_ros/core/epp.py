@@ -148,7 +148,7 @@ class _EDMMethod:
                           else (self.rank + 1, 3 * p))
         return valid.sum(axis=1).min() >= per_tag and valid.sum() >= total
 
-    def reset(self):
+    def reset(self, joints=None):
         """Do nothing: the EDM methods keep no state of their own."""
 
     def _known_columns(self, ranges):

@@ -35,15 +35,18 @@ from .chain import ChainMethod
 from .epp import CEPP, EPP1, EPP2
 from .integrity import ERROR, Integrity, IntegrityLimits, OK, Thresholds
 from .measurements import Measurements, plausible_limits, SensorNoise
+from .methods import FrameResult
 from .multilateration import cold_start_guess
 from .nlos import NlosMixture
+from .noise_learning import frame_scale, NoiseLearner, RangeNoiseEstimate
+from .track import TrackMethod
 
 __all__ = ['PostureEstimator', 'METHODS', 'RANGE_METHODS', 'ESTIMATOR_OPTIONS',
            'accepted_options']
 
 
 METHODS = {'epp1': EPP1, 'epp2': EPP2, 'cepp': CEPP, 'chain': ChainMethod,
-           'srls': SRLSMethod, 'sdp': SDPMethod, 'tpsm': TPSMMethod}
+           'track': TrackMethod, 'srls': SRLSMethod, 'sdp': SDPMethod, 'tpsm': TPSMMethod}
 
 #: Methods that work from UWB ranges alone (what the estimator node receives).
 RANGE_METHODS = [name for name, cls in METHODS.items() if 'ranges' in cls.inputs]
@@ -64,7 +67,8 @@ def accepted_options(method):
 def _constructor_names(method):
     """Names of the options the method's own constructor (and its bases') take."""
     names = set()
-    for cls in METHODS[method].__mro__:
+    cls = METHODS[method]
+    for cls in cls.__mro__ + getattr(cls, 'delegates', ()):
         if '__init__' in vars(cls):
             names |= {name for name, parameter in
                       inspect.signature(cls.__init__).parameters.items()
@@ -119,6 +123,11 @@ class PostureEstimator:
     reset_after_failures : int
         Frames in a row that could not be solved or did not fit, after which the warm
         start is dropped.
+    learn_noise : bool
+        Learn the range noise (``sigma``, ``eta``, ``nlos_fraction``, ``nlos_gamma``) from
+        the residuals while running (``core.noise_learning``), starting from the told
+        values; the solver and the integrity checks then use what was learned. False: the
+        told values stay (benchmarks that tell the truth).
     **options
         What the estimator is told, for every method (``ESTIMATOR_OPTIONS``): ``sigma``
         (tag-anchor range standard deviation, 0.1 m), ``eta`` (multiplicative range
@@ -129,13 +138,17 @@ class PostureEstimator:
         ``anchor_weight`` (inf: anchor-anchor distances fixed, the default; a number:
         weighted), ``tol``, ``max_iter``; CEPP also ``predict_slew`` (default true; false:
         the paper's plane from the previous pose), ``slew_iterations`` (re-solves after
-        refining the slew, default 0), ``slew_tol`` and ``clip_weight``; chain:
-        ``tol``, ``max_iter``, ``slew_starts``, ``screen_iterations``; sdp: ``solver``.
+        refining the slew, default 0), ``slew_tol``, ``clip_weight`` and
+        ``irls_iterations`` (NLOS reweighting, default 2; 0 is the paper's CEPP); chain:
+        ``tol``, ``max_iter``, ``slew_starts``, ``screen_iterations``; track: the chain's,
+        ``process_noise`` (starting acceleration spectral density, rad^2/s^3),
+        ``adapt_process_noise``, ``max_rate``, ``max_hypotheses``; sdp: ``solver``.
 
     Attributes
     ----------
-    last_diagnostics : dict
-        Of the last :meth:`update`: ``status`` (``"ok"``, ``"insufficient_data"``,
+    last_diagnostics : FrameResult
+        Of the last :meth:`update` (None before the first), readable as a mapping:
+        ``status`` (``"ok"``, ``"insufficient_data"``,
         ``"solver_failed"``, or the integrity's ``"inconsistent"``, ``"ambiguous"``,
         ``"unobservable"``, ``"implausible"``), ``valid`` (positions come from this frame
         and may be published), ``level`` (0 OK, 1 WARN, 2 ERROR) and ``message``,
@@ -145,29 +158,34 @@ class PostureEstimator:
         those dropped as longer than the geometry allows), ``iterations``, ``solve_time``
         (s), the integrity's statistics (``chi_square``, ``chi_square_limit``,
         ``nlos_links`` (p, m), ``predicted_rmse`` (m), ``joint_std`` (p,),
-        ``ambiguous_joints``), the method's ``estimate`` (p, 3) whether valid or not, and
-        solver details (``converged``, ...).
+        ``ambiguous_joints``), the method's ``estimate`` (p, 3) whether valid or not,
+        ``noise`` (the range noise in use, :class:`RangeNoiseEstimate`), and solver
+        details (``converged``, ...; track: ``rates`` (p + 1,), ``hypotheses``,
+        ``manoeuvre``).
 
     """
 
     def __init__(self, model, method='cepp', *, integrity=IntegrityLimits(),
-                 thresholds=Thresholds(), reset_after_failures=10, **options):
+                 thresholds=Thresholds(), reset_after_failures=10, learn_noise=True,
+                 **options):
         if method not in METHODS:
             raise ValueError(f'method must be one of {sorted(METHODS)}, got {method!r}')
         self.model = model
         self.method = method
         self._settings = {}
+        self._learner = None
+        self.last_diagnostics = None
         self._configure(integrity=integrity, thresholds=thresholds,
-                        reset_after_failures=reset_after_failures, options=options)
+                        reset_after_failures=reset_after_failures, learn_noise=learn_noise,
+                        options=options)
         self._limits = plausible_limits(model)
         self._previous = None           # (joints, stamp, joint_std) last accepted
         self._warm = None               # the last estimate that fitted its frame
         self._stamp = None
         self._failures = 0
-        self.last_diagnostics = {}
 
     def reconfigure(self, *, integrity=None, thresholds=None, reset_after_failures=None,
-                    **options):
+                    learn_noise=None, **options):
         """
         Change settings from the next frame on, keeping the warm start.
 
@@ -175,12 +193,12 @@ class PostureEstimator:
         ValueError, leaving the estimator as it was, when the new settings are invalid.
         """
         changes = {'integrity': integrity, 'thresholds': thresholds,
-                   'reset_after_failures': reset_after_failures}
+                   'reset_after_failures': reset_after_failures, 'learn_noise': learn_noise}
         settings = {**self._settings, **{k: v for k, v in changes.items() if v is not None}}
         settings['options'] = {**self._settings['options'], **options}
         self._configure(**settings)
 
-    def _configure(self, integrity, thresholds, reset_after_failures, options):
+    def _configure(self, integrity, thresholds, reset_after_failures, learn_noise, options):
         """Validate the settings and build the method and the integrity checks from them."""
         method = self.method
         unknown = set(options) - accepted_options(method)
@@ -191,6 +209,8 @@ class PostureEstimator:
                 reset_after_failures, (int, np.integer)) or reset_after_failures < 1:
             raise ValueError(f'reset_after_failures: must be an integer >= 1, got '
                              f'{reset_after_failures!r}')
+        if not isinstance(learn_noise, (bool, np.bool_)):
+            raise ValueError(f'learn_noise: must be true or false, got {learn_noise!r}')
         told = _told(options)
         checks = _integrity(self.model, told, integrity, thresholds)
         own = _constructor_names(method)
@@ -198,15 +218,59 @@ class PostureEstimator:
                                                 in {**options, **told}.items() if name in own})
         self.integrity, self._solver = checks, solver
         self.reset_after_failures = int(reset_after_failures)
+        configured = RangeNoiseEstimate(told['sigma'], told['eta'], told['nlos_fraction'],
+                                        told['nlos_gamma'])
+        keep = (learn_noise and self._learner is not None
+                and self._learner.configured == configured)
+        if not keep:            # what was learned from other told values starts over
+            self._learner = NoiseLearner(configured) if learn_noise else None
+        self._told = told
         self._settings = {'integrity': integrity, 'thresholds': thresholds,
                           'reset_after_failures': reset_after_failures,
-                          'options': dict(options)}
+                          'learn_noise': bool(learn_noise), 'options': dict(options)}
+        if keep:
+            self._use_noise(self._learner.estimate)
 
-    def reset(self):
-        """Forget the warm start: the next frame is solved from scratch."""
-        self._previous = self._warm = None
+    @property
+    def noise(self):
+        """Return the range noise in use (:class:`RangeNoiseEstimate`): learned or told."""
+        if self._learner is not None:
+            return self._learner.estimate
+        told = self._told
+        return RangeNoiseEstimate(told['sigma'], told['eta'], told['nlos_fraction'],
+                                  told['nlos_gamma'])
+
+    def _use_noise(self, estimate):
+        """Give the solver and the integrity checks the range noise ``estimate``."""
+        told = {**self._told, **estimate.as_options()}
+        if self._settings['options'].get('tag_sigma') is None:
+            told['tag_sigma'] = estimate.sigma          # tag-tag ranges are UWB ranges too
+        self.integrity = _integrity(self.model, told, self._settings['integrity'],
+                                    self._settings['thresholds'])
+        if hasattr(self._solver, 'tune'):
+            self._solver.tune(**estimate.as_options())
+
+    def reset(self, joints=None):
+        """
+        Forget the warm start: the next frame is solved from scratch, or from ``joints``.
+
+        Parameters
+        ----------
+        joints : array_like, shape (p, 3), optional
+            A posture to start the next frame from (metres), e.g. a parking pose or one
+            from another source. It seeds the solver only: the checks of the next frame
+            decide whether what follows from it is valid. The noise learned is kept.
+
+        """
+        seed = None
+        if joints is not None:
+            seed = np.array(joints, dtype=float)
+            if seed.shape != (self.model.n_sections, 3) or not np.all(np.isfinite(seed)):
+                raise ValueError(f'joints: must be finite, of shape '
+                                 f'({self.model.n_sections}, 3), got {np.shape(joints)}')
+        self._previous, self._warm = None, seed
         self._failures = 0
-        self._solver.reset()
+        self._solver.reset(seed)
 
     @property
     def previous(self):
@@ -255,9 +319,11 @@ class PostureEstimator:
         stamp = self._frame_time(stamp)
         p, m = self.model.n_sections, self.model.n_anchors
         measurements, implausible = Measurements.clean(self.model, ranges, tag_ranges,
-                                                       pitches, slew, self._limits)
+                                                       pitches, slew, self._limits, stamp,
+                                                       range_stamps)
         valid = np.isfinite(measurements.ranges)
-        diagnostics = {'method': self.method, 'missing_links': int(p * m - valid.sum()),
+        diagnostics = {'method': self.method, 'noise': self.noise,
+                       'missing_links': int(p * m - valid.sum()),
                        'implausible_links': implausible, 'cold_start': self._warm is None,
                        'reacquired': False, 'iterations': 0,
                        'ignored_inputs': [name for name in measurements.present()
@@ -281,7 +347,13 @@ class PostureEstimator:
                 if fresh_verdict.valid:
                     (joints, info), verdict = fresh, fresh_verdict
                     diagnostics['reacquired'] = True
-        diagnostics.update(info)
+        if self._learner is not None and not self._learner.settled:
+            (joints, info), verdict = self._bootstrap_noise(measurements, stamp,
+                                                            (joints, info), verdict)
+        self._learn(joints, info, measurements, verdict)
+        diagnostics.update(info, noise=self.noise)       # as learned from this frame
+        if not verdict.lost and hasattr(self._solver, 'accept'):
+            self._solver.accept()           # a motion model takes the fit as its state
         diagnostics.update(verdict.values, estimate=joints)
         diagnostics.update(level=verdict.level, message=verdict.message)
         if not verdict.lost:            # it fits the frame: the next frame's start
@@ -291,6 +363,57 @@ class PostureEstimator:
         self._previous = (joints.copy(), stamp, verdict.values['joint_std'])
         self._failures = 0
         return self._finish(joints, 'ok', diagnostics, measurements, start)
+
+    def _excess(self, joints, measurements):
+        """Return measured minus fitted tag-anchor ranges and the fitted ones, (n,) each."""
+        fitted = self.model.ranges(joints)
+        measured = np.isfinite(measurements.ranges)
+        return measurements.ranges[measured] - fitted[measured], fitted[measured]
+
+    def _dof(self, info=None):
+        """
+        Return the parameters the frame's fit spent: the chain's angles, or 3 per joint.
+
+        A motion model says how many its prediction did not supply (``fitted_dof``).
+        """
+        if info is not None and 'fitted_dof' in info:
+            return info['fitted_dof']
+        p = self.model.n_sections
+        return p + 1 if getattr(self._solver, 'holds_chain', True) else 3 * p
+
+    def _bootstrap_noise(self, measurements, stamp, solved, verdict, attempts=3):
+        """
+        Before the noise is learned, take the frame's own scale when far above the told one.
+
+        A told sigma ten times too small makes every link look blocked, which can send a
+        cold start to a wrong fit: the frame is solved again with its own scale, at most
+        ``attempts`` times. A smaller scale waits for the window: trusting one frame's
+        would make the estimator claim an accuracy it does not have.
+        """
+        threshold = 2.0
+        for _ in range(attempts):
+            excess, fitted = self._excess(solved[1].get('timed_joints', solved[0]),
+                                          measurements)
+            factor = frame_scale(excess, self._learner.estimate.link_sigma(fitted),
+                                 self._dof(solved[1]), too_short_only=False)
+            if not np.isfinite(factor) or factor <= threshold:   # one frame never shrinks it
+                break
+            threshold = 1.25                # once far off, settle it closely
+            self._learner.rescale(factor)
+            self._use_noise(self._learner.estimate)
+            again = self._solve(measurements, warm=self._warm is not None)
+            if isinstance(again, str):
+                break
+            solved, verdict = again, self._judge(again, measurements, stamp)
+        return solved, verdict
+
+    def _learn(self, joints, info, measurements, verdict):
+        """Add the frame's residuals to the noise learned, unless its fit is impossible."""
+        if self._learner is None or verdict.status == 'implausible':
+            return
+        excess, fitted = self._excess(info.get('timed_joints', joints), measurements)
+        if self._learner.observe(excess, fitted, self._dof(info)):
+            self._use_noise(self._learner.estimate)
 
     def _frame_time(self, stamp):
         """Return the frame's time, seconds: the stamp, or one frame period after the last."""
@@ -304,7 +427,9 @@ class PostureEstimator:
     def _judge(self, solved, measurements, stamp):
         joints, info = solved
         known = {'alternatives': info.get('alternatives', ()),
-                 'chain': getattr(self._solver, 'holds_chain', True)}
+                 'chain': getattr(self._solver, 'holds_chain', True),
+                 'prior_information': info.get('prior_information'),
+                 'timed_joints': info.get('timed_joints'), 'rivals': info.get('rivals', ())}
         if self._previous is None:
             return self.integrity.judge(joints, measurements, **known)
         reference, then, reference_std = self._previous
@@ -367,5 +492,5 @@ class PostureEstimator:
             solve_time=time.perf_counter() - start)
         diagnostics.setdefault('level', OK)
         diagnostics.setdefault('message', 'tracking')
-        self.last_diagnostics = diagnostics
+        self.last_diagnostics = FrameResult.from_values(diagnostics)
         return joints

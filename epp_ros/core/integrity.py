@@ -355,11 +355,12 @@ class Integrity:
                   if los_metres.size else 0.0}
         return failures, values, (kept, tag_kept)
 
-    def bound(self, joints, measurements, kept, angles):
+    def bound(self, joints, measurements, kept, angles, prior_information=None):
         """
         Cramér–Rao bound at the estimate from the line-of-sight links and the angles.
 
-        ``angles``: the estimate's (slew, pitches), radians.
+        ``angles``: the estimate's (slew, pitches), radians; ``prior_information``
+        (p + 1, p + 1), rad^-2, what was known of them before the frame.
         """
         slew, pitches = angles
         ranges, tag_ranges = kept
@@ -371,7 +372,10 @@ class Integrity:
             noise = type(noise)(self.link_sigma(measurements), noise.tag_sigma,
                                 noise.pitch_sigma, noise.slew_sigma)
         jacobian = Residuals(self.model, used, noise).jacobian(np.r_[slew, pitches])
-        return bound_from_information(self.model, slew, pitches, jacobian.T @ jacobian)
+        information = jacobian.T @ jacobian
+        if prior_information is not None:
+            information = information + prior_information
+        return bound_from_information(self.model, slew, pitches, information)
 
     def reach(self, reference, elapsed, reference_std):
         """
@@ -526,7 +530,8 @@ class Integrity:
 
     # -- the verdict ----------------------------------------------------------------------
     def judge(self, joints, measurements, reference=None, elapsed=None, reference_std=None,
-              alternatives=(), chain=True):
+              alternatives=(), chain=True, prior_information=None, timed_joints=None,
+              rivals=()):
         """
         Return the :class:`Verdict` on an estimate of one frame.
 
@@ -550,6 +555,16 @@ class Integrity:
             Whether the method holds the boom to its p + 1 angles (the chain's bound is
             then its uncertainty); else each joint's own 3-D bound is
             (:meth:`point_bound`).
+        prior_information : ndarray, shape (p + 1, p + 1), optional
+            Information on the angles (rad^-2) the method had before the frame (a motion
+            model's prediction): the bound is then the posterior one.
+        timed_joints : ndarray, shape (p, 3), optional
+            Each tag's joint when it ranged (TDMA slots on a moving boom), for the
+            residuals; ``joints`` by default.
+        rivals : sequence of ndarray, shape (p, 3)
+            Postures the method itself holds about as likely, all frames considered (a
+            tracker's fold hypotheses): a joint further than ``ambiguity_distance`` from
+            one is ambiguous, whatever its own uncertainty.
 
         Returns
         -------
@@ -562,7 +577,8 @@ class Integrity:
             reference, self.reach(reference, elapsed, reference_std))
         angles = angles_from_joints(self.model, joints)
         self._plausibility(joints, angles[0], reach, elapsed, checks, values)
-        failures, found, kept = self.consistency(joints, measurements)
+        failures, found, kept = self.consistency(
+            joints if timed_joints is None else timed_joints, measurements)
         values.update(found)
         if failures:
             checks.append((ERROR, 'inconsistent', '; '.join(failures)))
@@ -572,8 +588,8 @@ class Integrity:
             checks.append((ERROR, 'inconsistent', f'line-of-sight range residual {rms:.2f} m'))
         elif rms > t.residual_warn:
             checks.append((WARN, 'ok', f'line-of-sight range residual {rms:.2f} m'))
-        joint_std = (self.bound(joints, measurements, kept, angles).joint_std if chain
-                     else self.point_bound(joints, measurements, kept))
+        joint_std = (self.bound(joints, measurements, kept, angles, prior_information).joint_std
+                     if chain else self.point_bound(joints, measurements, kept))
         rmse = float(np.sqrt(np.mean(joint_std ** 2)))
         values.update(predicted_rmse=rmse, joint_std=joint_std)
         if not math.isfinite(rmse) or rmse > t.predicted_rmse_error:
@@ -584,6 +600,9 @@ class Integrity:
                                               reach))
         ambiguous |= self.ambiguous_postures(joints, measurements, joint_std, angles[0], reach,
                                              alternatives)
+        for rival in rivals:
+            far = _norm(np.asarray(rival, dtype=float) - joints) > self.limits.ambiguity_distance
+            ambiguous |= set(np.flatnonzero(far).tolist())
         values['ambiguous_joints'] = sorted(k + 1 for k in ambiguous)
         if ambiguous:
             checks.append((ERROR, 'ambiguous', 'joint(s) ' + ', '.join(

@@ -96,6 +96,11 @@ class Measurements:
         Inclinometer pitch of each section above the horizontal, radians.
     slew : float
         Slew encoder angle about z from the world x-axis, radians.
+    stamp : float
+        The frame's time, seconds (NaN: not known).
+    range_stamps : ndarray, shape (p,), or None
+        When each tag's ranges were measured, seconds on the clock of ``stamp``; NaN or
+        None: at ``stamp``.
 
     """
 
@@ -103,14 +108,36 @@ class Measurements:
     tag_ranges: np.ndarray
     pitches: np.ndarray
     slew: float
+    stamp: float = float('nan')
+    range_stamps: np.ndarray = None
+
+    #: Largest believable distance, seconds, between a tag's measurement and its frame.
+    LONGEST_DELAY = 1.0
+
+    def delays(self):
+        """
+        Return each tag's measurement time less the frame's, seconds, shape (p,).
+
+        Unknown times count as the frame's; delays beyond ``LONGEST_DELAY`` are clipped
+        (a bad clock must not throw a tag a long way along its motion).
+        """
+        p = self.ranges.shape[0]
+        if self.range_stamps is None or not np.isfinite(self.stamp):
+            return np.zeros(p)
+        delays = np.nan_to_num(self.range_stamps - self.stamp, nan=0.0, posinf=0.0,
+                               neginf=0.0)
+        return np.clip(delays, -self.LONGEST_DELAY, self.LONGEST_DELAY)
 
     @classmethod
-    def clean(cls, model, ranges, tag_ranges=None, pitches=None, slew=None, limits=None):
+    def clean(cls, model, ranges, tag_ranges=None, pitches=None, slew=None, limits=None,
+              stamp=None, range_stamps=None):
         """
         Validate one frame for ``model``; unusable entries become NaN.
 
         NaN, inf and negative distances count as missing, and so do distances beyond
         ``limits`` (default :func:`plausible_limits`; pass them precomputed per frame).
+        ``stamp`` (s) and ``range_stamps`` (p,) say when the frame and each tag's ranges
+        were measured.
 
         Returns
         -------
@@ -136,7 +163,10 @@ class Measurements:
         pitches = np.full(p, np.nan) if pitches is None else \
             _clean(pitches, (p,), 'pitches')[0]
         slew = np.nan if slew is None else float(_clean(slew, (), 'slew')[0])
-        return cls(ranges, tag_ranges, pitches, slew), too_long
+        stamp = np.nan if stamp is None else float(_clean(stamp, (), 'stamp')[0])
+        if range_stamps is not None:
+            range_stamps = _clean(range_stamps, (p,), 'range_stamps')[0]
+        return cls(ranges, tag_ranges, pitches, slew, stamp, range_stamps), too_long
 
     @classmethod
     def ranges_only(cls, ranges):
@@ -156,7 +186,7 @@ class Measurements:
     def with_ranges(self, ranges, tag_ranges=None):
         """Return the same frame with other ranges (e.g. with links removed)."""
         return Measurements(ranges, self.tag_ranges if tag_ranges is None else tag_ranges,
-                            self.pitches, self.slew)
+                            self.pitches, self.slew, self.stamp, self.range_stamps)
 
 
 class Residuals:
@@ -210,6 +240,11 @@ class Residuals:
         """Return the number of residuals."""
         return self.measured.size
 
+    def link_sigma(self):
+        """Return the standard deviation (p, m) of each tag-anchor range, metres."""
+        return np.broadcast_to(np.asarray(self.noise.range_sigma, dtype=float),
+                               self.link_mask.shape)
+
     def ranged(self):
         """Boolean (size,): which rows are ranges (the ones NLOS can lengthen)."""
         return np.arange(self.size) < self.n_ranged
@@ -238,6 +273,53 @@ class Residuals:
         n = self.n_ranged
         difference[n:] = wrap_angle(difference[n:])
         return difference / self.sigma, geometry
+
+    def timed(self, psi, rates, delays):
+        """
+        Scaled residuals and their Jacobian in (psi, rates) when tags ranged at other times.
+
+        Tag k's ranges (to the anchors, and to the tags it measured) were taken ``delays[k]``
+        seconds from the stamp ``psi`` describes, when the boom was at
+        ``psi + delays[k] rates``; the angle sensors read at the stamp.
+
+        Parameters
+        ----------
+        psi, rates : ndarray, shape (p + 1,)
+            Angles (rad) and their rates (rad/s) at the stamp.
+        delays : ndarray, shape (p,)
+            Seconds.
+
+        Returns
+        -------
+        scaled : ndarray, shape (size,)
+        jacobian : ndarray, shape (size, 2 (p + 1))
+        joints : ndarray, shape (p, 3)
+            At the stamp.
+
+        """
+        p = self.model.n_sections
+        postures = psi + np.r_[np.asarray(delays, dtype=float), 0.0][:, None] * rates
+        boom = self.model.forward_kinematics(postures[:, 0], postures[:, 1:])  # (p + 1, p, 3)
+        joint_jacobians = [self.model.joint_jacobian(posture[0], posture[1:])
+                           for posture in postures[:p]]
+        # Each tag at its own time; a tag-tag range at the measuring tag's.
+        tags = np.arange(p)
+        offsets = np.concatenate([boom[tags, tags][self._tag] - self.model.anchors[self._anchor],
+                                  boom[self._near, self._near] - boom[self._near, self._far]])
+        distances = np.linalg.norm(offsets, axis=1)
+        difference = np.concatenate([distances, psi[self._angle_index]]) - self.measured
+        n = self.n_ranged
+        difference[n:] = wrap_angle(difference[n:])
+        units = offsets / np.maximum(distances, 1e-12)[:, None]
+        moved = np.array([joint_jacobians[k][k] for k in self._tag]
+                         + [joint_jacobians[near][near] - joint_jacobians[near][far]
+                            for near, far in zip(self._near, self._far)]).reshape(-1, 3, p + 1)
+        rows = np.concatenate([np.einsum('nc,ncq->nq', units, moved), self._angle_rows])
+        measuring = np.concatenate([self._tag, self._near]).astype(int)
+        row_delays = np.r_[np.asarray(delays, dtype=float)[measuring],
+                           np.zeros(len(self._angle_index))]
+        jacobian = np.hstack([rows, rows * row_delays[:, None]]) / self.sigma[:, None]
+        return difference / self.sigma, jacobian, boom[p]
 
     def jacobian(self, psi, geometry=None):
         """Jacobian of the scaled residuals, shape (size, p + 1)."""

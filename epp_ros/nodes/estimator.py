@@ -116,6 +116,8 @@ SETTINGS = {
     'reset_after_failures': Setting(10, 'Frames in a row that cannot be solved or do not fit '
                                         'before the estimator starts cold.', True, 1, 100000),
     'publish_markers': Setting(True, 'Also publish arm_posture/markers for RViz.'),
+    'learn_noise': Setting(True, 'Learn the range noise from the residuals while running, '
+                                 'starting from range_sigma, nlos_fraction and nlos_gamma.'),
     'arm_length_warn': _metres('arm_length_warn', 'Section length or plane error for WARN, m.'),
     'arm_length_error': _metres('arm_length_error',
                                 'Section length or plane error for ERROR, m.'),
@@ -173,6 +175,7 @@ def estimator_settings(values):
     integrity = IntegrityLimits(max_angular_rate=values['max_angular_rate'])
     return dict(method=method, integrity=integrity, thresholds=thresholds,
                 reset_after_failures=values['reset_after_failures'],
+                learn_noise=values['learn_noise'],
                 **{OPTION_OF[name]: values[name] for name in OPTION_OF})
 
 

@@ -40,6 +40,11 @@ Suites:
             rss_end_mb). Method: the first of --methods, else chain. Not default.
   fuzz      --inputs generated inputs (default 100,000) per line protocol and per pump
             configuration field; counts every exception that escapes. Not default.
+  field     The field effects of core.simulate alone and together (--seeds runs of
+            --seconds per case): chain, cepp and track with their defaults, and chain told
+            the truth, as RMSE over the clean Cramér–Rao bound; track over the posterior
+            bound; the authors' geometry at sigma 1 and 2 m from cold starts (--trials);
+            cost of track and chain, and of the chain's fit against scipy. Not default.
 Every table ends with the commit it was measured on. ``--option KEY=VALUE`` passes an
 option to the estimators (e.g. ``anchor_weight=inf``, ``predict_slew=false``).
 """
@@ -267,6 +272,9 @@ def markdown(report):
     if report['suite'] == 'integrity':
         from epp_ros.tools import integrity_bench
         return integrity_bench.markdown(report)
+    if report['suite'] == 'field':
+        from epp_ros.tools import field_bench
+        return field_bench.markdown(report)
     if report['suite'] in ('soak', 'fuzz'):
         from epp_ros.tools import fuzz_bench, soak_bench
         return (soak_bench if report['suite'] == 'soak' else fuzz_bench).markdown(report)
@@ -337,6 +345,8 @@ def main(argv=None):
     parser.add_argument('--latency-seconds', type=float, default=5.0,
                         help='latency: seconds per rate')
     parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--seeds', type=integer(1, 1000), default=2,
+                        help='field: runs per case (default 2)')
     parser.add_argument('--option', type=parse_option, action='append', default=[],
                         metavar='KEY=VALUE', help='estimator option, repeatable')
     parser.add_argument('--json', action='store_true', help='also print the reports as JSON')
@@ -352,7 +362,7 @@ def main(argv=None):
                         help='fuzz: inputs per protocol and per configuration field')
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     default = ['xie3dim', 'tracking', 'latency', 'bags']
-    known = default + ['paper', 'integrity', 'driver', 'soak', 'fuzz']
+    known = default + ['paper', 'integrity', 'driver', 'soak', 'fuzz', 'field']
     suites = args.suites or default
     unknown = sorted(set(suites) - set(known))
     if unknown:
@@ -392,6 +402,9 @@ def main(argv=None):
             reports.append(soak_bench.run(args.frames, args.live_frames,
                                           (args.methods or ['chain'])[0], args.seed,
                                           progress=lambda text: print(text, flush=True)))
+        elif suite == 'field':
+            from epp_ros.tools import field_bench
+            reports.append(field_bench.run(args.seconds, args.seeds, args.seed, args.trials))
         elif suite == 'fuzz':
             from epp_ros.tools import fuzz_bench
             reports.append(fuzz_bench.run(args.inputs, args.seed,

@@ -176,7 +176,7 @@ def target_cases(runs, seed, sigma=0.1):
                     times.append(time.perf_counter() - start)
                     residuals = Residuals(model, Measurements.ranges_only(frame['ranges']),
                                           reference.noise)
-                    near, near_cost, _ = reference.fit(np.r_[slew, pitches], residuals)
+                    near, near_cost, _, _ = reference.fit(np.r_[slew, pitches], residuals)
                     found = np.r_[estimator.last_diagnostics['slew'],
                                   estimator.last_diagnostics['pitches']]
                     misses += near_cost < reference.cost(found, residuals) - 1e-3

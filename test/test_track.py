@@ -1,0 +1,145 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The tracking estimator: time, silence, folds and manoeuvres."""
+from epp_ros.core import PostureEstimator
+from epp_ros.core.simulate import (field_effects, JoystickMotion, simulate_field, truck_pump,
+                                   WorkingMotion)
+from epp_ros.core.track import constant_velocity
+import numpy as np
+import pytest
+
+MODEL = truck_pump()
+PERIOD = 0.1
+
+
+def constant_rates(k, start=(0.2, 0.9, 0.35, 0.0, -0.35, -0.7),
+                   rates=(0.1, -0.03, 0.04, 0.05, -0.06, 0.08)):
+    """Angles at time ``k`` seconds of a boom turning at constant rates (its motion model)."""
+    psi = np.asarray(start) + k * np.asarray(rates)
+    return psi[0], psi[1:]
+
+
+def tdma_frame(t, delays):
+    """Exact ranges of each tag at its own time ``t + delays[k]``; (ranges, joints at t)."""
+    ranges = np.empty((MODEL.n_sections, MODEL.n_anchors))
+    for k, delay in enumerate(delays):
+        ranges[k] = MODEL.ranges(MODEL.forward_kinematics(*constant_rates(t + delay)))[k]
+    return ranges, MODEL.forward_kinematics(*constant_rates(t))
+
+
+def test_constant_velocity_model_integrates_the_rates():
+    transition, covariance = constant_velocity(2, 0.5, [1.0, 4.0])
+    np.testing.assert_allclose(transition @ [1.0, 2.0, 0.1, -0.2], [1.05, 1.9, 0.1, -0.2])
+    # Position variance of integrated white acceleration: q t^3 / 3.
+    assert covariance[1, 1] == pytest.approx(4.0 * 0.5 ** 3 / 3)
+    assert covariance[3, 3] == pytest.approx(4.0 * 0.5)
+
+
+def test_exact_trajectory_with_tags_in_their_own_slots_is_recovered():
+    """No noise, tags ranging 20 ms apart on a turning boom: exact; chain is not."""
+    delays = -PERIOD + PERIOD * np.arange(1, 6) / 5
+    track = PostureEstimator(MODEL, 'track', sigma=0.01)
+    chain = PostureEstimator(MODEL, 'chain', sigma=0.01)
+    track_errors, chain_errors = [], []
+    for k in range(80):
+        t = k * PERIOD
+        ranges, joints = tdma_frame(t, delays)
+        for estimator, errors in ((track, track_errors), (chain, chain_errors)):
+            estimate = estimator.update(ranges, stamp=t, range_stamps=t + delays)
+            errors.append(np.abs(estimate - joints).max())
+    assert max(track_errors[40:]) < 1e-4
+    assert min(chain_errors[40:]) > 0.01        # a frame of mixed instants, fitted as one
+    assert 'range_stamps' in chain.last_diagnostics['ignored_inputs']
+    assert 'range_stamps' not in track.last_diagnostics['ignored_inputs']
+    np.testing.assert_allclose(track.last_diagnostics['rates'], constant_rates(1)[0] * 0
+                               + np.array([0.1, -0.03, 0.04, 0.05, -0.06, 0.08]), atol=1e-3)
+
+
+def test_a_silent_tag_is_predicted_through_with_growing_uncertainty():
+    """Tag 3 silent for a second: its joint stays close, and its reported std grows."""
+    rng = np.random.default_rng(1)
+    estimator = PostureEstimator(MODEL, 'track')
+    stds, errors = [], []
+    for k in range(60):
+        t = k * PERIOD
+        joints = MODEL.forward_kinematics(*constant_rates(t))
+        ranges = MODEL.ranges(joints) + 0.05 * rng.standard_normal((5, 6))
+        silent = 40 <= k < 50
+        if silent:
+            ranges[2] = np.nan
+        estimator.update(ranges, stamp=t)
+        if silent:
+            diagnostics = estimator.last_diagnostics
+            stds.append(diagnostics['joint_std'][2])
+            errors.append(np.linalg.norm(diagnostics['estimate'][2] - joints[2]))
+    assert np.all(np.diff(stds) > 0)
+    # Within four reported standard deviations, and never a fold away.
+    assert np.all(np.array(errors) < 4 * np.array(stds) + 0.05)
+
+
+def test_both_folds_are_kept_until_the_data_decides():
+    """
+    Joint 3's tag is silent from the start: the joint could fold either way.
+
+    The tracker keeps both, refuses the frames, and settles when the tag's ranges come
+    back, on the right fold.
+    """
+    estimator = PostureEstimator(MODEL, 'track')
+    slew, pitches = 0.3, np.radians([50.0, 20.0, -10.0, -20.0, -40.0])
+    joints = MODEL.forward_kinematics(slew, pitches)
+    ranges = MODEL.ranges(joints)
+    ranges[2] = np.nan
+    statuses, hypotheses = [], []
+    for k in range(5):
+        estimator.update(ranges, stamp=k * PERIOD)
+        statuses.append(estimator.last_diagnostics['status'])
+        hypotheses.append(estimator.last_diagnostics['hypotheses'])
+    assert set(statuses) == {'ambiguous'}
+    assert min(hypotheses) >= 2
+    for k in range(5, 8):
+        estimate = estimator.update(MODEL.ranges(joints), stamp=k * PERIOD)
+    assert estimator.last_diagnostics['status'] == 'ok'
+    assert estimator.last_diagnostics['hypotheses'] == 1
+    np.testing.assert_allclose(estimate, joints, atol=1e-3)
+
+
+def test_joystick_starts_and_stops_cost_no_accuracy_against_the_chain():
+    rng = np.random.default_rng(4)
+    motion = JoystickMotion(MODEL, 40.0, rng)
+    frames = simulate_field(MODEL, motion, 40.0, field_effects('sigma_high'), rng)
+    errors = {}
+    for method in ('chain', 'track'):
+        estimator = PostureEstimator(MODEL, method)
+        squared = []
+        for frame in frames:
+            estimator.update(**frame.inputs())
+            estimate = estimator.last_diagnostics['estimate']
+            squared.append(np.mean(np.sum((estimate - frame.joints) ** 2, axis=1)))
+        errors[method] = np.sqrt(np.mean(squared[50:]))
+    assert errors['track'] < errors['chain']
+
+
+def test_a_smooth_cycle_is_tracked_well_below_the_single_frame_error():
+    rng = np.random.default_rng(5)
+    frames = simulate_field(MODEL, WorkingMotion(MODEL, rng), 40.0,
+                            field_effects('sigma_high'), rng)
+    errors = {}
+    for method in ('chain', 'track'):
+        estimator = PostureEstimator(MODEL, method)
+        squared = [np.mean(np.sum((estimator.update(**frame.inputs()) - frame.joints) ** 2,
+                                  axis=1)) for frame in frames]
+        errors[method] = np.sqrt(np.mean(squared[50:]))
+    # ~0.5 measured over 60 s (epp_bench field); 350 frames leave room.
+    assert errors['track'] < 0.75 * errors['chain']
