@@ -82,7 +82,7 @@ def test_a_silent_tag_is_predicted_through_with_growing_uncertainty():
         estimator.update(ranges, stamp=t)
         if silent:
             diagnostics = estimator.last_diagnostics
-            stds.append(diagnostics['joint_std'][2])
+            stds.append(diagnostics['posterior_joint_std'][2])
             errors.append(np.linalg.norm(diagnostics['estimate'][2] - joints[2]))
     assert np.all(np.diff(stds) > 0)
     # Within four reported standard deviations, and never a fold away.

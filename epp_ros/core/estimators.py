@@ -182,6 +182,8 @@ class PostureEstimator:
         self._previous = None           # (joints, stamp, joint_std) last accepted
         self._warm = None               # the last estimate that fitted its frame
         self._stamp = None
+        self._second_opinion_stamp = -np.inf
+        self._in_doubt = False
         self._failures = 0
 
     def reconfigure(self, *, integrity=None, thresholds=None, reset_after_failures=None,
@@ -339,14 +341,18 @@ class PostureEstimator:
         joints, info = solved
         verdict = self._judge(solved, measurements, stamp)
         # A fresh solve, unless the method searched from scratch for this frame already.
-        if verdict.lost and self._warm is not None and not info.get('searched') \
-                and self._due_for_search():
-            fresh = self._solve(measurements, warm=False)
-            if not isinstance(fresh, str):
-                fresh_verdict = self._judge(fresh, measurements, stamp)
-                if fresh_verdict.valid:
-                    (joints, info), verdict = fresh, fresh_verdict
-                    diagnostics['reacquired'] = True
+        if self._warm is not None and not info.get('searched'):
+            if verdict.lost and self._due_for_search():
+                fresh = self._solve(measurements, warm=False)
+                if not isinstance(fresh, str):
+                    fresh_verdict = self._judge(fresh, measurements, stamp)
+                    if fresh_verdict.valid:
+                        (joints, info), verdict = fresh, fresh_verdict
+                        diagnostics['reacquired'] = True
+            elif self._suspicious(verdict, measurements, stamp):
+                (joints, info), verdict, moved = self._second_opinion(
+                    (joints, info), measurements, stamp, verdict)
+                diagnostics['reacquired'] = moved
         if self._learner is not None and not self._learner.settled:
             (joints, info), verdict = self._bootstrap_noise(measurements, stamp,
                                                             (joints, info), verdict)
@@ -428,13 +434,56 @@ class PostureEstimator:
         joints, info = solved
         known = {'alternatives': info.get('alternatives', ()),
                  'chain': getattr(self._solver, 'holds_chain', True),
-                 'prior_information': info.get('prior_information'),
                  'timed_joints': info.get('timed_joints'), 'rivals': info.get('rivals', ())}
         if self._previous is None:
             return self.integrity.judge(joints, measurements, **known)
         reference, then, reference_std = self._previous
         return self.integrity.judge(joints, measurements, reference, max(stamp - then, 0.0),
                                     reference_std, **known)
+
+    #: Seconds between second opinions on fits that call many links blocked.
+    SECOND_OPINION_PERIOD = 1.0
+
+    def _suspicious(self, verdict, measurements, stamp):
+        """
+        Judge whether a fit that explains its frame does so by calling a tag's links blocked.
+
+        A warm fit in the wrong basin can fit that way: half of a tag's links or more
+        flagged blocked earns a fresh search, at most once a ``SECOND_OPINION_PERIOD``,
+        and every frame while the last search found another posture about as likely.
+        Not for a method with a state of its own (a motion model): one frame's search
+        would replace what many frames built.
+        """
+        blocked = verdict.values.get('nlos_links')
+        if blocked is None or hasattr(self._solver, 'accept'):
+            return False
+        if self._in_doubt:
+            return True
+        if stamp - self._second_opinion_stamp < self.SECOND_OPINION_PERIOD:
+            return False
+        flagged = np.sum(blocked, axis=1)
+        measured = np.sum(np.isfinite(measurements.ranges), axis=1)
+        return bool(np.any((flagged >= 2) & (2 * flagged >= measured)))
+
+    def _second_opinion(self, solved, measurements, stamp, verdict):
+        """
+        Solve the frame from scratch too; keep the fit the frame likes better.
+
+        The other stays as an alternative: when it is about as likely and elsewhere, the
+        frame is ambiguous. Returns (joints, info), verdict, and whether the fresh fit won.
+        """
+        self._second_opinion_stamp = stamp
+        fresh = self._solve(measurements, warm=False)
+        if isinstance(fresh, str):
+            return solved, verdict, False
+        costs = self.integrity.posture_cost(np.array([solved[0], fresh[0]]), measurements)
+        moved = bool(costs[1] < costs[0])
+        best, other = (fresh, solved) if moved else (solved, fresh)
+        best[1]['alternatives'] = (list(best[1].get('alternatives', [])) + [other[0]]
+                                   + list(other[1].get('alternatives', [])))
+        verdict = self._judge(best, measurements, stamp)
+        self._in_doubt = verdict.status == 'ambiguous'
+        return best, verdict, moved
 
     def _due_for_search(self):
         """
@@ -482,7 +531,9 @@ class PostureEstimator:
 
     def _finish(self, joints, status, diagnostics, measurements, start):
         lengths = self.model.section_lengths(joints)
-        residual = self.model.ranges(joints) - measurements.ranges
+        # Each tag where it was when it ranged, for a method that knows.
+        residual = self.model.ranges(diagnostics.get('timed_joints', joints)) \
+            - measurements.ranges
         valid = np.isfinite(residual)
         diagnostics.update(
             status=status, valid=status == 'ok', section_lengths=lengths,

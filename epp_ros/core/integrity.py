@@ -355,12 +355,13 @@ class Integrity:
                   if los_metres.size else 0.0}
         return failures, values, (kept, tag_kept)
 
-    def bound(self, joints, measurements, kept, angles, prior_information=None):
+    def bound(self, joints, measurements, kept, angles):
         """
         Cramér–Rao bound at the estimate from the line-of-sight links and the angles.
 
-        ``angles``: the estimate's (slew, pitches), radians; ``prior_information``
-        (p + 1, p + 1), rad^-2, what was known of them before the frame.
+        ``angles``: the estimate's (slew, pitches), radians. The frame's own: a motion
+        model's prediction is not trusted to make a posture valid (its process noise is
+        itself a guess).
         """
         slew, pitches = angles
         ranges, tag_ranges = kept
@@ -372,10 +373,7 @@ class Integrity:
             noise = type(noise)(self.link_sigma(measurements), noise.tag_sigma,
                                 noise.pitch_sigma, noise.slew_sigma)
         jacobian = Residuals(self.model, used, noise).jacobian(np.r_[slew, pitches])
-        information = jacobian.T @ jacobian
-        if prior_information is not None:
-            information = information + prior_information
-        return bound_from_information(self.model, slew, pitches, information)
+        return bound_from_information(self.model, slew, pitches, jacobian.T @ jacobian)
 
     def reach(self, reference, elapsed, reference_std):
         """
@@ -471,7 +469,7 @@ class Integrity:
             mirrored.append(image)
         return np.array(mirrored)
 
-    def _posture_cost(self, postures, measurements):
+    def posture_cost(self, postures, measurements):
         """Loss of every measurement of the frame at each posture (n, p, 3): shape (n,)."""
         valid = np.isfinite(measurements.ranges)
         sigma = self.link_sigma(measurements)
@@ -514,8 +512,8 @@ class Integrity:
             keep &= np.all(_norm(candidates - reach[0]) <= reach[1], axis=1)
         if not keep.any():
             return set()
-        costs = self._posture_cost(np.concatenate([joints[None], candidates[keep]]),
-                                   measurements)
+        costs = self.posture_cost(np.concatenate([joints[None], candidates[keep]]),
+                                  measurements)
         rivals = costs[1:] - costs[0] < math.log(self.limits.ambiguity_odds)
         return set(np.flatnonzero(far[keep][rivals].any(axis=0)).tolist())
 
@@ -530,8 +528,7 @@ class Integrity:
 
     # -- the verdict ----------------------------------------------------------------------
     def judge(self, joints, measurements, reference=None, elapsed=None, reference_std=None,
-              alternatives=(), chain=True, prior_information=None, timed_joints=None,
-              rivals=()):
+              alternatives=(), chain=True, timed_joints=None, rivals=()):
         """
         Return the :class:`Verdict` on an estimate of one frame.
 
@@ -555,9 +552,6 @@ class Integrity:
             Whether the method holds the boom to its p + 1 angles (the chain's bound is
             then its uncertainty); else each joint's own 3-D bound is
             (:meth:`point_bound`).
-        prior_information : ndarray, shape (p + 1, p + 1), optional
-            Information on the angles (rad^-2) the method had before the frame (a motion
-            model's prediction): the bound is then the posterior one.
         timed_joints : ndarray, shape (p, 3), optional
             Each tag's joint when it ranged (TDMA slots on a moving boom), for the
             residuals; ``joints`` by default.
@@ -588,8 +582,8 @@ class Integrity:
             checks.append((ERROR, 'inconsistent', f'line-of-sight range residual {rms:.2f} m'))
         elif rms > t.residual_warn:
             checks.append((WARN, 'ok', f'line-of-sight range residual {rms:.2f} m'))
-        joint_std = (self.bound(joints, measurements, kept, angles, prior_information).joint_std
-                     if chain else self.point_bound(joints, measurements, kept))
+        joint_std = (self.bound(joints, measurements, kept, angles).joint_std if chain
+                     else self.point_bound(joints, measurements, kept))
         rmse = float(np.sqrt(np.mean(joint_std ** 2)))
         values.update(predicted_rmse=rmse, joint_std=joint_std)
         if not math.isfinite(rmse) or rmse > t.predicted_rmse_error:

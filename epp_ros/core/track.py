@@ -27,8 +27,10 @@ in its own TDMA slot, ``delays`` seconds from the frame's stamp, when the boom w
 - Process noise adapts: each angle's ``q`` follows how far the fits correct the prediction
   against how far they should (covariance matching), and a frame the prediction cannot
   explain (a joystick start, stop or reversal) is refitted with the rates let free.
-- A tag that falls silent is predicted through; its growing uncertainty is in the
-  posterior covariance, which the integrity checks take as prior information.
+- A tag that falls silent is predicted through, its growing uncertainty reported
+  (``posterior_joint_std``). The integrity checks still judge each frame by its own
+  measurements: a prediction, whose process noise is itself a guess, never makes a
+  posture valid.
 - Folds (a joint with too few ranges fits two ways) are kept as hypotheses, each its own
   filter weighted by how well it explains the frames, until the data decides.
 
@@ -72,8 +74,6 @@ class Hypothesis:
     state: np.ndarray           #: (2 (p + 1),) angles (rad) then rates (rad/s)
     covariance: np.ndarray      #: (2 (p + 1), 2 (p + 1))
     log_weight: float = 0.0     #: log of its relative probability
-    #: (p + 1, p + 1) information on the angles the prediction gave its last fit, rad^-2
-    prior_information: np.ndarray = None
     #: Parameters its last frame's measurements determined (the rest came from the
     #: prediction): what the fit's residuals lost to it.
     fitted_dof: float = 0.0
@@ -150,7 +150,7 @@ class TrackMethod:
             n = self.model.n_sections + 1
             covariance = np.diag(np.r_[np.full(n, 1e-2), np.full(n, self.max_rate ** 2)])
             self._bank = [Hypothesis(np.r_[slew, pitches, np.zeros(n)], covariance, 0.0,
-                                     np.zeros((n, n)))]
+                                     float(n))]
 
     @property
     def tracking(self):
@@ -193,7 +193,7 @@ class TrackMethod:
         others = [self.model.forward_kinematics(h.state[0], h.state[1:n]) for h in bank[1:]]
         info.update(slew=float(psi[0]), pitches=psi[1:].copy(),
                     rates=turned * best.state[n:], hypotheses=len(bank), rivals=others,
-                    prior_information=turned[:, None] * best.prior_information * turned,
+                    posterior_joint_std=self._joint_std(best),
                     fitted_dof=best.fitted_dof,
                     timed_joints=timed[np.arange(n - 1), np.arange(n - 1)])
         self._pending = (bank, stamp)
@@ -231,8 +231,7 @@ class TrackMethod:
             if any(np.max(np.abs(wrap_angle(psi - h.state[:n]))) < 0.05 for h in bank):
                 continue
             covariance = self._start_covariance(psi, residuals)
-            bank.append(Hypothesis(np.r_[psi, np.zeros(n)], covariance, log_weight,
-                                   np.zeros((n, n)), float(n)))
+            bank.append(Hypothesis(np.r_[psi, np.zeros(n)], covariance, log_weight, float(n)))
         info = {'iterations': info['iterations'], 'converged': info['converged'],
                 'searched': info.get('searched', True), 'manoeuvre': False,
                 'alternatives': info.get('alternatives', [])}
@@ -331,9 +330,8 @@ class TrackMethod:
         spread = predicted.covariance - covariance
         surprise = float(correction[:n] @ _pseudo_solve(spread[:n, :n], correction[:n]))
         fitted_dof = float(2 * n - np.trace(covariance @ prior_information))
-        return (Hypothesis(state, covariance, log_weight,
-                           _inverse(predicted.covariance[:n, :n]), fitted_dof), iterations,
-                converged, surprise)
+        return (Hypothesis(state, covariance, log_weight, fitted_dof), iterations, converged,
+                surprise)
 
     def _evaluate(self, state, predicted, prior_information, residuals, delays):
         """Cost of a state: prediction term, robust frame loss, ground penalty."""
@@ -393,6 +391,15 @@ class TrackMethod:
         for hypothesis in kept:             # keep the numbers small
             hypothesis.log_weight -= best
         return kept[:self.max_hypotheses]
+
+    def _joint_std(self, hypothesis):
+        """Return each joint's posterior standard deviation (p,), metres."""
+        n = self.model.n_sections + 1
+        psi = hypothesis.state[:n]
+        jacobian = self.model.joint_jacobian(psi[0], psi[1:])
+        covariance = np.einsum('kcq,qr,kcr->k', jacobian, hypothesis.covariance[:n, :n],
+                               jacobian)
+        return np.sqrt(np.maximum(covariance, 0.0))
 
     def _residuals(self, measurements):
         noise = self.chain.noise
