@@ -143,3 +143,27 @@ def test_a_smooth_cycle_is_tracked_well_below_the_single_frame_error():
         errors[method] = np.sqrt(np.mean(squared[50:]))
     # ~0.5 measured over 60 s (epp_bench field); 350 frames leave room.
     assert errors['track'] < 0.75 * errors['chain']
+
+
+@pytest.mark.parametrize('method', ['chain', 'track'])
+def test_the_combined_field_case_publishes_nothing_confidently_wrong(method):
+    """
+    Sigma growing with range, links blocked for seconds, TDMA slots, silent tags at once.
+
+    Before the second opinion on fits that call a tag's links blocked, the chain published
+    frames here more than 1 m and 5 predicted sigma off (and track, when its prediction
+    counted as prior information in the checks, dozens).
+    """
+    rng = np.random.default_rng([0, sum(map(ord, 'all'))])
+    effects = field_effects('sigma_distance,nlos_persistent,tdma,dropouts')
+    frames = simulate_field(MODEL, WorkingMotion(MODEL, rng), 20.0, effects, rng)
+    estimator = PostureEstimator(MODEL, method)
+    published = 0
+    for frame in frames:
+        estimator.update(**frame.inputs())
+        diagnostics = estimator.last_diagnostics
+        if diagnostics['valid']:
+            published += 1
+            error = np.linalg.norm(diagnostics['estimate'] - frame.joints, axis=1)
+            assert not np.any((error > 1.0) & (error > 5 * diagnostics['joint_std']))
+    assert published > len(frames) // 2
