@@ -61,6 +61,11 @@ def report(diagnostics, lengths):
         values['predicted RMSE [m]'] = f'{diagnostics["predicted_rmse"]:.4f}'
         for k, std in enumerate(diagnostics['joint_std'], start=1):
             values[f'joint {k} predicted std [m]'] = f'{std:.4f}'
+    if 'posterior_joint_std' in diagnostics:         # a motion model's own uncertainty
+        for k, std in enumerate(diagnostics['posterior_joint_std'], start=1):
+            values[f'joint {k} tracked std [m]'] = f'{std:.4f}'
+    if 'hypotheses' in diagnostics:
+        values['hypotheses'] = str(diagnostics['hypotheses'])
     noise = diagnostics.get('noise')
     if noise is not None:                   # learned while running, or as told
         values['range sigma [m]'] = f'{noise.sigma:.4f}'
