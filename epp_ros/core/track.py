@@ -117,6 +117,8 @@ class TrackMethod:
     MANOEUVRE_NOISE = 10.0
     #: A gap after which the rates are forgotten, s.
     LONGEST_COAST = 5.0
+    #: Hypotheses closer than this in every angle are one, rad.
+    SAME_FOLD = 0.05
 
     def __init__(self, model, process_noise=1e-4, adapt_process_noise=True, max_rate=0.35,
                  max_hypotheses=4, ambiguity_odds=1000.0, manoeuvre_false_alarm=1e-3,
@@ -184,7 +186,7 @@ class TrackMethod:
         best = bank[0]
         n = self.model.n_sections + 1
         psi = canonical_angles(best.state[:n], self.model.pivot_offset)
-        # (slew + pi, pi - pitches) is the same boom: the information turns with it.
+        # (slew + pi, pi - pitches) is the same boom: the pitch rates turn with it.
         turned = np.r_[1.0, np.full(n - 1, -1.0 if np.cos(best.state[1]) < 0 and
                                     self.model.pivot_offset == 0.0 else 1.0)]
         joints = self.model.forward_kinematics(psi[0], psi[1:])
@@ -196,13 +198,13 @@ class TrackMethod:
                     posterior_joint_std=self._joint_std(best),
                     fitted_dof=best.fitted_dof,
                     timed_joints=timed[np.arange(n - 1), np.arange(n - 1)])
-        self._pending = (bank, stamp)
+        self._pending = (bank, stamp, info.pop('process_noise', self.process_noise))
         return joints, info
 
     def accept(self):
         """Commit the last :meth:`solve` as the state (its frame was judged to fit)."""
         if self._pending is not None:
-            self._bank, stamp = self._pending
+            self._bank, stamp, self.process_noise = self._pending
             self._stamp = stamp if np.isfinite(stamp) else None
             self._pending = None
 
@@ -224,11 +226,13 @@ class TrackMethod:
             fit = self.chain.fit(start, residuals)
             fits.append((fit.cost, fit.psi))
         bank = []
-        for cost, psi in sorted(fits, key=lambda fit: fit[0]):
+        fits.sort(key=lambda fit: fit[0])
+        for cost, psi in fits:
             log_weight = fits[0][0] - cost
             if log_weight < -np.log(self.ambiguity_odds) or len(bank) >= self.max_hypotheses:
                 break
-            if any(np.max(np.abs(wrap_angle(psi - h.state[:n]))) < 0.05 for h in bank):
+            if any(np.max(np.abs(wrap_angle(psi - h.state[:n]))) < self.SAME_FOLD
+                   for h in bank):
                 continue
             covariance = self._start_covariance(psi, residuals)
             bank.append(Hypothesis(np.r_[psi, np.zeros(n)], covariance, log_weight, float(n)))
@@ -250,6 +254,7 @@ class TrackMethod:
         elapsed = max(stamp - self._stamp, 0.0)
         residuals = self._residuals(measurements)
         bank, iterations, manoeuvre, converged = [], 0, False, True
+        process_noise = self.process_noise
         for hypothesis in self._bank:
             predicted = self._predict(hypothesis, elapsed, self.process_noise)
             fitted, used, done, surprise = self._update(predicted, residuals, delays)
@@ -262,11 +267,11 @@ class TrackMethod:
                     fitted, done, manoeuvre = refit, refit_done, True
             converged &= done
             if self.adapt_process_noise and hypothesis is self._bank[0]:
-                self._adapt(predicted, fitted, elapsed)
+                process_noise = self._adapted(predicted, fitted, elapsed)
             bank.append(fitted)
         bank = self._prune(bank)
         return bank, {'iterations': iterations, 'converged': converged, 'searched': False,
-                      'manoeuvre': manoeuvre}
+                      'manoeuvre': manoeuvre, 'process_noise': process_noise}
 
     def _predict(self, hypothesis, elapsed, process_noise):
         n = self.model.n_sections + 1
@@ -358,22 +363,23 @@ class TrackMethod:
             gradient = gradient + sinking.T @ depth[depth > 0]
         return normal, gradient
 
-    def _adapt(self, predicted, fitted, elapsed):
+    def _adapted(self, predicted, fitted, elapsed):
         """
-        Move each angle's process noise toward what its corrections say (covariance matching).
+        Return each angle's process noise moved toward what its correction says.
 
-        A correction of angle i has variance ``P_prior,ii - P_post,ii`` when the model holds;
-        corrections larger on average mean the boom accelerates more than ``q`` allows.
+        A correction of angle i has variance ``P_prior,ii - P_post,ii`` when the model holds
+        (covariance matching); corrections larger on average mean the boom accelerates
+        more than ``q`` allows. Committed with the frame, by :meth:`accept`.
         """
         if elapsed <= 0.0:
-            return
+            return self.process_noise
         n = self.model.n_sections + 1
         correction = wrap_angle(fitted.state[:n] - predicted.state[:n])
         expected = np.diag(predicted.covariance - fitted.covariance)[:n]
         ratio = np.clip(correction ** 2 / np.maximum(expected, 1e-18), 0.0, 10.0)
         # Stochastic approximation of E[ratio] = 1 (a mean: a log would settle low).
         step = 1.0 + (ratio - 1.0) / self.ADAPTATION_FRAMES
-        self.process_noise = np.clip(self.process_noise * step, *self.PROCESS_NOISE_RANGE)
+        return np.clip(self.process_noise * step, *self.PROCESS_NOISE_RANGE)
 
     def _prune(self, bank):
         """Best first; folds far less likely dropped, those that met merged."""
@@ -383,8 +389,8 @@ class TrackMethod:
         for hypothesis in bank:
             if hypothesis.log_weight < bank[0].log_weight - np.log(self.ambiguity_odds):
                 break
-            if any(np.max(np.abs(wrap_angle(hypothesis.state[:n] - h.state[:n]))) < 0.05
-                   for h in kept):
+            if any(np.max(np.abs(wrap_angle(hypothesis.state[:n] - h.state[:n])))
+                   < self.SAME_FOLD for h in kept):
                 continue
             kept.append(hypothesis)
         best = kept[0].log_weight
