@@ -338,24 +338,13 @@ class PostureEstimator:
         if isinstance(solved, str):
             diagnostics['error'] = solved
             return self._reject('solver_failed', diagnostics, measurements, start)
-        joints, info = solved
         verdict = self._judge(solved, measurements, stamp)
-        # A fresh solve, unless the method searched from scratch for this frame already.
-        if self._warm is not None and not info.get('searched'):
-            if verdict.lost and self._due_for_search():
-                fresh = self._solve(measurements, warm=False)
-                if not isinstance(fresh, str):
-                    fresh_verdict = self._judge(fresh, measurements, stamp)
-                    if fresh_verdict.valid:
-                        (joints, info), verdict = fresh, fresh_verdict
-                        diagnostics['reacquired'] = True
-            elif self._suspicious(verdict, measurements, stamp):
-                (joints, info), verdict, moved = self._second_opinion(
-                    (joints, info), measurements, stamp, verdict)
-                diagnostics['reacquired'] = moved
+        if self._warm is not None and not solved[1].get('searched'):
+            solved, verdict = self._reconsider(solved, verdict, measurements, stamp,
+                                               diagnostics)
         if self._learner is not None and not self._learner.settled:
-            (joints, info), verdict = self._bootstrap_noise(measurements, stamp,
-                                                            (joints, info), verdict)
+            solved, verdict = self._bootstrap_noise(measurements, stamp, solved, verdict)
+        joints, info = solved
         self._learn(joints, info, measurements, verdict)
         diagnostics.update(info, noise=self.noise)       # as learned from this frame
         if not verdict.lost and hasattr(self._solver, 'accept'):
@@ -440,6 +429,27 @@ class PostureEstimator:
         reference, then, reference_std = self._previous
         return self.integrity.judge(joints, measurements, reference, max(stamp - then, 0.0),
                                     reference_std, **known)
+
+    def _reconsider(self, solved, verdict, measurements, stamp, diagnostics):
+        """
+        Solve a warm-started frame from scratch too, when its fit is lost or suspicious.
+
+        Not when the method searched from scratch for this frame already. Returns the
+        (joints, info) kept and its verdict; ``diagnostics["reacquired"]`` says whether
+        the fresh fit won.
+        """
+        if verdict.lost:
+            if self._due_for_search():
+                fresh = self._solve(measurements, warm=False)
+                if not isinstance(fresh, str):
+                    fresh_verdict = self._judge(fresh, measurements, stamp)
+                    if fresh_verdict.valid:
+                        diagnostics['reacquired'] = True
+                        return fresh, fresh_verdict
+        elif self._suspicious(verdict, measurements, stamp):
+            solved, verdict, diagnostics['reacquired'] = self._second_opinion(
+                solved, measurements, stamp, verdict)
+        return solved, verdict
 
     #: Seconds between second opinions on fits that call many links blocked.
     SECOND_OPINION_PERIOD = 1.0
