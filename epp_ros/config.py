@@ -26,7 +26,7 @@ import re
 from typing import NamedTuple
 
 from epp_ros import contract
-from epp_ros.core.model import BoomModel
+from epp_ros.core.model import BoomModel, MAX_RANGE_OFFSET
 from epp_ros.uwb.formats import device_number, FORMATS
 import numpy as np
 import yaml
@@ -54,6 +54,10 @@ PUMP_PARAMETERS = {
     'anchor_ids': ([''], 'Anchor device ids as the firmware prints them (compared as '
                          'hexadecimal numbers).'),
     'anchor_positions': ([0.0], 'Anchor positions, metres, flattened [x0, y0, z0, x1, ...].'),
+    'anchor_offsets': ([], 'Constant each anchor adds to its ranges, metres, as anchor_names '
+                           '(empty: none); a range measures true + tag + anchor offset.'),
+    'tag_offsets': ([], 'Constant each tag adds to its ranges, metres, as tag_names (empty: '
+                        'none).'),
     'source_ports': ([''], 'Range sources, one each: /dev/tty..., socket://host:port (we '
                            'connect), tcp-listen://address:port (devices connect to us).'),
     'source_protocols': ([''], f'Line protocol of each source: {", ".join(FORMATS)} or '
@@ -145,10 +149,13 @@ class PumpConfig:
     anchor_positions: tuple     #: ((x, y, z), ...) per anchor
     sources: tuple              #: (Source, ...)
     pivot_offset: float = 0.0   #: metres from the slew axis to the boom pivot
+    anchor_offsets: tuple = None    #: metres each anchor adds to its ranges; None: zeros
+    tag_offsets: tuple = None       #: metres each tag adds to its ranges; None: zeros
 
     def model(self):
-        """Return the :class:`BoomModel` of this pump."""
-        return BoomModel(self.arm_lengths, self.base, self.anchor_positions, self.pivot_offset)
+        """Return the :class:`BoomModel` of this pump, with its device range offsets."""
+        return BoomModel(self.arm_lengths, self.base, self.anchor_positions, self.pivot_offset,
+                         self.anchor_offsets, self.tag_offsets)
 
     @property
     def link_names(self):
@@ -335,6 +342,30 @@ def _numbers(values, field):
         raise ConfigError(f'{field}: must be a list of numbers, got {_short(values)}') from None
 
 
+def _offsets(values, field, names_field, count):
+    """
+    Return a list of device range offsets (metres), or None when empty (no offsets).
+
+    Raises
+    ------
+    ConfigError
+        Unless it is one finite number per name of ``names_field``.
+
+    """
+    if len(values) == 0:
+        return None
+    offsets = _numbers(values, field)
+    if len(offsets) != count:
+        raise ConfigError(f'{field}: needs one offset per entry of {names_field} ({count}) or '
+                          f'none, got {len(offsets)}')
+    if not all(np.isfinite(offsets)):
+        raise ConfigError(f'{field}: must be finite numbers, got {_short(list(values))}')
+    if any(abs(v) >= MAX_RANGE_OFFSET for v in offsets):
+        raise ConfigError(f'{field}: offsets must be within {MAX_RANGE_OFFSET:g} m, got '
+                          f'{_short(list(values))}')
+    return offsets
+
+
 def pump_config_from_parameters(values):
     """
     Validate a pump description given as parameter values (names of PUMP_PARAMETERS).
@@ -386,8 +417,11 @@ def pump_config_from_parameters(values):
     except (TypeError, ValueError, OverflowError):
         shown = _short(get['pivot_offset'])
         raise ConfigError(f'pivot_offset: must be a number, got {shown}') from None
+    anchor_offsets = _offsets(get['anchor_offsets'], 'anchor_offsets', 'anchor_names',
+                              len(anchor_names))
+    tag_offsets = _offsets(get['tag_offsets'], 'tag_offsets', 'tag_names', len(tag_names))
     try:
-        BoomModel(arm_lengths, base, positions, pivot_offset)
+        BoomModel(arm_lengths, base, positions, pivot_offset, anchor_offsets, tag_offsets)
     except ValueError as exc:
         text = _short(str(exc), 300)
         raise ConfigError(f'anchor_positions: {text}' if text.startswith('anchors ') else text) \
@@ -395,7 +429,7 @@ def pump_config_from_parameters(values):
     sources = _sources(get['source_ports'], get['source_protocols'], get['source_tags'],
                        get['source_anchors'], tag_ids, anchor_ids)
     return PumpConfig(frame_id, arm_lengths, base, tag_names, tag_ids, anchor_names,
-                      anchor_ids, positions, sources, pivot_offset)
+                      anchor_ids, positions, sources, pivot_offset, anchor_offsets, tag_offsets)
 
 
 def _sources(ports, protocols, tags, anchors, tag_ids, anchor_ids):

@@ -286,3 +286,36 @@ def test_error_messages_stay_short_whatever_the_value(field, tmp_path):
     with pytest.raises(ConfigError, match=field) as error:
         load_pump_config(path)
     assert len(str(error.value)) < 400
+
+
+def test_device_offsets_are_optional_and_reach_the_model(tmp_path):
+    assert load_pump_config(PUMP_YAML).model().has_offsets is False
+    document = yaml.safe_load(PUMP_YAML.read_text())
+    settings = document['/**']['ros__parameters']
+    settings['anchor_offsets'] = [0.0, 0.12, -0.05, 0.08, 0.2, -0.1]
+    settings['tag_offsets'] = [0.1, -0.03, 0.15, 0, -0.07]
+    path = tmp_path / 'pump.yaml'
+    path.write_text(yaml.safe_dump(document))
+    model = load_pump_config(path).model()
+    np.testing.assert_allclose(model.anchor_offsets, settings['anchor_offsets'])
+    np.testing.assert_allclose(model.tag_offsets, settings['tag_offsets'])
+    values = shared_values()
+    values.update(anchor_offsets=[], tag_offsets=[])        # ROS parameters' "none"
+    assert not pump_config_from_parameters(values).model().has_offsets
+
+
+@pytest.mark.parametrize('change, message', [
+    ({'anchor_offsets': [0.1] * 5}, 'anchor_offsets: needs one offset per entry of '
+                                    r'anchor_names \(6\) or none, got 5'),
+    ({'tag_offsets': [0.1] * 6}, 'tag_offsets: needs one offset per entry of tag_names'),
+    ({'tag_offsets': [0.1, 0.1, 0.1, 0.1, float('nan')]}, 'tag_offsets: must be finite'),
+    ({'anchor_offsets': ['x'] * 6}, 'anchor_offsets: must be a list of numbers'),
+    ({'anchor_offsets': [0.1] * 5 + [150.0]}, 'anchor_offsets: offsets must be within'),
+    ({'tag_offsets': 0.1}, 'tag_offsets: must be a list'),
+])
+def test_bad_offsets_give_one_line_naming_the_field(change, message):
+    values = shared_values()
+    values.update(change)
+    with pytest.raises(ConfigError, match=message) as error:
+        pump_config_from_parameters(values)
+    assert '\n' not in str(error.value) and len(str(error.value)) < 200

@@ -73,3 +73,35 @@ def test_model_arrays_are_read_only():
     model = BoomModel([1.0], [0.0, 0.0, 0.0], ANCHORS)
     with pytest.raises(ValueError):
         model.anchors[0, 0] = 5.0
+
+
+def test_device_offsets_default_to_zero_and_add_to_the_measured_ranges():
+    model = BoomModel([1.0, 2.0], [0.0, 0.0, 0.0], ANCHORS)
+    assert not model.has_offsets and model.tag_offsets.shape == (2,)
+    np.testing.assert_array_equal(model.anchor_offsets, np.zeros(4))
+    offset = BoomModel([1.0, 2.0], [0.0, 0.0, 0.0], ANCHORS, anchor_offsets=[0.1, 0.2, 0.3, 0.4],
+                       tag_offsets=[-0.05, 0.05])
+    joints = offset.forward_kinematics(0.2, [0.5, -0.3])
+    np.testing.assert_allclose(offset.ranges(joints), model.ranges(joints))   # true distances
+    np.testing.assert_allclose(offset.measured_ranges(joints) - offset.ranges(joints),
+                               [[0.05, 0.15, 0.25, 0.35], [0.15, 0.25, 0.35, 0.45]])
+    np.testing.assert_allclose(offset.tag_link_offsets(), [[-0.1, 0.0], [0.0, 0.1]])
+    assert 'tag_offsets=[-0.05, 0.05]' in repr(offset)
+    with pytest.raises(ValueError):
+        offset.tag_offsets[0] = 1.0
+    calibrated = model.with_calibration(tag_offsets=[0.1, 0.2])
+    np.testing.assert_array_equal(calibrated.tag_offsets, [0.1, 0.2])
+    np.testing.assert_array_equal(calibrated.anchors, model.anchors)
+
+
+@pytest.mark.parametrize('kwargs, message', [
+    ({'anchor_offsets': [0.1, 0.2]}, 'anchor_offsets must hold 4 values'),
+    ({'tag_offsets': [0.1, 0.2, 0.3]}, 'tag_offsets must hold 2 values'),
+    ({'tag_offsets': [0.1, np.nan]}, 'tag_offsets must be finite'),
+    ({'anchor_offsets': [0.1, 0.2, 0.3, 25.0]}, 'anchor_offsets must be within'),
+    ({'anchor_offsets': 'short'}, 'anchor_offsets must be numeric'),
+    ({'tag_offsets': [[0.1, 0.2]]}, 'tag_offsets must be a 1-D array'),
+])
+def test_invalid_offsets_name_the_field(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        BoomModel([1.0, 2.0], [0.0, 0.0, 0.0], ANCHORS, **kwargs)

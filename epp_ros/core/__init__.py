@@ -13,8 +13,10 @@
 # limitations under the License.
 
 """Plain numerical library of epp_ros: geometry, estimators, simulation. No ROS imports."""
+from .calibrate import calibrate, CalibrationResult
 from .estimators import METHODS, PostureEstimator, RANGE_METHODS
 from .model import BoomModel
 from .nedm import nearest_edm
 
-__all__ = ['BoomModel', 'PostureEstimator', 'METHODS', 'RANGE_METHODS', 'nearest_edm']
+__all__ = ['BoomModel', 'PostureEstimator', 'METHODS', 'RANGE_METHODS', 'nearest_edm',
+           'calibrate', 'CalibrationResult']

@@ -139,6 +139,11 @@ class Measurements:
         ``stamp`` (s) and ``range_stamps`` (p,) say when the frame and each tag's ranges
         were measured.
 
+        The ranges are as the modules report them: the model's device offsets
+        (``model.link_offsets()``, ``model.tag_link_offsets()``) are subtracted here, the
+        one place every method's frames pass, so that the methods fit true distances
+        (``model.ranges``); a corrected range below zero is taken as zero.
+
         Returns
         -------
         measurements : Measurements
@@ -160,6 +165,9 @@ class Measurements:
             tag_ranges, tag_too_long = _clean(tag_ranges, (p, p), 'tag_ranges', tag_limit)
             tag_ranges[np.diag_indices(p)] = np.nan
             too_long += tag_too_long
+        if model.has_offsets:
+            ranges = np.maximum(ranges - model.link_offsets(), 0.0)   # NaN stays NaN
+            tag_ranges = np.maximum(tag_ranges - model.tag_link_offsets(), 0.0)
         pitches = np.full(p, np.nan) if pitches is None else \
             _clean(pitches, (p,), 'pitches')[0]
         slew = np.nan if slew is None else float(_clean(slew, (), 'slew')[0])
@@ -170,7 +178,7 @@ class Measurements:
 
     @classmethod
     def ranges_only(cls, ranges):
-        """Return a frame of tag-anchor ranges (p, m) alone (taken as they are)."""
+        """Return a frame of tag-anchor ranges (p, m) alone (taken as they are: no offsets)."""
         ranges = np.asarray(ranges, dtype=float)
         p = ranges.shape[0]
         return cls(ranges, np.full((p, p), np.nan), np.full(p, np.nan), np.nan)

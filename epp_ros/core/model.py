@@ -19,6 +19,12 @@ Conventions (REP 103, SI): world frame in metres with z up. Sections are numbere
 base outward; section k (k = 1..p) has length ``arm_lengths[k-1]`` and joint k is its distal
 end, joint p the tip. One UWB tag sits on each joint, anchors are at known positions.
 
+Every UWB module adds a constant to the ranges it measures (its antenna delay is never
+calibrated exactly): a measured tag-anchor range is the true distance plus
+``tag_offsets[k] + anchor_offsets[j]``. :meth:`BoomModel.ranges` is the true distance,
+:meth:`BoomModel.measured_ranges` what the modules report; ``Measurements.clean`` subtracts
+the offsets once, so every method fits true distances.
+
 The slew axis is vertical through ``base``. On real turntables the boom's pivot sits
 ``pivot_offset`` metres from that axis, along the slew direction, and moves on a circle as
 the boom slews; with the default 0 the pivot is ``base`` itself, as in the paper.
@@ -47,6 +53,25 @@ def _as_finite_array(value, field, ndim):
 #: Metres: no pump is larger; a bigger number is a unit or typing mistake (and would
 #: overflow the geometry's squares).
 MAX_METRES = 1e6
+
+
+#: Metres: no UWB module's range offset is this large (antenna delays give tens of
+#: centimetres); a bigger number is a unit or sign mistake.
+MAX_RANGE_OFFSET = 10.0
+
+
+def _offsets(value, field, count):
+    """Return a device's range offsets (count,), metres: zeros for None, else validated."""
+    if value is None:
+        return np.zeros(count)
+    offsets = _as_finite_array(value, field, 1)
+    if offsets.shape != (count,):
+        raise ValueError(f'{field} must hold {count} values (one per device), got '
+                         f'{offsets.size}: {offsets.tolist()}')
+    if np.any(np.abs(offsets) >= MAX_RANGE_OFFSET):
+        raise ValueError(f'{field} must be within {MAX_RANGE_OFFSET:g} m, got '
+                         f'{offsets.tolist()}')
+    return offsets
 
 
 #: Metres: anchors closer than this to each other, or all this close to one line, give the
@@ -86,6 +111,15 @@ class BoomModel:
     pivot_offset : float
         Horizontal distance from the slew axis to the pivot, metres, positive along the
         slew direction. ``base`` is then the point of the slew axis at the pivot's height.
+    anchor_offsets : array_like, shape (m,), optional
+        Constant each anchor adds to the ranges it measures, metres (default zeros);
+        finite, below ``MAX_RANGE_OFFSET`` in magnitude.
+    tag_offsets : array_like, shape (p,), optional
+        Constant each tag adds to the ranges it measures, metres (default zeros): a
+        measured tag-anchor range is ``ranges(joints)[k, j] + tag_offsets[k] +
+        anchor_offsets[j]``, a tag-tag range ``... + tag_offsets[k] + tag_offsets[l]``.
+        Known offsets are subtracted from the measurements (``Measurements.clean``) and
+        leave the Cramér–Rao bound unchanged: a known constant carries no information.
 
     Raises
     ------
@@ -94,7 +128,8 @@ class BoomModel:
 
     """
 
-    def __init__(self, arm_lengths, base, anchors, pivot_offset=0.0):
+    def __init__(self, arm_lengths, base, anchors, pivot_offset=0.0, anchor_offsets=None,
+                 tag_offsets=None):
         arm_lengths = _as_finite_array(arm_lengths, 'arm_lengths', 1)
         if arm_lengths.size < 1:
             raise ValueError('arm_lengths must hold at least one section, got []')
@@ -113,12 +148,17 @@ class BoomModel:
         if not np.isfinite(pivot_offset):
             raise ValueError(f'pivot_offset must be finite, got {pivot_offset!r}')
         _check_anchor_geometry(anchors)
+        anchor_offsets = _offsets(anchor_offsets, 'anchor_offsets', anchors.shape[0])
+        tag_offsets = _offsets(tag_offsets, 'tag_offsets', arm_lengths.size)
         self.arm_lengths = arm_lengths
         self.base = base
         self.pivot_offset = pivot_offset
         self.anchors = anchors
+        self.anchor_offsets = anchor_offsets
+        self.tag_offsets = tag_offsets
         self._moves_with = np.tril(np.ones((arm_lengths.size, arm_lengths.size)))
-        for array in (self.arm_lengths, self.base, self.anchors):
+        for array in (self.arm_lengths, self.base, self.anchors, self.anchor_offsets,
+                      self.tag_offsets):
             array.flags.writeable = False
 
     @property
@@ -218,10 +258,40 @@ class BoomModel:
         jacobian[:, :, 1:] = self._moves_with[:, None, :] * section[None, :, :]
         return jacobian
 
+    @property
+    def has_offsets(self):
+        """Whether any device has a range offset."""
+        return bool(self.anchor_offsets.any() or self.tag_offsets.any())
+
+    def link_offsets(self):
+        """Return what each tag-anchor range measures too long, shape (p, m), metres."""
+        return self.tag_offsets[:, None] + self.anchor_offsets[None, :]
+
+    def tag_link_offsets(self):
+        """Return what each tag-tag range measures too long, shape (p, p), metres."""
+        return self.tag_offsets[:, None] + self.tag_offsets[None, :]
+
     def ranges(self, joints):
-        """Tag-to-anchor distances, shape (..., p, m), for joints of shape (..., p, 3)."""
+        """
+        Return the true tag-to-anchor distances, shape (..., p, m), metres.
+
+        ``joints`` has shape (..., p, 3). Without the device offsets: what the methods
+        fit, once ``Measurements.clean`` has taken the offsets off the measured ranges
+        (:meth:`measured_ranges` adds them).
+        """
         joints = np.asarray(joints, dtype=float)
         return np.linalg.norm(joints[..., :, None, :] - self.anchors, axis=-1)
+
+    def measured_ranges(self, joints):
+        """Return what the modules report, shape (..., p, m): :meth:`ranges` plus offsets."""
+        return self.ranges(joints) + self.link_offsets()
+
+    def with_calibration(self, anchors=None, anchor_offsets=None, tag_offsets=None):
+        """Return the same boom with other anchors and offsets (None: keep these)."""
+        return BoomModel(self.arm_lengths, self.base,
+                         self.anchors if anchors is None else anchors, self.pivot_offset,
+                         self.anchor_offsets if anchor_offsets is None else anchor_offsets,
+                         self.tag_offsets if tag_offsets is None else tag_offsets)
 
     def max_ranges(self):
         """Longest possible tag-anchor distances, shape (p, m): anchor to base plus reach."""
@@ -241,5 +311,8 @@ class BoomModel:
 
     def __repr__(self):
         offset = f', pivot_offset={self.pivot_offset}' if self.pivot_offset else ''
+        if self.has_offsets:
+            offset += (f', anchor_offsets={self.anchor_offsets.tolist()}, '
+                       f'tag_offsets={self.tag_offsets.tolist()}')
         return (f'BoomModel(arm_lengths={self.arm_lengths.tolist()}, base={self.base.tolist()}, '
                 f'anchors={self.anchors.tolist()}{offset})')

@@ -1,0 +1,164 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+from epp_ros.core import calibrate, PostureEstimator
+from epp_ros.core.measurements import Measurements
+from epp_ros.core.simulate import (FieldEffects, FieldSimulator, Motion, truck_pump,
+                                   WorkingMotion)
+import numpy as np
+import pytest
+
+#: Turret and cab stay where configured; the four outriggers move.
+FIXED = (0, 5)
+OUTRIGGERS = (1, 2, 3, 4)
+
+
+def recording(seed, sigma, seconds, motion=None):
+    """Return the model, the simulator (the truth) and the ranges (N, p, m) of a run."""
+    model = truck_pump()
+    rng = np.random.default_rng(seed)
+    effects = FieldEffects(sigma=sigma, tag_offset=0.15, anchor_offset=0.15, anchor_shift=0.3,
+                           moving_anchors=OUTRIGGERS)
+    simulator = FieldSimulator(model, effects, rng)
+    motion = WorkingMotion(model, rng) if motion is None else motion
+    frames = [simulator.frame(motion, 0.1 * index) for index in range(int(seconds * 10))]
+    return model, simulator, np.array([frame.ranges for frame in frames]), frames
+
+
+def true_links(simulator):
+    return simulator.tag_offsets[:, None] + simulator.anchor_offsets[None, :]
+
+
+def test_exact_recovery_without_noise():
+    model, simulator, ranges, _ = recording(0, 0.0, 15.0)
+    result = calibrate(model, ranges, fixed_anchors=FIXED)
+    assert result.converged and result.frames_used.all()
+    np.testing.assert_allclose(result.anchors, simulator.true_anchors, atol=1e-6)
+    np.testing.assert_allclose(result.link_offsets, true_links(simulator), atol=1e-6)
+    assert result.rms_after < 1e-6 < 0.1 < result.rms_before
+    # The gauge: the split of the link offsets nearest to zero, sum(tags) == sum(anchors).
+    assert abs(result.tag_offsets.sum() - result.anchor_offsets.sum()) < 1e-9
+    shift = (simulator.tag_offsets.sum() - simulator.anchor_offsets.sum()) / (5 + 6)
+    np.testing.assert_allclose(result.tag_offsets, simulator.tag_offsets - shift, atol=1e-6)
+    np.testing.assert_allclose(result.anchor_offsets, simulator.anchor_offsets + shift,
+                               atol=1e-6)
+    assert 'sum(tag_offsets) = sum(anchor_offsets)' in result.gauge
+    # The calibrated model is a model: its anchors and offsets are the result's.
+    np.testing.assert_allclose(result.model.anchors, result.anchors)
+    np.testing.assert_allclose(result.model.link_offsets(), result.link_offsets)
+    np.testing.assert_array_equal(result.anchor_std[list(FIXED)], 0.0)
+
+
+def test_tag_ranges_split_the_offsets_between_tags_and_anchors():
+    model, simulator, ranges, frames = recording(1, 0.0, 10.0)
+    joints = np.array([frame.joints for frame in frames])
+    tag_ranges = (np.linalg.norm(joints[:, :, None] - joints[:, None], axis=-1)
+                  + simulator.tag_offsets[:, None] + simulator.tag_offsets[None, :])
+    result = calibrate(model, ranges, tag_ranges=tag_ranges, fixed_anchors=FIXED)
+    np.testing.assert_allclose(result.tag_offsets, simulator.tag_offsets, atol=1e-6)
+    np.testing.assert_allclose(result.anchor_offsets, simulator.anchor_offsets, atol=1e-6)
+    assert 'tag-tag' in result.gauge
+
+
+def test_turret_alone_fixed_keeps_the_first_free_anchors_bearing():
+    model, simulator, ranges, _ = recording(2, 0.0, 10.0)
+    result = calibrate(model, ranges, fixed_anchors=(0,))
+    # The outrigger's offset from its configured place, across its bearing, is the gauge.
+    radial = model.anchors[1, :2] / np.linalg.norm(model.anchors[1, :2])
+    across = np.array([-radial[1], radial[0]])
+    assert abs((result.anchors[1, :2] - model.anchors[1, :2]) @ across) < 1e-9
+    assert 'bearing' in result.gauge
+    # Rotated about the slew axis to the truth's frame, the anchors are exact.
+    truth = simulator.true_anchors
+    turn = np.arctan2(truth[1, 1], truth[1, 0]) - np.arctan2(result.anchors[1, 1],
+                                                             result.anchors[1, 0])
+    rotation = np.array([[np.cos(turn), -np.sin(turn), 0.0], [np.sin(turn), np.cos(turn), 0.0],
+                         [0.0, 0.0, 1.0]])
+    np.testing.assert_allclose(result.anchors @ rotation.T, truth, atol=1e-6)
+    np.testing.assert_allclose(result.link_offsets, true_links(simulator), atol=1e-6)
+
+
+def test_recovered_parameters_lie_within_their_standard_deviations():
+    scores = []
+    for seed in (3, 4):
+        model, simulator, ranges, _ = recording(seed, 0.1, 20.0)
+        result = calibrate(model, ranges, fixed_anchors=FIXED)
+        assert result.converged and 0.8 < result.residual_scale < 1.2
+        scores.append(np.abs(result.link_offsets - true_links(simulator))
+                      / result.link_offset_std)
+        moved = list(OUTRIGGERS)
+        scores.append(np.abs(result.anchors - simulator.true_anchors)[moved]
+                      / result.anchor_std[moved])
+        assert result.rms_after < 0.11 < result.rms_before
+    scores = np.concatenate([score.ravel() for score in scores])
+    assert scores.max() < 4.0
+    assert 0.3 < np.sqrt(np.mean(scores ** 2)) < 2.0     # not grossly over- or under-confident
+
+
+class Parked(Motion):
+    """A boom that does not move."""
+
+    def __init__(self, model):
+        self.model = model
+
+    def angles(self, times):
+        times = np.asarray(times, dtype=float)
+        return (np.full(times.shape, 0.4),
+                np.broadcast_to(np.radians([55.0, 30.0, 5.0, -20.0, -45.0]),
+                                times.shape + (5,)))
+
+
+def test_a_parked_boom_is_reported_as_poorly_excited():
+    model = truck_pump()
+    _, _, ranges, _ = recording(6, 0.1, 10.0, motion=Parked(model))
+    result = calibrate(model, ranges, fixed_anchors=FIXED)
+    assert result.status == 'poorly_excited' and not result.success
+    assert any(name.startswith('anchor') for name in result.poorly_determined)
+    assert 'slew' in result.message and '\n' not in result.message
+
+
+def test_measurements_and_estimators_see_offset_corrected_ranges():
+    model = truck_pump()
+    rng = np.random.default_rng(7)
+    tag_offsets, anchor_offsets = rng.normal(0.0, 0.15, 5), rng.normal(0.0, 0.15, 6)
+    offset = model.with_calibration(anchor_offsets=anchor_offsets, tag_offsets=tag_offsets)
+    joints = offset.forward_kinematics(0.3, np.radians([50.0, 20.0, 0.0, -20.0, -40.0]))
+    measured = offset.measured_ranges(joints)
+    np.testing.assert_allclose(measured - offset.ranges(joints), offset.link_offsets())
+    tag_ranges = (np.linalg.norm(joints[:, None] - joints[None], axis=-1)
+                  + offset.tag_link_offsets())
+    frame, _ = Measurements.clean(offset, measured, tag_ranges)
+    np.testing.assert_allclose(frame.ranges, offset.ranges(joints), atol=1e-12)
+    distances = np.linalg.norm(joints[:, None] - joints[None], axis=-1)
+    np.testing.assert_allclose(frame.tag_ranges[~np.eye(5, dtype=bool)],
+                               distances[~np.eye(5, dtype=bool)], atol=1e-12)
+    estimator = PostureEstimator(offset, 'chain', sigma=0.1)
+    estimate = estimator.update(measured)
+    assert estimator.last_diagnostics['valid']
+    np.testing.assert_allclose(estimate, joints, atol=1e-6)
+
+
+@pytest.mark.parametrize('kwargs, message', [
+    ({'ranges': np.zeros((3, 5, 5))}, 'ranges must have shape'),
+    ({'ranges': np.zeros((5, 6))}, 'ranges must have shape'),
+    ({'fixed_anchors': (0, 6)}, 'fixed_anchors'),
+    ({'fixed_anchors': (0, 0)}, 'fixed_anchors'),
+    ({'fixed_anchors': 'turret'}, 'fixed_anchors'),
+    ({'ranges': np.full((3, 5, 6), np.nan)}, 'no frame'),
+])
+def test_bad_recordings_are_refused(kwargs, message):
+    model = truck_pump()
+    args = {'ranges': np.full((3, 5, 6), 10.0), **kwargs}
+    with pytest.raises(ValueError, match=message):
+        calibrate(model, **args)
