@@ -29,7 +29,7 @@ setup(
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/rviz', glob('rviz/*.rviz')),
     ],
-    install_requires=['setuptools', 'numpy', 'scipy', 'pyserial', 'PyYAML'],
+    install_requires=['setuptools', 'numpy', 'scipy', 'pyserial', 'PyYAML', 'rich'],
     # epp_bench paper: the SDP baseline and the plots; never needed at runtime.
     extras_require={'bench': ['cvxpy', 'matplotlib']},
     zip_safe=True,

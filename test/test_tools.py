@@ -26,9 +26,10 @@ import pytest
 
 def test_demo_runs_the_pipeline_and_ends_with_a_json_summary(tmp_path):
     plot = tmp_path / 'boom.png'
-    result = subprocess.run([sys.executable, '-m', 'epp_ros.tools.demo', '--duration', '6',
-                             '--sigma', '0.1', '--garbage', '0', '--json', '--plot', str(plot)],
-                            capture_output=True, text=True, timeout=90)
+    # Until 30 postures arrived, however long a loaded machine takes (at most 80 s).
+    result = subprocess.run([sys.executable, '-m', 'epp_ros.tools.demo', '--postures', '30',
+                             '--duration', '80', '--sigma', '0.1', '--garbage', '0', '--json',
+                             '--plot', str(plot)], capture_output=True, text=True, timeout=150)
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout.strip().splitlines()[-1])
     assert set(summary) == {'frames', 'rmse_m', 'max_joint_error_m', 'latency_p50_ms',

@@ -16,11 +16,25 @@
 epp_demo: the whole pipeline live on the built-in simulated pump.
 
 Starts ``uwb_emulator`` (a pseudo-terminal, with the true posture), ``uwb_driver`` and
-``posture_estimator`` as separate processes talking over DDS, and watches them: each joint's
-estimate and its error against the truth, the running RMSE, the frame rate, the latency from
-a range frame to its posture, and the estimator's diagnostic level. Stops on Ctrl-C or after
-``--duration``, shuts every process down, prints a summary (``--json``: as the last stdout
-line) and can save a plot of the estimated and true boom (``--plot FILE.png``).
+``posture_estimator`` as separate processes talking over DDS, and watches them. On a
+terminal it draws the true and the estimated boom a few times a second (``rich``'s live
+display; the drawing is :mod:`epp_ros.tools.demo_view`): a side view and a top view, each
+joint's predicted uncertainty around it, and below them the method, the learned noise,
+the health level and its reason, the rate, the latency and the frames left unanswered.
+With ``--plain``, or when the output is not a terminal, it prints one line a second
+instead. Stops on Ctrl-C, after ``--duration`` or ``--postures``, shuts every process
+down, prints a summary (``--json``: as the last stdout line) and can save a plot of the
+estimated and true boom (``--plot FILE.png``).
+
+``--field NAMES`` runs the emulator with the field simulator's effects (presets of
+:data:`epp_ros.core.simulate.FIELD_EFFECTS`, comma-separated) instead of the
+``--sigma/--nlos/--drop`` noise; ``--record BAG`` keeps the demo's topics in a rosbag2
+(``epp_bag record`` beside the pipeline).
+
+The view never slows the pipeline: the nodes are processes of their own, the demo takes
+every message before it redraws and skips a redraw when it is behind, and the latency is
+measured from a frame's stamp to the moment DDS received its posture, not to when the
+demo got round to it.
 """
 import json
 from pathlib import Path
@@ -30,75 +44,143 @@ import sys
 import tempfile
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray
-from epp_ros import contract
 from epp_ros.arguments import Parser
-from epp_ros.config import ConfigError, default_config_path, load_pump_config
-from epp_ros.core import RANGE_METHODS
-from epp_ros.core.metrics import frame_rmse, joint_errors, pooled_rmse
-from epp_ros.nodes.common import POSTURE_QOS, RANGES_QOS, to_seconds
-from geometry_msgs.msg import PoseArray
-import numpy as np
-import rclpy
-from rclpy.node import Node
-from sensor_msgs.msg import JointState
+from epp_ros.nodes.stopping import ignore_signals, shutdown_on_signals, ShutdownRequest
+
+# Only the standard library and the stop request above are imported before main() has
+# made SIGINT a request: rclpy, numpy and rich load inside the functions.
 
 LEVEL_NAMES = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}
+LEVEL_STYLES = {'OK': 'bold green', 'WARN': 'bold yellow', 'ERROR': 'bold red',
+                'STALE': 'bold magenta'}
+#: The noise options' defaults (None when parsed: --field refuses them when given).
+NOISE_DEFAULTS = {'sigma': 0.1, 'drop': 0.05, 'nlos': 0.0}
+LIVE_PERIOD = 0.2           # s between redraws of the live view
+PLAIN_PERIOD = 1.0          # s between the lines of --plain
+RATE_WINDOW = 2.0           # s of postures the live view's rate counts
+INFO_LINES = 6              # lines of the live view besides the drawing
+STOP_WAIT = 5.0             # s a node gets to stop after SIGINT
+RECORD_WAIT = 120.0         # s the recorder gets to write its bag
+
+
+def _field_names(text):
+    """Return ``text`` if it names presets of ``FIELD_EFFECTS`` (an argparse type)."""
+    import argparse
+    from epp_ros.core.simulate import field_effects
+    try:
+        field_effects(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
 
 
 def parse_args(argv):
+    from epp_ros.core import RANGE_METHODS
+    from epp_ros.core.simulate import FIELD_EFFECTS
     parser = Parser(prog='epp_demo', description=__doc__.lstrip().splitlines()[0])
     parser.add_argument('--method', choices=RANGE_METHODS, default='cepp')
     parser.add_argument('--duration', type=float, default=None,
                         help='seconds to run (default: until Ctrl-C)')
+    parser.add_argument('--postures', type=int, default=None,
+                        help='stop once this many postures arrived (or --duration is over)')
     parser.add_argument('--rate', type=float, default=10.0, help='ranging cycles per second')
-    parser.add_argument('--sigma', type=float, default=0.1, help='range noise, metres')
-    parser.add_argument('--drop', type=float, default=0.05, help='link dropout probability')
-    parser.add_argument('--nlos', type=float, default=0.0, help='fraction of NLOS links')
+    parser.add_argument('--sigma', type=float,
+                        help=f'range noise, metres (default {NOISE_DEFAULTS["sigma"]:g})')
+    parser.add_argument('--drop', type=float,
+                        help=f'link dropout probability (default {NOISE_DEFAULTS["drop"]:g})')
+    parser.add_argument('--nlos', type=float, help='fraction of NLOS links (default 0)')
+    parser.add_argument('--field', metavar='EFFECT[,EFFECT...]', type=_field_names,
+                        help='the emulator simulates these field effects instead of '
+                             '--sigma/--nlos/--drop: ' + ', '.join(FIELD_EFFECTS))
     parser.add_argument('--garbage', type=float, default=0.01,
                         help='probability of a corrupted line')
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--config', help='pump description (default: the packaged one)')
     parser.add_argument('--plot', metavar='FILE.png', help='save estimated vs. true boom')
+    parser.add_argument('--record', metavar='BAG',
+                        help="record the demo's topics into this rosbag2 (a new directory)")
+    parser.add_argument('--plain', action='store_true',
+                        help='one line of numbers a second instead of the live view')
     parser.add_argument('--json', action='store_true',
                         help='print a JSON summary as the last stdout line')
     args = parser.parse_args(argv)
     if args.rate <= 0 or (args.duration is not None and args.duration <= 0):
         parser.error('--rate and --duration must be positive')
+    if args.postures is not None and args.postures < 1:
+        parser.error('--postures must be >= 1')
+    given = [f'--{name}' for name in NOISE_DEFAULTS if getattr(args, name) is not None]
+    if args.field and given:
+        parser.error(f'--field sets the range errors itself: give it or {"/".join(given)}, '
+                     'not both')
+    if not args.field:
+        for name, default in NOISE_DEFAULTS.items():
+            if getattr(args, name) is None:
+                setattr(args, name, default)
     return args
 
 
-class Monitor(Node):
+class Monitor:
     """Receives ranges, postures, truth and diagnostics, and scores the postures."""
 
     def __init__(self):
-        super().__init__('epp_demo_monitor')
+        from diagnostic_msgs.msg import DiagnosticArray
+        from epp_ros import contract
+        from epp_ros.nodes.common import POSTURE_QOS, RANGES_QOS
+        from geometry_msgs.msg import PoseArray
+        import rclpy
+        from sensor_msgs.msg import JointState
+        self.node = rclpy.create_node('epp_demo_monitor')
         self.truth_stamps, self.truths = [], []
         self.frame_stamps = []
         self.latencies, self.rmses, self.max_error = [], [], 0.0
         self.posture_stamps = []
+        self.posture_times = []               # monotonic receipt of each posture
         self.last = None                      # (estimate, truth) of the newest posture
+        self.estimate = None                  # the newest posture, with or without truth
         self.level = None
-        self.create_subscription(PoseArray, contract.POSTURE.name, self.on_posture,
-                                 POSTURE_QOS)
-        self.create_subscription(PoseArray, contract.TRUTH.name, self.on_truth, POSTURE_QOS)
-        self.create_subscription(JointState, contract.RANGES.name, self.on_ranges, RANGES_QOS)
-        self.create_subscription(DiagnosticArray, contract.DIAGNOSTICS.name,
-                                 self.on_diagnostics, contract.DIAGNOSTICS.depth)
+        self.reason = ''
+        self.values = {}                      # the estimator's newest diagnostic values
+        self.received = 0                     # messages taken so far
+        self.node.create_subscription(PoseArray, contract.POSTURE.name, self.on_posture,
+                                      POSTURE_QOS)
+        self.node.create_subscription(PoseArray, contract.TRUTH.name, self.on_truth,
+                                      POSTURE_QOS)
+        self.node.create_subscription(JointState, contract.RANGES.name, self.on_ranges,
+                                      RANGES_QOS)
+        self.node.create_subscription(DiagnosticArray, contract.DIAGNOSTICS.name,
+                                      self.on_diagnostics, contract.DIAGNOSTICS.depth)
 
     def on_truth(self, message):
+        from epp_ros import contract
+        from epp_ros.nodes.common import to_seconds
+        self.received += 1
         self.truth_stamps.append(to_seconds(message.header.stamp))
         self.truths.append(contract.points_of(message))
 
     def on_ranges(self, message):
+        self.received += 1
         self.frame_stamps.append((message.header.stamp.sec, message.header.stamp.nanosec))
 
-    def on_posture(self, message):
-        received = time.time()
+    def on_posture(self, message, info):
+        """
+        Score a posture against the truth of its frame.
+
+        Its latency ends when DDS received it (``info``), not when the demo took it: a
+        redraw that keeps the demo busy does not count.
+        """
+        from epp_ros import contract
+        from epp_ros.core.metrics import frame_rmse, joint_errors
+        from epp_ros.nodes.common import to_seconds
+        import numpy as np
+        self.received += 1
+        received_ns = info.get('received_timestamp', 0) if isinstance(info, dict) else 0
+        received = 1e-9 * received_ns if received_ns > 0 else time.time()
         stamp = to_seconds(message.header.stamp)
         self.posture_stamps.append((message.header.stamp.sec, message.header.stamp.nanosec))
+        self.posture_times.append(time.monotonic())
         self.latencies.append(received - stamp)
         estimate = contract.points_of(message)
+        self.estimate = estimate
         # The truth of a frame is the newest published before the frame was received.
         index = int(np.searchsorted(self.truth_stamps, stamp)) - 1
         if index >= 0 and stamp - self.truth_stamps[index] < 1.0:
@@ -109,9 +191,45 @@ class Monitor(Node):
             self.last = (estimate, truth)
 
     def on_diagnostics(self, message):
+        self.received += 1
         for status in message.status:
             if status.name.startswith('posture_estimator'):
                 self.level = LEVEL_NAMES.get(ord(status.level), '?')
+                self.reason = status.message
+                self.values = {value.key: value.value for value in status.values}
+
+    def drain(self, executor, budget=0.1):
+        """Take every message waiting, for at most ``budget`` s; True when none is left."""
+        deadline = time.monotonic() + budget
+        while time.monotonic() < deadline:
+            before = self.received
+            executor.spin_once(timeout_sec=0.0)
+            if self.received == before:
+                return True
+        return False
+
+    def joint_stds(self, joints):
+        """
+        Each joint's standard deviation from the diagnostics, metres (NaN where unknown).
+
+        A motion model's own (``tracked``) where the method has one, else the Cramér–Rao
+        bound at the estimate (``predicted``).
+        """
+        stds = []
+        for k in range(1, joints + 1):
+            text = self.values.get(f'joint {k} tracked std [m]',
+                                   self.values.get(f'joint {k} predicted std [m]', 'nan'))
+            try:
+                stds.append(float(text))
+            except ValueError:
+                stds.append(float('nan'))
+        return stds
+
+    def recent_rate(self, window=RATE_WINDOW):
+        """Return the postures per second over the last ``window`` seconds."""
+        now = time.monotonic()
+        recent = sum(1 for t in self.posture_times[-int(100 * window):] if now - t <= window)
+        return recent / window
 
     def unanswered_frames(self, settle=0.5):
         """
@@ -130,6 +248,8 @@ class Monitor(Node):
                    and stamp not in answered)
 
     def summary(self, method):
+        from epp_ros.core.metrics import pooled_rmse
+        import numpy as np
         latencies = 1e3 * np.array(self.latencies) if self.latencies else np.full(1, np.nan)
         return {'frames': len(self.posture_stamps), 'rmse_m': pooled_rmse(self.rmses),
                 'max_joint_error_m': self.max_error,
@@ -138,10 +258,17 @@ class Monitor(Node):
                 'dropped_frames': self.unanswered_frames(), 'method': method}
 
 
+def _noise_text(args):
+    if args.field:
+        return f'field={args.field}'
+    return f'sigma={args.sigma} m  drop={args.drop}  nlos={args.nlos}'
+
+
 def render(monitor, args, elapsed):
-    """Render the live view as text."""
-    lines = [f'epp_demo  method={args.method}  sigma={args.sigma} m  drop={args.drop}  '
-             f'nlos={args.nlos}  {elapsed:5.1f} s   (Ctrl-C to stop)', '',
+    """Render the numbers as text; ``--plain`` prints its last line."""
+    from epp_ros.core.metrics import joint_errors
+    lines = [f'epp_demo  method={args.method}  {_noise_text(args)}  '
+             f'{elapsed:5.1f} s   (Ctrl-C to stop)', '',
              '  joint      x [m]      y [m]      z [m]    error [m]']
     if monitor.last is not None:
         estimate, truth = monitor.last
@@ -161,11 +288,62 @@ def render(monitor, args, elapsed):
     return '\n'.join(lines)
 
 
+def live_view(monitor, args, elapsed, width, height, scene, skipped=0):
+    """
+    Return the live view as a ``rich`` renderable: the drawing and the numbers below it.
+
+    ``scene`` is a dict with ``axis`` (the slew axis, x y), ``span`` (the boom's length)
+    and ``top`` (its highest reach), metres, which keep the picture still.
+    """
+    from epp_ros.tools import demo_view
+    from rich.console import Group
+    from rich.text import Text
+    summary = monitor.summary(args.method)
+    estimate, truth = monitor.last if monitor.last is not None else (monitor.estimate, None)
+    header = Text.assemble(('epp_demo', 'bold'), '  method ', (args.method, 'bold cyan'),
+                           f'  {_noise_text(args)}  {elapsed:.1f} s  Ctrl-C stops')
+    lines = [header]
+    drawing_height = max(height - INFO_LINES, 4)
+    if estimate is None:
+        lines.append(Text('waiting for the first posture ...'))
+        lines += [Text('')] * (drawing_height - 1)
+    else:
+        stds = monitor.joint_stds(len(estimate) - 1)
+        drawing = demo_view.draw(estimate, truth, stds, width=max(width - 1, 20),
+                                 height=drawing_height, **scene)
+        lines.append(demo_view.to_rich(drawing))
+    glyphs = demo_view.GLYPHS
+    lines.append(Text.assemble(
+        'estimate ', (f'{glyphs["pivot"]} 1 2 .. {glyphs["tip"]}', 'bold cyan'),
+        '   truth ', (f'{glyphs["truth_joint"]} {glyphs["truth_line"]}', 'bright_black'),
+        '   ', (glyphs['uncertainty'], 'magenta'),
+        f' {demo_view.SIGMAS:g}σ of each joint, drawn x{demo_view.MAGNIFY:g}   ',
+        (glyphs['ground'], 'green'), ' ground'))
+    level = monitor.level or '-'
+    lines.append(Text.assemble('health ', (level, LEVEL_STYLES.get(level, 'bold')),
+                               f'  {monitor.reason or "waiting for /diagnostics"}'))
+    values = monitor.values
+    lines.append(Text(f'learned noise  σ {values.get("range sigma [m]", "-")} m   '
+                      f'NLOS fraction {values.get("NLOS fraction", "-")}'))
+    lines.append(Text(f'NLOS links {values.get("NLOS links", "-")}   (a count: the estimator '
+                      'does not publish which links)'))
+    lines.append(Text(
+        f'{monitor.recent_rate():.1f} Hz  latency p50 {summary["latency_p50_ms"]:.1f} ms '
+        f'p99 {summary["latency_p99_ms"]:.1f} ms  unanswered frames '
+        f'{summary["dropped_frames"]}  RMSE {summary["rmse_m"]:.3f} m'
+        + (f'  redraws skipped {skipped}' if skipped else '')))
+    for line in lines:
+        line.no_wrap, line.overflow = True, 'crop'
+    return Group(*lines)
+
+
 def plot(monitor, path):
     """Save the newest estimated and true boom, side view along the slew, as a PNG."""
     import matplotlib
     matplotlib.use('Agg')
+    from epp_ros.core.metrics import pooled_rmse
     from matplotlib import pyplot
+    import numpy as np
     estimate, truth = monitor.last
     figure, axis = pyplot.subplots(figsize=(7, 5))
     for joints, style, label in ((truth, 'k-o', 'truth'), (estimate, 'C1--s', 'estimate')):
@@ -181,87 +359,194 @@ def plot(monitor, path):
     pyplot.close(figure)
 
 
-def start_pipeline(args, config_path, workdir):
-    """Emulator, driver and estimator processes; the emulator's device path."""
+def emulator_noise(args):
+    """Return the emulator's noise options: ``--field`` or ``--sigma/--drop/--nlos``."""
+    if args.field:
+        return ['--field', args.field]
+    return ['--sigma', str(args.sigma), '--drop', str(args.drop), '--nlos', str(args.nlos)]
+
+
+def start_pipeline(args, config_path, workdir, stderr=None):
+    """Emulator, driver and estimator processes; ``stderr`` a file for their output."""
     python = [sys.executable, '-m']
     link = str(Path(workdir) / 'ttyUWB')
     emulator = subprocess.Popen(
         python + ['epp_ros.nodes.emulator', '--protocol', 'json', '--pty', '--link', link,
                   '--truth', '--config', str(config_path), '--rate', str(args.rate),
-                  '--sigma', str(args.sigma), '--drop', str(args.drop), '--nlos',
-                  str(args.nlos), '--garbage', str(args.garbage), '--seed', str(args.seed)],
-        stdout=subprocess.PIPE, text=True)
+                  *emulator_noise(args), '--garbage', str(args.garbage),
+                  '--seed', str(args.seed)],
+        stdout=subprocess.PIPE, stderr=stderr, text=True)
+    processes = [emulator]
     announced = emulator.stdout.readline().split()
     if not announced or announced[0] != 'PTY':
-        raise RuntimeError('the emulator did not start')
+        return processes, False
     ros = ['--ros-args', '--params-file', str(config_path), '--log-level', 'warn']
-    driver = subprocess.Popen(python + ['epp_ros.nodes.driver', *ros, '-p', f'port:={link}',
-                                        '-p', 'protocol:=json'])
-    estimator = subprocess.Popen(python + ['epp_ros.nodes.estimator', *ros,
-                                           '-p', f'method:={args.method}'])
-    return [emulator, driver, estimator]
+    processes.append(subprocess.Popen(
+        python + ['epp_ros.nodes.driver', *ros, '-p', f'port:={link}', '-p', 'protocol:=json'],
+        stderr=stderr))
+    processes.append(subprocess.Popen(
+        python + ['epp_ros.nodes.estimator', *ros, '-p', f'method:={args.method}'],
+        stderr=stderr))
+    return processes, True
 
 
-def stop(processes):
+def start_recorder(path, stderr=None):
+    """Start ``epp_bag record`` on the demo's topics (ranges, postures, truth, diagnostics)."""
+    return subprocess.Popen([sys.executable, '-m', 'epp_ros.tools.bag', 'record', str(path)],
+                            stdout=subprocess.PIPE, stderr=stderr, text=True)
+
+
+def stop(processes, wait=STOP_WAIT):
     for process in processes:
         if process.poll() is None:
             process.send_signal(signal.SIGINT)
     for process in processes:
         try:
-            process.wait(5)
+            process.wait(wait)
         except subprocess.TimeoutExpired:
             process.kill()
             process.wait()
-        if process.stdout is not None:
-            process.stdout.close()
+
+
+def _done(args, monitor, elapsed):
+    """Judge whether ``--duration`` is over or ``--postures`` postures arrived."""
+    if args.postures is not None and len(monitor.posture_stamps) >= args.postures:
+        return True
+    return args.duration is not None and elapsed >= args.duration
 
 
 def main(argv=None):
-    args = parse_args(sys.argv[1:] if argv is None else argv)
+    """
+    Run the demo; return the exit status.
+
+    SIGINT and SIGTERM only ask it to stop from the first line on (``stopping``), so that a
+    Ctrl-C at any moment ends with the summary and a restored terminal. Run as a program
+    (``argv`` None) the signals are then ignored while the interpreter exits; called with
+    ``argv`` the caller's handlers are put back.
+    """
+    handlers = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM)}
+    ShutdownRequest.requested = False
+    stop_request = shutdown_on_signals()
+    try:
+        return run(parse_args(sys.argv[1:] if argv is None else argv), stop_request)
+    finally:
+        if argv is None:
+            ignore_signals()
+        else:
+            for signum, handler in handlers.items():
+                signal.signal(signum, handler)
+
+
+def run(args, stop_request):
+    """Run the pipeline and the view until asked to stop or ``--duration`` is over."""
+    from epp_ros.config import ConfigError, default_config_path, load_pump_config
     try:
         config_path = Path(args.config) if args.config else default_config_path()
-        load_pump_config(config_path)
+        config = load_pump_config(config_path)
     except ConfigError as exc:
         print(f'epp_demo: {exc}', file=sys.stderr)
         return 2
+    if args.record and Path(args.record).exists():
+        print(f'epp_demo: {args.record} exists already', file=sys.stderr)
+        return 2
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
     view = sys.stderr if args.json else sys.stdout
-    live = view.isatty()
+    live = view.isatty() and not args.plain
     workdir = tempfile.TemporaryDirectory(prefix='epp_demo_')
-    rclpy.init()
+    # The live view owns the screen: the nodes' own messages go to a file meanwhile.
+    log = open(Path(workdir.name) / 'pipeline.log', 'w+') if live else None
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     monitor = Monitor()
-    processes = []
+    executor = SingleThreadedExecutor()
+    executor.add_node(monitor.node)
+    processes, recorder, failure = [], None, None
     try:
-        processes = start_pipeline(args, config_path, workdir.name)
-        start = last_render = time.monotonic()
-        while args.duration is None or time.monotonic() - start < args.duration:
-            rclpy.spin_once(monitor, timeout_sec=0.05)
-            if any(p.poll() is not None for p in processes):
-                print('epp_demo: a pipeline process exited early', file=sys.stderr)
-                break
-            now = time.monotonic()
-            if now - last_render >= (0.2 if live else 1.0):
-                last_render = now
-                text = render(monitor, args, now - start)
-                view.write('\033[H\033[J' + text + '\n' if live
-                           else text.splitlines()[-1].strip() + '\n')
-                view.flush()
-    except KeyboardInterrupt:
-        pass
+        if args.record:
+            recorder = start_recorder(args.record, log)
+        processes, started = start_pipeline(args, config_path, workdir.name, log)
+        if not started and not stop_request.requested:
+            failure = 'the emulator did not start'
+        elif started:
+            scene = {'axis': tuple(config.base[:2]), 'span': float(sum(config.arm_lengths)),
+                     'top': float(config.base[2] + sum(config.arm_lengths))}
+            failure = watch(monitor, executor, processes, args, view, live, scene,
+                            stop_request)
     finally:
         stop(processes)
+        if recorder is not None:
+            stop([recorder], RECORD_WAIT)
     result = monitor.summary(args.method)
     if args.plot and monitor.last is not None:
         plot(monitor, args.plot)
-    monitor.destroy_node()
+    executor.remove_node(monitor.node)
+    monitor.node.destroy_node()
     rclpy.try_shutdown()
+    if failure:
+        print(f'epp_demo: {failure}', file=sys.stderr)
+        if log is not None:
+            log.seek(0)
+            sys.stderr.write(''.join(log.readlines()[-20:]))
+    if log is not None:
+        log.close()
     workdir.cleanup()
+    if recorder is not None:
+        view.write(recorder.stdout.read())
+        recorder.stdout.close()
     view.write(f'\nepp_demo: {result["frames"]} postures, RMSE {result["rmse_m"]:.3f} m, max '
                f'joint error {result["max_joint_error_m"]:.3f} m, latency p50 '
                f'{result["latency_p50_ms"]:.1f} ms / p99 {result["latency_p99_ms"]:.1f} ms, '
                f'{result["dropped_frames"]} range frames without a posture\n')
+    view.flush()
     if args.json:
         print(json.dumps(result))
     return 0
+
+
+def watch(monitor, executor, processes, args, view, live, scene, stop_request):
+    """
+    Take the messages and show them until stopped; return a failure or None.
+
+    Every message is taken before a redraw; when messages keep coming for longer than a
+    redraw's budget the redraw is skipped, never a message.
+    """
+    live_display = None
+    if live:
+        from rich.console import Console
+        from rich.live import Live
+        console = Console(file=view)
+        live_display = Live(console=console, screen=True, auto_refresh=False,
+                            redirect_stdout=False, redirect_stderr=False)
+        live_display.start()
+    skipped = 0
+    start = last_render = time.monotonic()
+    failure = None
+    try:
+        while not stop_request.requested and not _done(args, monitor, time.monotonic() - start):
+            executor.spin_once(timeout_sec=0.05)
+            if any(p.poll() is not None for p in processes):
+                time.sleep(0.2)         # a Ctrl-C reaches the nodes too: was it one?
+                if not stop_request.requested:
+                    failure = 'a pipeline process exited early'
+                break
+            now = time.monotonic()
+            if now - last_render < (LIVE_PERIOD if live else PLAIN_PERIOD):
+                continue
+            last_render = now
+            if not live:
+                view.write(render(monitor, args, now - start).splitlines()[-1].strip() + '\n')
+                view.flush()
+            elif not monitor.drain(executor):
+                skipped += 1
+            else:
+                size = live_display.console.size
+                live_display.update(live_view(monitor, args, now - start, size.width,
+                                              size.height, scene, skipped), refresh=True)
+    finally:
+        if live_display is not None:
+            live_display.stop()
+    return failure
 
 
 if __name__ == '__main__':
