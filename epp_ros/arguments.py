@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-Command-line numbers and addresses, checked where they are parsed.
+Command-line numbers, addresses and field effects, checked where they are parsed.
 
 Every numeric option of the console scripts is finite and in its range, so that a typo
 gives argparse's one usage line and exit status 2, never a traceback or an all-NaN file.
@@ -21,7 +21,7 @@ gives argparse's one usage line and exit status 2, never a traceback or an all-N
 import argparse
 import math
 
-__all__ = ['Parser', 'number', 'integer', 'host_port']
+__all__ = ['Parser', 'number', 'integer', 'host_port', 'field_names']
 
 
 class Parser(argparse.ArgumentParser):
@@ -97,3 +97,13 @@ def host_port(text):
     if not host or not port.isdigit() or not 0 <= int(port) < 65536:
         raise argparse.ArgumentTypeError(f'{text!r} is not HOST:PORT with a port 0-65535')
     return host, int(port)
+
+
+def field_names(text):
+    """Return ``text`` if it names presets of ``core.simulate.FIELD_EFFECTS`` (a type)."""
+    from epp_ros.core.simulate import field_effects     # numpy only when it is used
+    try:
+        field_effects(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text

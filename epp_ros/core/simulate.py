@@ -333,22 +333,7 @@ class WorkingMotion(Motion):
         self.rest = np.radians(np.linspace(55.0, -45.0, p) if p > 1 else np.array([30.0]))
 
     def angles(self, times):
-        """
-        Return the posture angles at ``times``.
-
-        Parameters
-        ----------
-        times : array_like, shape (T,)
-            Seconds from the start of the cycle.
-
-        Returns
-        -------
-        slew : ndarray, shape (T,)
-            Radians.
-        pitches : ndarray, shape (T, p)
-            Radians.
-
-        """
+        """Return the cycle's slew (T,) and pitches (T, p) at ``times`` (:meth:`Motion.angles`)."""
         times = np.asarray(times, dtype=float)
         slew = self.start + self.slew_amplitude * np.sin(2 * np.pi * times / _SLEW_PERIOD)
         pitches = self.rest + np.radians(10.0) * np.sin(
@@ -454,22 +439,7 @@ class JoystickMotion(Motion):
         self._drive(np.r_[slew, pitches], int(np.ceil(self.duration / self.step - 1e-9)), rng)
 
     def angles(self, times):
-        """
-        Return the posture angles at ``times``.
-
-        Parameters
-        ----------
-        times : array_like, shape (T,)
-            Seconds from the start of the motion.
-
-        Returns
-        -------
-        slew : ndarray, shape (T,)
-            Radians.
-        pitches : ndarray, shape (T, p)
-            Radians.
-
-        """
+        """Return the slew (T,) and pitches (T, p) at ``times`` (:meth:`Motion.angles`)."""
         times = np.asarray(times, dtype=float)
         angles = np.stack([np.interp(times, self.breakpoints, column)
                            for column in self._path.T], axis=-1)

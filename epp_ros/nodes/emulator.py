@@ -32,11 +32,10 @@ or ``--motion joystick`` they come from :class:`epp_ros.core.simulate.FieldSimul
 instead: the presets' effects, or, without ``--field``, the same noise as above. ``--field``
 replaces the noise options, so giving both is refused.
 """
-import argparse
 import sys
 
 from epp_ros import contract
-from epp_ros.arguments import host_port, integer, number, Parser
+from epp_ros.arguments import field_names, host_port, integer, number, Parser
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core.simulate import (FIELD_EFFECTS, field_effects, FieldEffects, FieldSimulator,
                                    make_motion, Motion, MOTIONS, RangeNoise, working_cycle)
@@ -58,15 +57,6 @@ NLOS_GAMMA = 2.0
 
 #: Seconds of motion played forth and back, so that the boom never jumps.
 PLAYBACK_S = 600.0
-
-
-def field_names(text):
-    """Return ``text`` if it names presets of ``FIELD_EFFECTS`` (an argparse type)."""
-    try:
-        field_effects(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return text
 
 
 def parse_args(argv):

@@ -40,7 +40,7 @@ import sys
 import time
 
 from epp_ros import bags, contract
-from epp_ros.arguments import integer, number, Parser
+from epp_ros.arguments import field_names, integer, number, Parser
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core import RANGE_METHODS
 from epp_ros.core.simulate import (FIELD_EFFECTS, field_effects, FieldEffects, FieldSimulator,
@@ -53,15 +53,6 @@ CLOCK_HZ = 40.0         # /clock rate of `play --clock`, as ros2 bag play's defa
 #: synth's noise options' defaults (None when parsed: --field refuses them when given).
 NOISE_DEFAULTS = {'sigma': 0.1, 'nlos': 0.0, 'drop': 0.0}
 NLOS_GAMMA = 2.0        # metres, mean NLOS excess of --nlos, as bags.synthesize's
-
-
-def field_names(text):
-    """Return ``text`` if it names presets of ``FIELD_EFFECTS`` (an argparse type)."""
-    try:
-        field_effects(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return text
 
 
 def parse_args(argv):

@@ -44,7 +44,7 @@ import sys
 import tempfile
 import time
 
-from epp_ros.arguments import Parser
+from epp_ros.arguments import field_names, Parser
 from epp_ros.nodes.stopping import ignore_signals, shutdown_on_signals, ShutdownRequest
 
 # Only the standard library and the stop request above are imported before main() has
@@ -63,17 +63,6 @@ STOP_WAIT = 5.0             # s a node gets to stop after SIGINT
 RECORD_WAIT = 120.0         # s the recorder gets to write its bag
 
 
-def _field_names(text):
-    """Return ``text`` if it names presets of ``FIELD_EFFECTS`` (an argparse type)."""
-    import argparse
-    from epp_ros.core.simulate import field_effects
-    try:
-        field_effects(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return text
-
-
 def parse_args(argv):
     from epp_ros.core import RANGE_METHODS
     from epp_ros.core.simulate import FIELD_EFFECTS
@@ -89,7 +78,7 @@ def parse_args(argv):
     parser.add_argument('--drop', type=float,
                         help=f'link dropout probability (default {NOISE_DEFAULTS["drop"]:g})')
     parser.add_argument('--nlos', type=float, help='fraction of NLOS links (default 0)')
-    parser.add_argument('--field', metavar='EFFECT[,EFFECT...]', type=_field_names,
+    parser.add_argument('--field', metavar='EFFECT[,EFFECT...]', type=field_names,
                         help='the emulator simulates these field effects instead of '
                              '--sigma/--nlos/--drop: ' + ', '.join(FIELD_EFFECTS))
     parser.add_argument('--garbage', type=float, default=0.01,
