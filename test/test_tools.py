@@ -19,7 +19,7 @@ from pathlib import Path
 import subprocess
 import sys
 
-from epp_ros.tools import bench, demo
+from epp_ros.tools import bench, demo, field_bench
 import numpy as np
 import pytest
 
@@ -201,3 +201,16 @@ def test_bad_numbers_on_the_command_line_give_one_line_and_status_2(argv, tmp_pa
     assert result.returncode == 2 and len(lines) == 1, result.stderr
     assert 'error' in lines[0] and 'Traceback' not in result.stderr
     assert not (tmp_path / 'OUT').exists()
+
+
+def test_bench_field_prints_every_case_against_the_bounds(capsys):
+    """A short run: every case, method and part is printed, with finite ratios."""
+    assert bench.main(['field', '--seconds', '7', '--seeds', '1', '--trials', '2',
+                       '--json']) == 0
+    out = capsys.readouterr().out
+    report = json.loads(out.strip().splitlines()[-1])['reports'][0]
+    assert [row['case'] for row in report['rows']] == list(field_bench.CASES)
+    for row in report['rows']:
+        assert all(np.isfinite(row[method]['ratio']) for method in field_bench.METHODS)
+    assert 0.0 < report['posterior']['posterior_ratio'] < 10.0
+    assert '| all |' in out and 'posterior CRLB' in out and 'scipy least_squares' in out
