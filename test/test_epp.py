@@ -63,8 +63,9 @@ def test_blocked_links_are_discounted():
 def test_irls_iterations_0_is_the_papers_cepp():
     joints, _ = CEPP(MODEL, irls_iterations=0).solve(frame(), PRIOR)
     np.testing.assert_allclose(joints, PAPER_CEPP, atol=1e-4)
-    # Plain least squares weights every link 1: the reweighting path then is H = 1 too.
-    gaussian, info = CEPP(MODEL, nlos_fraction=0.0).solve(frame(), PRIOR)
+    # Plain least squares weights every link 1: without the noise model's weights the
+    # reweighting path then is H = 1 too.
+    gaussian, info = CEPP(MODEL, nlos_fraction=0.0, noise_weights=False).solve(frame(), PRIOR)
     np.testing.assert_array_equal(gaussian, joints)
     assert np.all(info['link_weights'] == 1.0) and info['irls_iterations'] == 0
 
@@ -82,7 +83,7 @@ def test_exact_ranges_are_not_reweighted():
 def test_line_of_sight_noise_is_weighted_as_the_paper_does():
     """Links a few sigmas long are barely discounted: the answer moves by millimetres."""
     paper, _ = CEPP(MODEL, irls_iterations=0).solve(frame(False), PRIOR)
-    joints, info = CEPP(MODEL).solve(frame(False), PRIOR)
+    joints, info = CEPP(MODEL, noise_weights=False).solve(frame(False), PRIOR)
     assert np.abs(joints - paper).max() < 0.01
     assert info['link_weights'].min() > 0.8
 
@@ -97,7 +98,7 @@ def test_epp1_and_epp2_are_the_papers_unless_asked():
 
 
 def test_tune_changes_the_weighting():
-    method = CEPP(MODEL)
+    method = CEPP(MODEL, noise_weights=False)
     method.tune(nlos_fraction=0.0)              # Gaussian: every weight 1
     joints, info = method.solve(frame(), PRIOR)
     np.testing.assert_allclose(joints, PAPER_CEPP, atol=1e-4)
@@ -141,3 +142,124 @@ def test_estimator_passes_the_noise_and_reports_the_weights():
             assert diagnostics['link_weights'][BLOCKED].max() < 0.2
         else:
             assert 'link_weights' not in diagnostics
+
+
+# -- beyond the paper: noise-model weights, silent tags, cold and fold searches ------------
+
+def test_noise_weights_follow_the_range_noise():
+    ranges = frame(False).ranges
+    factors = CEPP(MODEL, sigma=0.03, eta=0.01)._noise_factors(ranges)
+    assert np.median(factors) == pytest.approx(1.0)
+    order = np.argsort(ranges.ravel())              # longer links, smaller weights
+    assert np.all(np.diff(factors.ravel()[order]) <= 1e-12)
+    # A squared-distance residual has standard deviation 2 d sigma(d).
+    ratio = factors[0, 0] / factors[4, 5]
+    d0, d1 = ranges[0, 0], ranges[4, 5]
+    expected = d1 * np.hypot(0.03, 0.01 * d1) / (d0 * np.hypot(0.03, 0.01 * d0))
+    assert ratio == pytest.approx(expected)
+    missing = ranges.copy()
+    missing[1, 2] = np.nan
+    assert np.isnan(CEPP(MODEL)._noise_factors(missing)[1, 2])
+    assert CEPP(MODEL, noise_weights=False)._noise_factors(ranges) == 1.0
+    assert CEPP(MODEL, irls_iterations=0)._noise_factors(ranges) == 1.0
+    asked = CEPP(MODEL, irls_iterations=0, noise_weights=True)
+    assert asked._noise_factors(ranges).shape == (5, 6)
+
+
+def test_noise_weights_lower_the_error_when_noise_grows_with_range():
+    rng = np.random.default_rng(5)
+    exact = MODEL.ranges(TRUTH)
+    squared = {True: [], False: []}
+    for _ in range(12):
+        ranges = exact + rng.normal(0.0, 1.0, exact.shape) * (0.03 + 0.01 * exact)
+        measurements = Measurements.clean(MODEL, ranges)[0]
+        for weighted in squared:
+            method = CEPP(MODEL, sigma=0.03, eta=0.01, noise_weights=weighted)
+            squared[weighted].append(rmse(method.solve(measurements, PRIOR, warm=True)[0]) ** 2)
+    assert np.mean(squared[True]) < 0.6 * np.mean(squared[False])
+
+
+def test_beyond_the_paper_is_off_with_irls_iterations_0():
+    paper = CEPP(MODEL, irls_iterations=0)
+    assert not (paper.noise_weights or paper.cold_search or paper.fold_search)
+    assert paper.silent_weight == 0.0
+    method = CEPP(MODEL)
+    assert method.noise_weights and method.cold_search and method.fold_search
+    assert method.silent_weight == CEPP.SILENT_WEIGHT > 0
+    asked = CEPP(MODEL, irls_iterations=0, cold_search=True, silent_weight=0.5)
+    assert asked.cold_search and asked.silent_weight == 0.5 and not asked.fold_search
+
+
+@pytest.mark.parametrize('name, value', [('silent_weight', -1.0), ('silent_weight', True),
+                                         ('silent_weight', float('inf')),
+                                         ('noise_weights', 1), ('cold_search', 'yes'),
+                                         ('fold_search', 0), ('lowest_joint', float('nan'))])
+def test_new_options_are_checked(name, value):
+    with pytest.raises(ValueError, match=name):
+        CEPP(MODEL, **{name: value})
+    with pytest.raises(ValueError, match=name):
+        PostureEstimator(MODEL, 'cepp', **{name: value})
+
+
+def test_a_silent_tag_is_held_at_the_prior_shape():
+    ranges = frame(False).ranges.copy()
+    ranges[2] = np.nan                              # joint 3 between heard neighbours
+    measurements = Measurements.clean(MODEL, ranges)[0]
+    assert CEPP(MODEL).enough_information(measurements)
+    assert not CEPP(MODEL, irls_iterations=0).enough_information(measurements)
+    weights, targets = CEPP(MODEL)._held_pairs(ranges, PRIOR)
+    # The bends at joints 2, 3 and 4: pivot-joint distances two apart, (1, 3), (2, 4), (3, 5).
+    held = np.argwhere(np.triu(weights) > 0)
+    np.testing.assert_array_equal(held, [[1, 3], [2, 4], [3, 5]])
+    np.testing.assert_allclose(targets[1, 3], np.sum((PRIOR[0] - PRIOR[2]) ** 2))
+    joints, _ = CEPP(MODEL).solve(measurements, PRIOR, warm=True)
+    assert rmse(joints) < 0.5
+    one = ranges.copy()
+    one[1:] = np.nan                                # one tag alone: not enough
+    assert not CEPP(MODEL).enough_information(Measurements.clean(MODEL, one)[0])
+
+
+def test_a_tag_silent_for_seconds_keeps_its_joint_and_fold():
+    """A moving boom, tag 3 silent for 3 s: estimated every frame, joint 3 never folds over."""
+    frames = 40
+    slews = np.linspace(0.3, 0.5, frames)
+    pitches = np.radians([50.0, 25.0, 5.0, -20.0, -45.0]) + np.outer(
+        np.linspace(0.0, 1.0, frames), np.radians([4.0, -6.0, 5.0, 3.0, -4.0]))
+    rng = np.random.default_rng(11)
+    estimators = {name: PostureEstimator(MODEL, 'cepp', learn_noise=False, **options)
+                  for name, options in (('held', {}), ('paper', {'irls_iterations': 0}))}
+    worst = 0.0
+    for i in range(frames):
+        truth = MODEL.forward_kinematics(slews[i], pitches[i])
+        ranges = MODEL.ranges(truth) + rng.normal(0.0, 0.05, (5, 6))
+        if i >= 10:
+            ranges[2] = np.nan
+        for name, estimator in estimators.items():
+            estimator.update(ranges, stamp=0.1 * i)
+            status = estimator.last_diagnostics['status']
+            if i >= 10 and name == 'paper':
+                assert status == 'insufficient_data'
+            elif name == 'held':
+                assert status != 'insufficient_data'
+                estimate = estimator.last_diagnostics['estimate']
+                worst = max(worst, np.linalg.norm(estimate - truth, axis=1).max())
+    assert worst < 1.0          # the fold of joint 3 is about 3.4 m away
+
+
+def test_cold_search_escapes_a_bad_start():
+    bad = MODEL.forward_kinematics(2.4, np.radians([10.0, -30.0, 40.0, 10.0, 60.0]))
+    joints, info = CEPP(MODEL).solve(frame(False), bad, warm=False)
+    assert rmse(joints) < 0.5 and info['searched']
+    stuck, info = CEPP(MODEL, cold_search=False).solve(frame(False), bad, warm=False)
+    assert rmse(stuck) > 5.0 and 'searched' not in info
+    # Warm, the prior is trusted: no search.
+    assert 'searched' not in CEPP(MODEL).solve(frame(False), PRIOR, warm=True)[1]
+
+
+def test_fold_search_turns_a_tip_stuck_at_the_wrong_pitch():
+    wrong = MODEL.forward_kinematics(0.37, np.radians([51.0, 24.0, 6.0, -21.0, 60.0]))
+    joints, info = CEPP(MODEL).solve(frame(False), wrong, warm=True)
+    assert rmse(joints) < 0.5 and info['refolded']
+    assert any(np.linalg.norm(other[-1] - TRUTH[-1]) > 5.0 for other in info['alternatives'])
+    stuck, info = CEPP(MODEL, fold_search=False).solve(frame(False), wrong, warm=True)
+    assert np.linalg.norm(stuck[-1] - TRUTH[-1]) > 5.0 and 'refolded' not in info

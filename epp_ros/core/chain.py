@@ -44,7 +44,8 @@ from .measurements import Residuals, SensorNoise, wrap_angle
 from .nlos import NlosMixture
 from .plane import fit_slew, to_plane
 
-__all__ = ['ChainMethod', 'SearchExhausted', 'angles_from_joints', 'canonical_angles']
+__all__ = ['ChainMethod', 'Fit', 'SearchExhausted', 'angles_from_joints', 'canonical_angles',
+           'grow_chains']
 
 
 def angles_from_joints(model, joints):
@@ -74,6 +75,80 @@ def canonical_angles(psi, pivot_offset=0.0):
     if pivot_offset == 0.0 and np.cos(psi[1]) < 0:
         psi = np.r_[psi[0] + np.pi, np.pi - psi[1:]]
     return wrap_angle(psi)
+
+
+def grow_chains(model, measurements, range_sigma, mixture, slews, lowest_joint, width=8,
+                candidates=72):
+    """
+    Chains grown section by section for each slew, keeping the ``width`` best so far.
+
+    Each section's pitch is taken from a grid (or its inclinometer), scored by the NLOS
+    loss of its tag's ranges, with joints below ``lowest_joint`` excluded. Keeping several
+    partial chains, not the single best, recovers folds that only later tags reveal and
+    tags whose best-looking pitch is pulled by a blocked link. The chain's cold start and
+    CEPP's (``core.epp``) both start from them.
+
+    Parameters
+    ----------
+    model : BoomModel
+    measurements : Measurements
+        The frame.
+    range_sigma : ndarray, shape (p, m)
+        Each tag-anchor range's standard deviation, metres.
+    mixture : NlosMixture
+        The range error model that scores a tag's ranges.
+    slews : ndarray, shape (s,)
+        Slews to grow chains at, radians.
+    lowest_joint : float
+        No joint below this height, metres.
+    width : int
+        Partial chains kept per slew.
+    candidates : int
+        Pitches of the grid over [-pi, pi) tried for a section without an inclinometer.
+
+    Returns
+    -------
+    pitches : ndarray, shape (s, width, p)
+        Candidate pitches per slew, best first.
+    cost : ndarray, shape (s, width)
+        Their loss over the ranges (inf for chains that could not stay above ground).
+
+    """
+    grid = np.linspace(-np.pi, np.pi, candidates, endpoint=False)
+    along = np.stack([np.cos(slews), np.sin(slews), np.zeros_like(slews)], axis=-1)
+    up = np.array([0.0, 0.0, 1.0])
+    joints = np.broadcast_to(model.pivot(slews)[:, None, :], (slews.size, 1, 3))
+    pitches = np.zeros((slews.size, 1, 0))
+    cost = np.zeros((slews.size, 1))
+    for k, length in enumerate(model.arm_lengths):
+        options = grid if np.isnan(measurements.pitches[k]) else measurements.pitches[k:k + 1]
+        step = length * (np.cos(options)[None, :, None] * along[:, None, :]
+                         + np.sin(options)[:, None] * up)                 # (s, c, 3)
+        ends = joints[:, :, None, :] + step[:, None, :, :]                # (s, w, c, 3)
+        added = np.where(ends[..., 2] < lowest_joint, np.inf, 0.0)
+        if np.isfinite(measurements.ranges[k]).any():
+            added = added + _tag_loss(model, mixture, k, ends, measurements, range_sigma)
+        elif options.size > 1:
+            added = added + np.abs(options)     # unseen section: prefer level
+        total = (cost[:, :, None] + added).reshape(slews.size, -1)
+        keep = np.argsort(total, axis=1)[:, :width]                       # (s, w)
+        rows = np.arange(slews.size)[:, None]
+        parent, choice = np.divmod(keep, options.size)
+        joints = ends.reshape(slews.size, -1, 3)[rows, keep]
+        pitches = np.concatenate([pitches[rows, parent],
+                                  np.broadcast_to(options, (slews.size, options.size))[
+                                      rows, choice][..., None]], axis=-1)
+        cost = total[rows, keep]
+    return pitches, cost
+
+
+def _tag_loss(model, mixture, k, ends, measurements, range_sigma):
+    """Approximate NLOS loss of tag ``k``'s measured ranges at candidate joints (..., 3)."""
+    valid = np.isfinite(measurements.ranges[k])
+    distance = np.linalg.norm(ends[..., None, :] - model.anchors[valid], axis=-1)
+    sigma = range_sigma[k, valid]
+    excess = (measurements.ranges[k, valid] - distance) / sigma
+    return mixture.approximate_loss(excess, sigma).sum(axis=-1)
 
 
 class Fit(NamedTuple):
@@ -262,71 +337,14 @@ class ChainMethod:
         return self._evaluate(np.asarray(psi, dtype=float), residuals)[0]
 
     # -- starts ---------------------------------------------------------------------------
-    def _beam_starts(self, slews, measurements, range_sigma, width=8, candidates=72):
-        """
-        Chains grown section by section for each slew, keeping the ``width`` best so far.
-
-        Each section's pitch is taken from a grid (or its inclinometer), scored by the NLOS
-        loss of its tag's ranges, with joints below the ground excluded. Keeping several
-        partial chains, not the single best, recovers folds that only later tags reveal
-        and tags whose best-looking pitch is pulled by a blocked link.
-
-        Parameters
-        ----------
-        slews : ndarray, shape (s,)
-            Slews to grow chains at, radians.
-        measurements : Measurements
-            The frame.
-        range_sigma : ndarray, shape (p, m)
-            Each tag-anchor range's standard deviation, metres.
-        width : int
-            Partial chains kept per slew.
-        candidates : int
-            Pitches of the grid over [-pi, pi) tried for a section without an
-            inclinometer.
-
-        Returns
-        -------
-        pitches : ndarray, shape (s, width, p)
-            Candidate pitches per slew, best first.
-        cost : ndarray, shape (s, width)
-            Their loss over the ranges (inf for chains that could not stay above ground).
-
-        """
-        grid = np.linspace(-np.pi, np.pi, candidates, endpoint=False)
-        along = np.stack([np.cos(slews), np.sin(slews), np.zeros_like(slews)], axis=-1)
-        up = np.array([0.0, 0.0, 1.0])
-        joints = np.broadcast_to(self.model.pivot(slews)[:, None, :], (slews.size, 1, 3))
-        pitches = np.zeros((slews.size, 1, 0))
-        cost = np.zeros((slews.size, 1))
-        for k, length in enumerate(self.model.arm_lengths):
-            options = grid if np.isnan(measurements.pitches[k]) else measurements.pitches[k:k + 1]
-            step = length * (np.cos(options)[None, :, None] * along[:, None, :]
-                             + np.sin(options)[:, None] * up)                 # (s, c, 3)
-            ends = joints[:, :, None, :] + step[:, None, :, :]                # (s, w, c, 3)
-            added = np.where(ends[..., 2] < self.lowest_joint, np.inf, 0.0)
-            if np.isfinite(measurements.ranges[k]).any():
-                added = added + self._tag_loss(k, ends, measurements, range_sigma)
-            elif options.size > 1:
-                added = added + np.abs(options)     # unseen section: prefer level
-            total = (cost[:, :, None] + added).reshape(slews.size, -1)
-            keep = np.argsort(total, axis=1)[:, :width]                       # (s, w)
-            rows = np.arange(slews.size)[:, None]
-            parent, choice = np.divmod(keep, options.size)
-            joints = ends.reshape(slews.size, -1, 3)[rows, keep]
-            pitches = np.concatenate([pitches[rows, parent],
-                                      np.broadcast_to(options, (slews.size, options.size))[
-                                          rows, choice][..., None]], axis=-1)
-            cost = total[rows, keep]
-        return pitches, cost
+    def _beam_starts(self, slews, measurements, range_sigma, width=8):
+        """Return :func:`grow_chains` for this chain's model, NLOS mixture and ground."""
+        return grow_chains(self.model, measurements, range_sigma, self.nlos, slews,
+                           self.lowest_joint, width)
 
     def _tag_loss(self, k, ends, measurements, range_sigma):
         """Approximate NLOS loss of tag ``k``'s measured ranges at candidate joints (..., 3)."""
-        valid = np.isfinite(measurements.ranges[k])
-        distance = np.linalg.norm(ends[..., None, :] - self.model.anchors[valid], axis=-1)
-        sigma = range_sigma[k, valid]
-        excess = (measurements.ranges[k, valid] - distance) / sigma
-        return self.nlos.approximate_loss(excess, sigma).sum(axis=-1)
+        return _tag_loss(self.model, self.nlos, k, ends, measurements, range_sigma)
 
     def _cold_starts(self, measurements, guess, range_sigma, extra=16):
         """Return start angles: the prior's, each slew's best chain, and the next best overall."""

@@ -487,7 +487,9 @@ class PostureEstimator:
         if isinstance(fresh, str):
             return solved, verdict, False
         costs = self.integrity.posture_cost(np.array([solved[0], fresh[0]]), measurements)
-        moved = bool(costs[1] < costs[0])
+        # Not to a posture the boom cannot be in (beyond its reach since the last one).
+        moved = bool(costs[1] < costs[0]) and \
+            self._judge(fresh, measurements, stamp).status != 'implausible'
         best, other = (fresh, solved) if moved else (solved, fresh)
         best[1]['alternatives'] = (list(best[1].get('alternatives', [])) + [other[0]]
                                    + list(other[1].get('alternatives', [])))
