@@ -138,8 +138,11 @@ class PostureEstimator:
         ``anchor_weight`` (inf: anchor-anchor distances fixed, the default; a number:
         weighted), ``tol``, ``max_iter``; CEPP also ``predict_slew`` (default true; false:
         the paper's plane from the previous pose), ``slew_iterations`` (re-solves after
-        refining the slew, default 0), ``slew_tol``, ``clip_weight`` and
-        ``irls_iterations`` (NLOS reweighting, default 2; 0 is the paper's CEPP); chain:
+        refining the slew, default 0), ``slew_tol``, ``clip_weight``,
+        ``irls_iterations`` (NLOS reweighting, default 2; 0 is the paper's CEPP and turns
+        off the rest of this list), ``noise_weights`` (links weighted by the noise model),
+        ``silent_weight`` (a silent tag keeps the previous bends), ``cold_search`` and
+        ``fold_search`` (searches beyond the paper's start); chain:
         ``tol``, ``max_iter``, ``slew_starts``, ``screen_iterations``; track: the chain's,
         ``process_noise`` (starting acceleration spectral density, rad^2/s^3),
         ``adapt_process_noise``, ``max_rate``, ``max_hypotheses``; sdp: ``solver``.
