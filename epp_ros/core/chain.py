@@ -91,6 +91,7 @@ def grow_chains(model, measurements, range_sigma, mixture, slews, lowest_joint, 
     Parameters
     ----------
     model : BoomModel
+        The boom and its anchors.
     measurements : Measurements
         The frame.
     range_sigma : ndarray, shape (p, m)
