@@ -20,7 +20,8 @@ Shared by the estimator node (``/diagnostics``) and the tools that print or reco
 from epp_ros.core.integrity import ERROR, OK, Thresholds, WARN
 import numpy as np
 
-__all__ = ['OK', 'WARN', 'ERROR', 'Thresholds', 'grade', 'report', 'assess']
+__all__ = ['OK', 'WARN', 'ERROR', 'Thresholds', 'grade', 'report', 'assess',
+           'nlos_text']
 
 
 def grade(diagnostics):
@@ -49,8 +50,35 @@ def grade(diagnostics):
     return level, message
 
 
+def nlos_text(nlos_links):
+    """
+    Name the links judged NLOS: ``'2:3 5:1'`` is joint 2 to anchor 3 and joint 5 to anchor 1.
+
+    Parameters
+    ----------
+    nlos_links : array_like of bool, shape (p, m)
+        ``last_diagnostics['nlos_links']``: row k is the tag of joint k + 1, column j anchor
+        j + 1.
+
+    Returns
+    -------
+    str
+        ``joint:anchor`` pairs, 1-based, joint-major, separated by spaces; empty when none.
+
+    """
+    blocked = np.asarray(nlos_links)
+    if blocked.ndim != 2:
+        return ''
+    return ' '.join(f'{k + 1}:{j + 1}' for k, j in np.argwhere(blocked))
+
+
 def report(diagnostics, lengths):
-    """Return the key values of one frame's diagnostics, as text for ``/diagnostics``."""
+    """
+    Return the key values of one frame's diagnostics, as text for ``/diagnostics``.
+
+    Among them ``NLOS links``, how many links the integrity checks judged NLOS, and
+    ``NLOS flagged links``, which (:func:`nlos_text`).
+    """
     estimated = np.asarray(diagnostics.get('section_lengths', np.full(len(lengths), np.nan)))
     values = {'method': diagnostics.get('method', ''), 'status': diagnostics.get('status', ''),
               'range residual RMS [m]': f'{diagnostics.get("range_residual_rms", np.nan):.4f}',
@@ -74,7 +102,9 @@ def report(diagnostics, lengths):
         values['NLOS mean excess [m]'] = f'{noise.nlos_gamma:.3f}'
         values['noise learned from links'] = str(noise.links)
     if 'nlos_links' in diagnostics:
-        values['NLOS links'] = str(int(np.sum(diagnostics['nlos_links'])))
+        blocked = np.asarray(diagnostics['nlos_links'])
+        values['NLOS links'] = str(int(np.sum(blocked)))
+        values['NLOS flagged links'] = nlos_text(blocked)
     if 'chi_square' in diagnostics:
         values['range chi-square'] = (f'{diagnostics["chi_square"]:.1f} (limit '
                                       f'{diagnostics["chi_square_limit"]:.1f})')

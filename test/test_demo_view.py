@@ -32,12 +32,13 @@ import termios
 import time
 
 from epp_ros import bags
+from epp_ros.health import nlos_text
 from epp_ros.tools import demo
-from epp_ros.tools.demo_view import Canvas, draw, GLYPHS, side_view, to_rich, top_view
+from epp_ros.tools.demo_view import Canvas, draw, GLYPHS, side_view, STYLES, to_rich, top_view
 import numpy as np
 import pytest
 
-TIMEOUT = 120.0         # s: for anything to happen on a busy 2-core machine
+TIMEOUT = 240.0         # s: for anything to happen on a busy 2-core machine
 COLUMNS, LINES = 90, 28
 ANSI = re.compile(r'\x1b\[[0-9;?]*[A-Za-z]|\x1b[()][0-9A-Za-z]|\r')
 LEAVE_ALT_SCREEN, SHOW_CURSOR, HOME = '\x1b[?1049l', '\x1b[?25h', '\x1b[H'
@@ -138,6 +139,79 @@ def test_draw_fills_the_canvas_with_both_views_and_converts_to_rich():
     assert moved.rows != draw(HORIZONTAL, None, None, width=90, height=20).rows
     with pytest.raises(ValueError):
         draw(np.zeros((3, 2)), width=90, height=20)
+
+
+# Anchor 1 15 m south of joint 1 (10 m east), anchor 2 north-west of the pivot.
+ANCHORS = np.array([[10.0, -15.0, 0.5], [-5.0, 5.0, 0.5]])
+
+
+def test_a_flagged_link_is_marked_from_its_joint_to_its_anchor():
+    kwargs = {'width': 40, 'height': 20, 'axis': (0.0, 0.0), 'span': 20.0,
+              'anchors': ANCHORS}
+    # 1.05 m a column, 2.1 m a row from (-21, 21) m: joint 1 (10, 0) is in row 10, column
+    # 29; anchor 1 (10, -15) in row 17, same column; anchor 2 (-5, 5) in row 7, column 15.
+    clear = top_view(HORIZONTAL, **kwargs)
+    assert clear.find(GLYPHS['anchor']) == [(7, 15), (17, 29)]
+    assert not clear.find(GLYPHS['nlos'])
+    assert STYLES['nlos'] not in (clear.styles[10][29], clear.styles[17][29])
+    flagged = top_view(HORIZONTAL, nlos=[(1, 1)], **kwargs)
+    assert flagged.find(GLYPHS['nlos']) == [(row, 29) for row in range(11, 17)]
+    assert flagged.rows[10][29] == '1' and flagged.rows[17][29] == GLYPHS['anchor']
+    assert flagged.styles[10][29] == flagged.styles[17][29] == STYLES['nlos']
+    assert flagged.styles[7][15] == STYLES['anchor']                # anchor 2: not flagged
+    # Under the boom: from joint 2 to an anchor under the pivot the link runs along the
+    # sections, which are drawn over it.
+    turret = dict(kwargs, anchors=[[0.0, 0.0, 3.5]])
+    along = top_view(HORIZONTAL, nlos=[(2, 1)], **turret)
+    assert along.rows == top_view(HORIZONTAL, **turret).rows
+    assert not along.find(GLYPHS['nlos']) and along.styles[10][39] == STYLES['nlos']
+    # Links naming no drawn joint or anchor are left out; without anchors only the joint.
+    assert top_view(HORIZONTAL, nlos=[(3, 1), (1, 3)], **kwargs).rows == clear.rows
+    bare = top_view(HORIZONTAL, nlos=[(1, 1)], **dict(kwargs, anchors=None))
+    assert not bare.find(GLYPHS['anchor']) and not bare.find(GLYPHS['nlos'])
+    assert bare.styles[10][29] == STYLES['nlos']
+    # Both views colour the joint; only the top view draws the link.
+    both = draw(HORIZONTAL, None, None, width=90, height=20, anchors=ANCHORS, nlos=[(1, 1)])
+    side_width = 90 - 40 - 2
+    joints = [(r, c) for r, c in both.find('1') if c < side_width]
+    assert joints and all(both.styles[r][c] == STYLES['nlos'] for r, c in joints)
+    assert all(c > side_width for _, c in both.find(GLYPHS['nlos']))
+
+
+def test_the_demo_reads_and_lists_the_flagged_links():
+    blocked = np.zeros((5, 6), dtype=bool)
+    blocked[1, 2] = blocked[4, 0] = True
+    text = nlos_text(blocked)
+    assert text == '2:3 5:1' and demo.nlos_pairs(text) == [(2, 3), (5, 1)]
+    assert demo.nlos_pairs('') == demo.nlos_pairs(None) == demo.nlos_pairs('a:1 2') == []
+    assert demo.nlos_line({'NLOS links': '2', 'NLOS flagged links': text}) == \
+        'NLOS links 2: joint 2-anchor 3, joint 5-anchor 1'
+    assert demo.nlos_line({'NLOS links': '3', 'NLOS flagged links': '1:2 1:5 3:4'}) == \
+        'NLOS links 3: joint 1-anchors 2 5, joint 3-anchor 4'
+    assert demo.nlos_line({'NLOS links': '3', 'NLOS flagged links': '1:2 1:5 3:4'}, 40) == \
+        'NLOS links 3 (joint-anchor): 1-2 1-5 3-4'
+    assert demo.nlos_line({'NLOS links': '0', 'NLOS flagged links': ''}) == 'NLOS links 0'
+    assert demo.nlos_line({}) == 'NLOS links -'
+
+
+def test_the_live_view_marks_the_flagged_links():
+    from io import StringIO
+    from rich.console import Console
+    monitor = object.__new__(demo.Monitor)          # its numbers, without a ROS node
+    monitor.__dict__.update(
+        latencies=[0.01], rmses=[0.1], max_error=0.2, posture_stamps=[(1, 0)],
+        frame_stamps=[(1, 0)], posture_times=[], last=(HORIZONTAL, HORIZONTAL),
+        estimate=HORIZONTAL, level='WARN', reason='1 of 12 links look blocked',
+        values={'NLOS links': '1', 'NLOS flagged links': '1:1'})
+    scene = {'axis': (0.0, 0.0), 'span': 20.0, 'top': 10.0, 'anchors': ANCHORS}
+    console = Console(file=StringIO(), width=COLUMNS, color_system=None)
+    console.print(demo.live_view(monitor, demo.parse_args(['--method', 'chain']), 1.0,
+                                 COLUMNS, LINES, scene))
+    screen = console.file.getvalue()
+    assert 'NLOS links 1: joint 1-anchor 1' in screen and ' x NLOS link' in screen
+    rows = _drawing(screen)
+    assert any(GLYPHS['anchor'] in row for row in rows)
+    assert any(GLYPHS['nlos'] in row for row in rows)
 
 
 def test_field_and_noise_options():

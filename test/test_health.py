@@ -14,7 +14,7 @@
 
 from epp_ros.core import PostureEstimator
 from epp_ros.core.simulate import random_posture, RangeNoise, truck_pump
-from epp_ros.health import assess, ERROR, OK, Thresholds, WARN
+from epp_ros.health import assess, ERROR, nlos_text, OK, Thresholds, WARN
 import numpy as np
 import pytest
 
@@ -42,6 +42,20 @@ def test_chain_reports_its_predicted_uncertainty_and_nlos():
     _, _, values = assess(diagnostics_of('chain', ranges), MODEL.arm_lengths)
     assert float(values['predicted RMSE [m]']) > 0
     assert 'joint 5 predicted std [m]' in values and values['NLOS links'] == '1'
+
+
+def test_the_links_judged_nlos_are_named_joint_then_anchor():
+    ranges = MODEL.ranges(JOINTS)
+    ranges[4, 1] += 5.0                         # joint 5's tag to anchor 2
+    ranges[1, 2] += 6.0                         # joint 2's tag to anchor 3
+    _, _, values = assess(diagnostics_of('chain', ranges), MODEL.arm_lengths)
+    assert values['NLOS links'] == '2' and values['NLOS flagged links'] == '2:3 5:2'
+    _, _, values = assess(diagnostics_of('chain', MODEL.ranges(JOINTS)), MODEL.arm_lengths)
+    assert values['NLOS links'] == '0' and values['NLOS flagged links'] == ''
+    blocked = np.zeros((5, 6), dtype=bool)
+    blocked[[0, 4], [5, 0]] = True
+    assert nlos_text(blocked) == '1:6 5:1'
+    assert nlos_text(np.zeros(0)) == ''
 
 
 def test_levels_follow_the_thresholds():

@@ -19,8 +19,9 @@ Starts ``uwb_emulator`` (a pseudo-terminal, with the true posture), ``uwb_driver
 ``posture_estimator`` as separate processes talking over DDS, and watches them. On a
 terminal it draws the true and the estimated boom a few times a second (``rich``'s live
 display; the drawing is :mod:`epp_ros.tools.demo_view`): a side view and a top view, each
-joint's predicted uncertainty around it, and below them the method, the learned noise,
-the health level and its reason, the rate, the latency and the frames left unanswered.
+joint's predicted uncertainty around it, the anchors and the links the estimator judged
+NLOS, and below them the method, the learned noise, the health level and its reason, the
+links judged NLOS, the rate, the latency and the frames left unanswered.
 With ``--plain``, or when the output is not a terminal, it prints one line a second
 instead. Stops on Ctrl-C, after ``--duration`` or ``--postures``, shuts every process
 down, prints a summary (``--json``: as the last stdout line) and can save a plot of the
@@ -247,6 +248,43 @@ class Monitor:
                 'dropped_frames': self.unanswered_frames(), 'method': method}
 
 
+def nlos_pairs(text):
+    """
+    Read the ``NLOS flagged links`` of ``/diagnostics``: ``'2:3 5:1'`` -> [(2, 3), (5, 1)].
+
+    The pairs are (joint, anchor), 1-based (``health.nlos_text``); what is not a pair of
+    numbers is left out.
+    """
+    pairs = []
+    for word in (text or '').split():
+        joint, _, anchor = word.partition(':')
+        if joint.isdigit() and anchor.isdigit():
+            pairs.append((int(joint), int(anchor)))
+    return pairs
+
+
+def nlos_line(values, width=None):
+    """
+    Return the live view's line of NLOS links from the estimator's diagnostic values.
+
+    ``NLOS links 3: joint 2-anchor 3, joint 5-anchors 1 4``: the count, then the links by
+    joint; when that is wider than ``width``, ``NLOS links 3 (joint-anchor): 2-3 5-1 5-4``.
+    """
+    count = values.get('NLOS links', '-')
+    pairs = nlos_pairs(values.get('NLOS flagged links'))
+    if not pairs:
+        return f'NLOS links {count}'
+    anchors = {}
+    for joint, anchor in pairs:
+        anchors.setdefault(joint, []).append(str(anchor))
+    line = f'NLOS links {count}: ' + ', '.join(
+        f'joint {k}-anchor{"s" if len(js) > 1 else ""} {" ".join(js)}'
+        for k, js in anchors.items())
+    if width is None or len(line) <= width:
+        return line
+    return f'NLOS links {count} (joint-anchor): ' + ' '.join(f'{k}-{j}' for k, j in pairs)
+
+
 def _noise_text(args):
     if args.field:
         return f'field={args.field}'
@@ -282,13 +320,16 @@ def live_view(monitor, args, elapsed, width, height, scene, skipped=0):
     Return the live view as a ``rich`` renderable: the drawing and the numbers below it.
 
     ``scene`` is a dict with ``axis`` (the slew axis, x y), ``span`` (the boom's length)
-    and ``top`` (its highest reach), metres, which keep the picture still.
+    and ``top`` (its highest reach), metres, which keep the picture still, and ``anchors``
+    (their positions, (m, 3) metres), drawn in the top view with the links judged NLOS.
     """
     from epp_ros.tools import demo_view
     from rich.console import Group
     from rich.text import Text
     summary = monitor.summary(args.method)
     estimate, truth = monitor.last if monitor.last is not None else (monitor.estimate, None)
+    values = monitor.values
+    nlos = nlos_pairs(values.get('NLOS flagged links'))
     header = Text.assemble(('epp_demo', 'bold'), '  method ', (args.method, 'bold cyan'),
                            f'  {_noise_text(args)}  {elapsed:.1f} s  Ctrl-C stops')
     lines = [header]
@@ -299,23 +340,23 @@ def live_view(monitor, args, elapsed, width, height, scene, skipped=0):
     else:
         stds = monitor.joint_stds(len(estimate) - 1)
         drawing = demo_view.draw(estimate, truth, stds, width=max(width - 1, 20),
-                                 height=drawing_height, **scene)
+                                 height=drawing_height, nlos=nlos, **scene)
         lines.append(demo_view.to_rich(drawing))
-    glyphs = demo_view.GLYPHS
+    glyphs, styles = demo_view.GLYPHS, demo_view.STYLES
     lines.append(Text.assemble(
-        'estimate ', (f'{glyphs["pivot"]} 1 2 .. {glyphs["tip"]}', 'bold cyan'),
-        '   truth ', (f'{glyphs["truth_joint"]} {glyphs["truth_line"]}', 'bright_black'),
-        '   ', (glyphs['uncertainty'], 'magenta'),
-        f' {demo_view.SIGMAS:g}σ of each joint, drawn x{demo_view.MAGNIFY:g}   ',
-        (glyphs['ground'], 'green'), ' ground'))
+        'estimate ', (f'{glyphs["pivot"]} 1 2 .. {glyphs["tip"]}', styles['estimate']),
+        '  truth ', (f'{glyphs["truth_joint"]} {glyphs["truth_line"]}', styles['truth']),
+        '  ', (glyphs['uncertainty'], styles['uncertainty']),
+        f' {demo_view.SIGMAS:g}σ x{demo_view.MAGNIFY:g}  ',
+        (glyphs['ground'], styles['ground']), ' ground  ',
+        (glyphs['anchor'], styles['anchor']), ' anchor  ',
+        (glyphs['nlos'], styles['nlos']), ' NLOS link'))
     level = monitor.level or '-'
     lines.append(Text.assemble('health ', (level, LEVEL_STYLES.get(level, 'bold')),
                                f'  {monitor.reason or "waiting for /diagnostics"}'))
-    values = monitor.values
     lines.append(Text(f'learned noise  σ {values.get("range sigma [m]", "-")} m   '
                       f'NLOS fraction {values.get("NLOS fraction", "-")}'))
-    lines.append(Text(f'NLOS links {values.get("NLOS links", "-")}   (a count: the estimator '
-                      'does not publish which links)'))
+    lines.append(Text(nlos_line(values, width), style=styles['nlos'] if nlos else ''))
     lines.append(Text(
         f'{monitor.recent_rate():.1f} Hz  latency p50 {summary["latency_p50_ms"]:.1f} ms '
         f'p99 {summary["latency_p99_ms"]:.1f} ms  unanswered frames '
@@ -459,7 +500,8 @@ def run(args, stop_request):
             failure = 'the emulator did not start'
         elif started:
             scene = {'axis': tuple(config.base[:2]), 'span': float(sum(config.arm_lengths)),
-                     'top': float(config.base[2] + sum(config.arm_lengths))}
+                     'top': float(config.base[2] + sum(config.arm_lengths)),
+                     'anchors': tuple(config.anchor_positions)}
             failure = watch(monitor, executor, processes, args, view, live, scene,
                             stop_request)
     finally:

@@ -21,8 +21,9 @@ shows with ``rich`` (:func:`to_rich`) and the tests read as text.
 
 Side view: the horizontal reach from the slew axis (signed, in each boom's own vertical
 plane) against the height, with the ground. Top view: the boom seen from above, the slew
-axis at the centre. Terminal cells are about twice as tall as wide, which both views
-respect, so that a metre is as long across as up.
+axis at the centre, with the anchors and the tag-anchor links the estimator judged NLOS
+(their joints red in both views). Terminal cells are about twice as tall as wide, which
+both views respect, so that a metre is as long across as up.
 """
 from dataclasses import dataclass
 import math
@@ -41,10 +42,12 @@ MAGNIFY = 10.0
 
 #: What each part is drawn with.
 GLYPHS = {'truth_line': '·', 'truth_joint': 'o', 'tip': '@', 'pivot': 'B',
-          'uncertainty': '░', 'ground': '=', 'mast': '|', 'axis': '+'}
+          'uncertainty': '░', 'ground': '=', 'mast': '|', 'axis': '+', 'anchor': '^',
+          'nlos': 'x'}
 #: The style of each part (rich style names).
 STYLES = {'truth': 'bright_black', 'estimate': 'bold cyan', 'tip': 'bold yellow',
-          'uncertainty': 'magenta', 'ground': 'green', 'title': 'bold', 'axis': 'green'}
+          'uncertainty': 'magenta', 'ground': 'green', 'title': 'bold', 'axis': 'green',
+          'anchor': 'bold blue', 'nlos': 'bold red'}
 
 # A segment's glyph by its direction on screen (degrees, 0 = to the right, 90 = up).
 _SLOPES = ((22.5, '-'), (67.5, '/'), (112.5, '|'), (157.5, '\\'), (180.0, '-'))
@@ -102,6 +105,12 @@ class Canvas:
     def centre(self, row, column):
         """Return the world point at the centre of a cell."""
         return self.x0 + (column + 0.5) * self.dx, self.y1 - (row + 0.5) * self.dy
+
+    def restyle(self, x, y, style):
+        """Give the cell at the world point ``style``, keeping its glyph."""
+        where = self.cell(x, y)
+        if where is not None:
+            self.styles[where[0]][where[1]] = style
 
     def put(self, x, y, glyph, style=None):
         """Draw ``glyph`` at the world point, if it is on the canvas."""
@@ -165,6 +174,13 @@ def _points(posture):
     return points
 
 
+def _anchors(anchors):
+    stations = np.asarray(anchors, dtype=float)
+    if stations.ndim != 2 or stations.shape[1] not in (2, 3):
+        raise ValueError(f'anchors are (m, 2) or (m, 3) positions, got {stations.shape}')
+    return stations
+
+
 def _reach(points, axis):
     """Signed reach from the slew axis in the boom's own vertical plane, and heights."""
     horizontal = points[:, :2] - np.asarray(axis, dtype=float)
@@ -175,8 +191,26 @@ def _reach(points, axis):
     return np.column_stack([horizontal @ direction, points[:, 2]])
 
 
-def _draw_boom(canvas, estimate, truth, stds, magnify):
-    """Uncertainty under the truth under the estimate; each posture is (p + 1, 2) points."""
+def _flagged(nlos, estimate, anchors=None):
+    """
+    Return the (joint, anchor) pairs of ``nlos`` (1-based) that name a drawn joint and anchor.
+
+    ``anchors`` None: only the joint is checked.
+    """
+    if estimate is None:
+        return []
+    joints = len(estimate) - 1
+    return [(int(k), int(j)) for k, j in nlos if 1 <= k <= joints
+            and (anchors is None or 1 <= j <= len(anchors))]
+
+
+def _draw_boom(canvas, estimate, truth, stds, magnify, nlos=(), under=None):
+    """
+    Uncertainty under the truth under ``under(canvas)`` under the estimate.
+
+    Each posture is (p + 1, 2) points; the joints of ``nlos`` (joint, anchor) pairs are
+    coloured as NLOS.
+    """
     if stds is not None and estimate is not None:
         for joint, std in zip(estimate[1:], np.asarray(stds, dtype=float)):
             canvas.disc(joint, SIGMAS * magnify * std, GLYPHS['uncertainty'],
@@ -186,6 +220,8 @@ def _draw_boom(canvas, estimate, truth, stds, magnify):
             canvas.line(a, b, GLYPHS['truth_line'], STYLES['truth'])
         for joint in truth[1:]:
             canvas.put(*joint, GLYPHS['truth_joint'], STYLES['truth'])
+    if under is not None:
+        under(canvas)
     if estimate is not None:
         for a, b in zip(estimate[:-1], estimate[1:]):
             canvas.line(a, b, None, STYLES['estimate'])
@@ -193,6 +229,8 @@ def _draw_boom(canvas, estimate, truth, stds, magnify):
             canvas.put(*joint, str(k % 10), STYLES['estimate'])
         canvas.put(*estimate[0], GLYPHS['pivot'], STYLES['estimate'])
         canvas.put(*estimate[-1], GLYPHS['tip'], STYLES['tip'])
+    for joint, _ in _flagged(nlos, estimate):
+        canvas.restyle(*estimate[joint], STYLES['nlos'])
 
 
 def _span(estimate, truth, axis):
@@ -206,7 +244,7 @@ def _span(estimate, truth, axis):
 
 
 def side_view(estimate, truth=None, stds=None, width=60, height=20, axis=None,
-              span=None, top=None, magnify=MAGNIFY):
+              span=None, top=None, magnify=MAGNIFY, nlos=()):
     """
     Draw the reach from the slew axis against the height, with the ground.
 
@@ -228,6 +266,9 @@ def side_view(estimate, truth=None, stds=None, width=60, height=20, axis=None,
         postures); fixed values keep the picture still while the boom moves.
     magnify : float
         How much larger than life the uncertainty is drawn.
+    nlos : sequence of (int, int), optional
+        The tag-anchor links the estimator judged NLOS, (joint, anchor), 1-based (the
+        ``NLOS flagged links`` of ``/diagnostics``): their estimated joints are coloured.
 
     Returns
     -------
@@ -245,17 +286,21 @@ def side_view(estimate, truth=None, stds=None, width=60, height=20, axis=None,
     base = first[0]
     canvas.line((0.0, 0.0), (0.0, base[2]), GLYPHS['mast'], STYLES['axis'])
     _draw_boom(canvas, None if estimate is None else _reach(estimate, axis),
-               None if truth is None else _reach(truth, axis), stds, magnify)
+               None if truth is None else _reach(truth, axis), stds, magnify, nlos)
     canvas.title('side: reach / height')
     return canvas.drawing()
 
 
 def top_view(estimate, truth=None, stds=None, width=40, height=20, axis=None, span=None,
-             magnify=MAGNIFY):
+             magnify=MAGNIFY, anchors=None, nlos=()):
     """
-    Draw the boom from above (the slew), the slew axis at the centre.
+    Draw the boom from above (the slew), the slew axis at the centre, and the anchors.
 
-    Parameters are those of :func:`side_view`; x to the right, y up.
+    ``anchors``, array_like of shape (m, 2) or (m, 3), are the anchor positions in metres
+    (only x, y are drawn; anchor j of ``nlos`` is row j - 1). Each link of ``nlos`` is
+    drawn from its estimated joint to its anchor, under the boom, and its joint and anchor
+    are coloured. The other parameters are those of :func:`side_view`; x to the right, y
+    up.
 
     Returns
     -------
@@ -272,18 +317,31 @@ def top_view(estimate, truth=None, stds=None, width=40, height=20, axis=None, sp
 
     def plan(points):
         return None if points is None else points[:, :2] - axis
-    _draw_boom(canvas, plan(estimate), plan(truth), stds, magnify)
+    estimated = plan(estimate)
+    stations = None if anchors is None else plan(_anchors(anchors))
+    flagged = _flagged(nlos, estimated, stations)
+
+    def links_and_anchors(canvas):
+        for joint, anchor in flagged if stations is not None else ():
+            canvas.line(estimated[joint], stations[anchor - 1], GLYPHS['nlos'],
+                        STYLES['nlos'])
+        blocked = {anchor for _, anchor in flagged}
+        for j, station in enumerate(() if stations is None else stations, start=1):
+            canvas.put(*station, GLYPHS['anchor'],
+                       STYLES['nlos'] if j in blocked else STYLES['anchor'])
+    _draw_boom(canvas, estimated, plan(truth), stds, magnify, flagged, links_and_anchors)
     canvas.title('top: slew')
     return canvas.drawing()
 
 
 def draw(estimate, truth=None, stds=None, width=100, height=22, axis=None, span=None,
-         top=None, magnify=MAGNIFY, gap=2):
+         top=None, magnify=MAGNIFY, gap=2, anchors=None, nlos=()):
     """
     Draw the side view and, right of it, the top view, on a ``width`` x ``height`` canvas.
 
     The top view takes a square of the world (as wide as twice its height in cells), at
-    most 40 % of the width. Parameters are those of :func:`side_view`.
+    most 40 % of the width. Parameters are those of :func:`side_view` and
+    :func:`top_view`.
 
     Returns
     -------
@@ -293,8 +351,10 @@ def draw(estimate, truth=None, stds=None, width=100, height=22, axis=None, span=
     width, height = int(width), int(height)
     top_width = max(min(int(CELL_ASPECT * height), int(0.4 * width)), 1)
     side_width = max(width - top_width - gap, 1)
-    side = side_view(estimate, truth, stds, side_width, height, axis, span, top, magnify)
-    plan = top_view(estimate, truth, stds, top_width, height, axis, span, magnify)
+    side = side_view(estimate, truth, stds, side_width, height, axis, span, top, magnify,
+                     nlos)
+    plan = top_view(estimate, truth, stds, top_width, height, axis, span, magnify, anchors,
+                    nlos)
     rows = [a + ' ' * gap + b for a, b in zip(side.rows, plan.rows)]
     styles = [a + [None] * gap + b for a, b in zip(side.styles, plan.styles)]
     return Drawing(rows, styles)
