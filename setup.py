@@ -45,6 +45,7 @@ setup(
             'epp_demo = epp_ros.tools.demo:main',
             'epp_bench = epp_ros.tools.bench:main',
             'epp_bag = epp_ros.tools.bag:main',
+            'epp_calibrate = epp_ros.tools.calibrate:main',
         ],
     },
 )

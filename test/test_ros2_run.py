@@ -69,7 +69,7 @@ def test_install_layout(install):
     assert (prefix / 'share/epp_ros/launch/epp.launch.py').exists()
     assert (prefix / 'share/epp_ros/rviz/epp.rviz').exists()
     for executable in ('uwb_driver', 'posture_estimator', 'uwb_emulator', 'epp_demo',
-                       'epp_bench', 'epp_bag'):
+                       'epp_bench', 'epp_bag', 'epp_calibrate'):
         assert os.access(prefix / 'lib/epp_ros' / executable, os.X_OK)
 
 

@@ -686,9 +686,19 @@ def calibrate(model, ranges, *, tag_ranges=None, fixed_anchors=(0,), sigma=0.1,
     anchor_std[problem.free] = std[:n_anchor].reshape(-1, 3)
     poorly, advice = _verdict(problem, covariance, condition, anchor_tolerance,
                               offset_tolerance)
-    calibrated = model.with_calibration(anchors, anchor_offsets, tag_offsets)
+    wandered = False
+    try:
+        calibrated = model.with_calibration(anchors, anchor_offsets, tag_offsets)
+    except ValueError as exc:       # values no pump has: the recording did not pin them
+        calibrated, wandered = model, True
+        poorly = poorly + ['the recording']
+        advice = advice + [f'the fit wandered to values no pump has ({exc}); record the '
+                           'boom slewing and luffing every section']
     rms_after = _range_rms(problem, psi, x, frames)
-    if not converged:
+    if wandered:
+        status = 'poorly_excited'
+        message = 'the recording does not determine everything: ' + '; '.join(advice)
+    elif not converged:
         status = 'not_converged'
         message = (f'the joint fit did not converge in {max_iter} iterations: the result is '
                    'not to be used')

@@ -45,6 +45,10 @@ Suites:
             the truth, as RMSE over the clean Cramér–Rao bound; track over the posterior
             bound; the authors' geometry at sigma 1 and 2 m from cold starts (--trials);
             cost of track and chain, and of the chain's fit against scipy. Not default.
+  calibration  Calibration from --seconds of working cycle (--seeds pumps, offsets 0.15 m,
+            outriggers 0.3 m off): anchor and link-offset errors, computation time, and chain
+            and track over the clean CRLB with the configured and the calibrated model on a
+            fresh recording, side by side. Not default.
 Every table ends with the commit it was measured on. ``--option KEY=VALUE`` passes an
 option to the estimators (e.g. ``anchor_weight=inf``, ``predict_slew=false``).
 """
@@ -275,6 +279,9 @@ def markdown(report):
     if report['suite'] == 'field':
         from epp_ros.tools import field_bench
         return field_bench.markdown(report)
+    if report['suite'] == 'calibration':
+        from epp_ros.tools import calibration_bench
+        return calibration_bench.markdown(report)
     if report['suite'] in ('soak', 'fuzz'):
         from epp_ros.tools import fuzz_bench, soak_bench
         return (soak_bench if report['suite'] == 'soak' else fuzz_bench).markdown(report)
@@ -346,7 +353,7 @@ def main(argv=None):
                         help='latency: seconds per rate')
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--seeds', type=integer(1, 1000), default=2,
-                        help='field: runs per case (default 2)')
+                        help='field: runs per case; calibration: pumps (default 2)')
     parser.add_argument('--option', type=parse_option, action='append', default=[],
                         metavar='KEY=VALUE', help='estimator option, repeatable')
     parser.add_argument('--json', action='store_true', help='also print the reports as JSON')
@@ -362,7 +369,7 @@ def main(argv=None):
                         help='fuzz: inputs per protocol and per configuration field')
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     default = ['xie3dim', 'tracking', 'latency', 'bags']
-    known = default + ['paper', 'integrity', 'driver', 'soak', 'fuzz', 'field']
+    known = default + ['paper', 'integrity', 'driver', 'soak', 'fuzz', 'field', 'calibration']
     suites = args.suites or default
     unknown = sorted(set(suites) - set(known))
     if unknown:
@@ -405,6 +412,9 @@ def main(argv=None):
         elif suite == 'field':
             from epp_ros.tools import field_bench
             reports.append(field_bench.run(args.seconds, args.seeds, args.seed, args.trials))
+        elif suite == 'calibration':
+            from epp_ros.tools import calibration_bench
+            reports.append(calibration_bench.run(args.seconds, args.seeds, args.seed))
         elif suite == 'fuzz':
             from epp_ros.tools import fuzz_bench
             reports.append(fuzz_bench.run(args.inputs, args.seed,

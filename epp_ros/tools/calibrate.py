@@ -1,0 +1,510 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+epp_calibrate: anchor positions and device range offsets from a recorded bag.
+
+    epp_calibrate BAG [--config pump.yaml] [--out calibrated.yaml] [--fixed-anchors NAMES]
+                      [--plot FILE.png] [--json] [--force] [--salvage]
+
+Reads the bag's /uwb/ranges (as uwb_driver publishes them) recorded while the boom slews
+and luffs, fits the free anchors' positions and every tag's and anchor's range offset
+(epp_ros.core.calibrate), prints what changed with its standard deviation, and writes
+--out: the --config file with anchor_positions, anchor_offsets and tag_offsets replaced
+and everything else kept, for the nodes to start from (--params-file). The fixed anchors
+(--fixed-anchors, names or device ids, comma-separated) are those on the truck body
+(turret, cab): their configured positions define the truck frame; default: the first
+anchor. The range noise model is the config's range_sigma, nlos_fraction and nlos_gamma.
+
+A recording that does not determine every parameter (too short, a parked boom, too little
+slewing or luffing) gets its verdict, what to move, and exit status 2, and nothing is
+written unless --force. Errors (no such bag, no /uwb/ranges, a bad config) are one line
+with exit status 2.
+"""
+import argparse
+import json
+import os
+from pathlib import Path
+import sys
+import tempfile
+import time
+
+from epp_ros.arguments import Parser
+
+#: Frames (with at least p + 1 ranges) a recording needs before it is tried at all.
+MIN_FRAMES = 100
+#: The fixed anchors when the config does not say which are on the truck body.
+DEFAULT_FIXED = (0,)
+#: Seconds between progress lines on a terminal.
+PROGRESS_PERIOD = 0.5
+
+
+class CalibrationError(Exception):
+    """A recording or a request that cannot be calibrated; the message is one line."""
+
+
+def parse_args(argv):
+    parser = Parser(prog='epp_calibrate', description=__doc__.lstrip().splitlines()[0],
+                    epilog=__doc__.lstrip().split('\n', 2)[2],
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('bag', help='a rosbag2 recording with /uwb/ranges')
+    parser.add_argument('--config', help='the pump.yaml the bag was recorded with (default: '
+                                         'the packaged one)')
+    parser.add_argument('--out', help='write the calibrated pump.yaml here (replaced if it '
+                                      'exists; without: nothing written)')
+    parser.add_argument('--fixed-anchors', metavar='NAMES',
+                        help='comma-separated anchor names or ids on the truck body (default: '
+                             'the first anchor)')
+    parser.add_argument('--plot', metavar='FILE.png',
+                        help='anchors before/after (top view) and residuals per link')
+    parser.add_argument('--json', action='store_true', help='also print the result as JSON')
+    parser.add_argument('--force', action='store_true',
+                        help='write --out even when the recording does not determine every '
+                             'parameter (risky: see the verdict)')
+    parser.add_argument('--salvage', action='store_true',
+                        help='use what can be read of a damaged bag (default: refuse it)')
+    return parser.parse_args(argv)
+
+
+def fixed_anchor_indices(config, text):
+    """
+    Return the indices of the fixed anchors named in ``text``, and how they were chosen.
+
+    Parameters
+    ----------
+    config : epp_ros.config.PumpConfig
+        The pump: its anchor names and ids.
+    text : str or None
+        Comma-separated anchor names or device ids; None: :data:`DEFAULT_FIXED`.
+
+    Returns
+    -------
+    indices : tuple of int
+    note : str
+        One line saying which anchors are fixed and why.
+
+    Raises
+    ------
+    CalibrationError
+        On a name that is not an anchor of the config.
+
+    """
+    names = config.anchor_names
+    if text is None:
+        indices = DEFAULT_FIXED
+        return indices, (f'fixed anchors: {", ".join(names[j] for j in indices)} (the first '
+                         'anchor: the config does not say which anchors are on the truck '
+                         'body; name them with --fixed-anchors, e.g. turret,cab)')
+    indices = []
+    for item in (part.strip() for part in text.split(',')):
+        if item in names:
+            index = names.index(item)
+        else:
+            index = config.anchor_index(item) if item else None
+        if index is None:
+            raise CalibrationError(f'--fixed-anchors: {item!r} is not an anchor of the config '
+                                   f'(anchors: {", ".join(names)})')
+        if index not in indices:
+            indices.append(index)
+    return tuple(indices), f'fixed anchors: {", ".join(names[j] for j in indices)}'
+
+
+def noise_settings(document):
+    """
+    Return calibrate's noise keywords from a pump.yaml's node settings (defaults if absent).
+
+    Raises
+    ------
+    CalibrationError
+        On a setting that is not a finite number in its range.
+
+    """
+    import math
+    section = document['/**']['ros__parameters']
+    limits = {'range_sigma': ('sigma', 0.1, 0.0), 'tag_sigma': ('tag_sigma', None, 0.0),
+              'nlos_fraction': ('nlos_fraction', 0.1, None),
+              'nlos_gamma': ('nlos_gamma', 1.0, 0.0)}
+    settings = {}
+    for name, (keyword, default, low) in limits.items():
+        value = section.get(name, default)
+        if value is None:
+            continue
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            value = float('nan')
+        inside = (value > low) if low is not None else (0.0 <= value < 1.0)
+        if not (math.isfinite(value) and inside):
+            raise CalibrationError(f'{name}: must be a finite number '
+                                   f'{"> 0" if low is not None else "in [0, 1)"}, got '
+                                   f'{section.get(name)!r}')
+        settings[keyword] = value
+    return settings
+
+
+def read_ranges(path, config, salvage=False, progress=None):
+    """
+    Read a bag's ``/uwb/ranges`` into the arrays calibrate takes.
+
+    Messages are decoded and arranged by ``PumpConfig.link_frame``, as ``epp_bag eval``
+    reads them, in the order of their stamps.
+
+    Parameters
+    ----------
+    path : path
+        The bag.
+    config : epp_ros.config.PumpConfig
+        The pump: link names of the messages.
+    salvage : bool
+        Use what can be read of a damaged bag.
+    progress : callable, optional
+        Called with (messages done, messages in all).
+
+    Returns
+    -------
+    ranges : ndarray, shape (N, p, m)
+    tag_ranges : ndarray, shape (N, p, p)
+    stamps : ndarray, shape (N,)
+        Seconds.
+    damage : str or None
+        What of a damaged bag was skipped.
+
+    Raises
+    ------
+    epp_ros.bags.BagError
+        On a bag that cannot be read, without /uwb/ranges or with malformed messages.
+
+    """
+    import numpy as np
+
+    from epp_ros import bags
+    summary = bags.info(path)
+    topics = {entry['topic']: entry['type'] for entry in summary['topics']}
+    if bags.RANGES not in topics:
+        raise bags.BagError(f'{path}: no {bags.RANGES} topic (topics: {sorted(topics)})')
+    if topics[bags.RANGES] != bags.TYPES[bags.RANGES]:
+        raise bags.BagError(f'{path}: {bags.RANGES} holds {topics[bags.RANGES]}, expected '
+                            f'{bags.TYPES[bags.RANGES]}')
+    messages, damage = bags.read_all(path, salvage=salvage, topics=[bags.RANGES])
+    p, m = len(config.tag_names), len(config.anchor_names)
+    ranges = np.full((len(messages), p, m), np.nan)
+    tag_ranges = np.full((len(messages), p, p), np.nan)
+    stamps = np.zeros(len(messages))
+    unknown = 0
+    for index, (_, msgtype, _, raw, _) in enumerate(messages):
+        message = bags.TYPESTORE.deserialize_cdr(raw, msgtype)
+        try:
+            frame = config.link_frame(list(message.name), message.position, message.effort)
+        except ValueError as exc:
+            raise bags.BagError(f'{path}: a {bags.RANGES} message is malformed: {exc}') \
+                from None
+        ranges[index], tag_ranges[index] = frame.ranges, frame.tag_ranges
+        stamps[index] = message.header.stamp.sec + 1e-9 * message.header.stamp.nanosec
+        unknown += frame.unknown
+        if progress is not None:
+            progress(index + 1, len(messages))
+    if messages and unknown and not np.isfinite(ranges).any():
+        raise bags.BagError(f'{path}: no {bags.RANGES} label names a tag-anchor pair of the '
+                            'config (recorded with another pump.yaml? see --config)')
+    order = np.argsort(stamps, kind='stable')
+    return (ranges[order], tag_ranges[order], stamps[order],
+            None if damage.intact else damage.describe())
+
+
+class Progress:
+    """Throttled progress lines on stderr, on a terminal only."""
+
+    def __init__(self, stream=None):
+        self.stream = sys.stderr if stream is None else stream
+        self.shown = 0.0
+        self.active = bool(getattr(self.stream, 'isatty', lambda: False)())
+
+    def __call__(self, done, total):
+        """Show ``done`` of ``total`` messages read, at most every PROGRESS_PERIOD s."""
+        now = time.monotonic()
+        if not self.active or (done < total and now - self.shown < PROGRESS_PERIOD):
+            return
+        self.shown = now
+        self.stream.write(f'\repp_calibrate: reading /uwb/ranges {done}/{total} '
+                          f'({100 * done / max(total, 1):.0f} %)')
+        if done == total:
+            self.stream.write('\n')
+        self.stream.flush()
+
+    def say(self, text):
+        """Show one line of status (on a terminal)."""
+        if self.active:
+            self.stream.write(f'epp_calibrate: {text}\n')
+            self.stream.flush()
+
+
+def _vector(values, std=None):
+    cells = ', '.join(f'{v:7.3f}' for v in values)
+    if std is None:
+        return f'({cells})'
+    return f'({cells}) +- ({", ".join(f"{s:.3f}" for s in std)})'
+
+
+def report_lines(config, before, result, fixed):
+    """
+    Return the table of what changed, as lines.
+
+    Parameters
+    ----------
+    config : epp_ros.config.PumpConfig
+        Names of the anchors and tags.
+    before : BoomModel
+        The configured model.
+    result : CalibrationResult
+        What calibrate found.
+    fixed : tuple of int
+        The fixed anchors.
+
+    """
+    import numpy as np
+    names = config.anchor_names
+    width = max(len(name) for name in (*names, *config.tag_names)) + 9
+    lines = ['Anchors [m]: configured -> calibrated +- std (x, y, z), moved', ]
+    for j, name in enumerate(names):
+        label = f'{name} (fixed)' if j in fixed else name
+        moved = float(np.linalg.norm(result.anchors[j] - before.anchors[j]))
+        std = None if j in fixed else result.anchor_std[j]
+        lines.append(f'  {label:<{width}} {_vector(before.anchors[j])} -> '
+                     f'{_vector(result.anchors[j], std)}  {moved:.3f}')
+    lines.append('Range offsets [m]: configured -> calibrated +- std')
+    for kind, labels, old, new, std in (
+            ('anchor', names, before.anchor_offsets, result.anchor_offsets,
+             result.anchor_offset_std),
+            ('tag', config.tag_names, before.tag_offsets, result.tag_offsets,
+             result.tag_offset_std)):
+        for label, a, b, s in zip(labels, old, new, std):
+            lines.append(f'  {kind + " " + label:<{width}} {a:7.3f} -> {b:7.3f} +- {s:.3f}')
+    lines.append(f'  (gauge: {result.gauge})')
+    lines.append('Link offsets (tag + anchor) [m], calibrated +- std:')
+    cell = max(17, max(len(name) for name in names) + 2)
+    lines.append('  ' + ' ' * width + ''.join(f'{name:>{cell}}' for name in names))
+    for k, tag in enumerate(config.tag_names):
+        lines.append(f'  {tag:<{width}}' + ''.join(
+            f'{f"{v:.3f} +- {s:.3f}":>{cell}}'
+            for v, s in zip(result.link_offsets[k], result.link_offset_std[k])))
+    used = int(result.frames_used.sum())
+    lines.append(f'Range residual RMS: {result.rms_before:.3f} m -> {result.rms_after:.3f} m '
+                 f'({used} frames, {result.iterations} iterations, condition '
+                 f'{result.condition:.3g}, {result.seconds:.1f} s)')
+    lines.append(f'Verdict: {result.status}: {result.message}')
+    return lines
+
+
+def result_json(config, before, result, fixed, written):
+    """Return the calibration as a JSON-ready dict (names -> values, metres)."""
+    return {
+        'status': result.status, 'message': result.message, 'written': written,
+        'fixed_anchors': [config.anchor_names[j] for j in fixed],
+        'anchors': {name: {'before': before.anchors[j].tolist(),
+                           'after': result.anchors[j].tolist(),
+                           'std': result.anchor_std[j].tolist()}
+                    for j, name in enumerate(config.anchor_names)},
+        'anchor_offsets': {name: {'before': float(before.anchor_offsets[j]),
+                                  'after': float(result.anchor_offsets[j]),
+                                  'std': float(result.anchor_offset_std[j])}
+                           for j, name in enumerate(config.anchor_names)},
+        'tag_offsets': {name: {'before': float(before.tag_offsets[k]),
+                               'after': float(result.tag_offsets[k]),
+                               'std': float(result.tag_offset_std[k])}
+                        for k, name in enumerate(config.tag_names)},
+        'link_offsets': result.link_offsets.tolist(),
+        'link_offset_std': result.link_offset_std.tolist(),
+        'rms_before_m': result.rms_before, 'rms_after_m': result.rms_after,
+        'condition': result.condition, 'poorly_determined': list(result.poorly_determined),
+        'gauge': result.gauge, 'frames_used': int(result.frames_used.sum()),
+        'iterations': result.iterations, 'seconds': result.seconds}
+
+
+def write_config(path, source_text, result):
+    """
+    Write the calibrated pump.yaml atomically (a temporary file renamed into place).
+
+    Returns
+    -------
+    str
+        The text written.
+
+    """
+    from epp_ros.config import update_pump_yaml
+    text = update_pump_yaml(source_text, {
+        'anchor_positions': result.anchors.ravel().tolist(),
+        'anchor_offsets': result.anchor_offsets.tolist(),
+        'tag_offsets': result.tag_offsets.tolist()})
+    path = Path(path)
+    handle, temporary = tempfile.mkstemp(prefix=f'.{path.name}.', dir=path.parent or '.')
+    try:
+        with os.fdopen(handle, 'w') as stream:
+            stream.write(text)
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+    return text
+
+
+def link_residuals(model, ranges, result):
+    """
+    Return the RMS range residual (p, m) of each link, metres, over the frames fitted.
+
+    Links judged blocked (NLOS probability over a half) do not count.
+    """
+    import numpy as np
+    used = result.frames_used
+    psi = result.postures[used]
+    joints = model.forward_kinematics(psi[:, 0], psi[:, 1:])
+    predicted = (np.linalg.norm(joints[:, :, None] - model.anchors[None, None], axis=-1)
+                 + model.link_offsets())
+    error = ranges[used] - predicted
+    keep = np.isfinite(error) & (result.nlos[used] < 0.5)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return np.sqrt((np.where(keep, error, 0.0) ** 2).sum(axis=0) / keep.sum(axis=0))
+
+
+def plot(path, config, before, result, ranges, fixed):
+    """Write a PNG: anchors before/after from above, and each link's residual RMS."""
+    import matplotlib
+    matplotlib.use('Agg')
+    from matplotlib import pyplot
+    import numpy as np
+    figure, (top, bars) = pyplot.subplots(1, 2, figsize=(13, 5.5))
+    top.plot(*before.base[:2], 'k+', markersize=12, label='slew axis')
+    top.scatter(before.anchors[:, 0], before.anchors[:, 1], facecolors='none',
+                edgecolors='tab:gray', s=80, label='configured')
+    top.scatter(result.anchors[:, 0], result.anchors[:, 1], c='tab:red', s=30,
+                label='calibrated')
+    for j, name in enumerate(config.anchor_names):
+        top.annotate('', result.anchors[j, :2], before.anchors[j, :2],
+                     arrowprops={'arrowstyle': '->', 'color': 'tab:red'})
+        shift = np.linalg.norm(result.anchors[j] - before.anchors[j])
+        top.annotate(f'{name}{" (fixed)" if j in fixed else ""}\n{shift:.3f} m',
+                     result.anchors[j, :2], textcoords='offset points', xytext=(6, 6),
+                     fontsize=8)
+    top.set_aspect('equal', 'datalim')
+    top.set_xlabel('x [m]')
+    top.set_ylabel('y [m]')
+    top.set_title('Anchors from above')
+    top.grid(True)
+    top.legend(fontsize=8)
+    after = link_residuals(result.model, ranges, result)
+    configured = link_residuals(before, ranges, result)
+    labels = config.link_names
+    positions = np.arange(len(labels))
+    bars.bar(positions - 0.2, configured.ravel(), 0.4, color='tab:gray',
+             label='configured model, at the calibrated postures')
+    bars.bar(positions + 0.2, after.ravel(), 0.4, color='tab:red', label='calibrated')
+    bars.set_xticks(positions, labels, rotation=90, fontsize=7)
+    bars.set_ylabel('range residual RMS [m]')
+    bars.set_title(f'Residuals per link ({result.status}: RMS {result.rms_before:.3f} -> '
+                   f'{result.rms_after:.3f} m)')
+    bars.grid(True, axis='y')
+    bars.legend(fontsize=8)
+    figure.tight_layout()
+    figure.savefig(path, dpi=100)
+    pyplot.close(figure)
+
+
+def run(args, out=None):
+    """Calibrate as the arguments say, printing to ``out`` (stdout); return the exit status."""
+    out = sys.stdout if out is None else out
+    import numpy as np
+    import yaml
+
+    from epp_ros.config import ConfigError, default_config_path, load_pump_config
+    from epp_ros.core import calibrate
+    progress = Progress()
+    config_path = Path(args.config) if args.config else default_config_path()
+    config = load_pump_config(config_path)
+    source_text = config_path.read_text()
+    settings = noise_settings(yaml.safe_load(source_text))
+    fixed, note = fixed_anchor_indices(config, args.fixed_anchors)
+    if args.out is not None and Path(args.out).is_dir():
+        raise CalibrationError(f'--out {args.out} is a directory')
+    ranges, tag_ranges, _, damage = read_ranges(args.bag, config, args.salvage, progress)
+    if damage:
+        print(f'epp_calibrate: salvaged {args.bag}: {damage}', file=sys.stderr)
+    p = len(config.tag_names)
+    usable = int(np.sum(np.isfinite(ranges).sum(axis=(1, 2)) >= p + 1))
+    if usable < MIN_FRAMES:
+        raise CalibrationError(
+            f'{args.bag}: {usable} frames with {p + 1} or more ranges, {MIN_FRAMES} needed: '
+            'record the boom slewing and luffing for a minute or more; nothing written')
+    before = config.model()
+    print(f'{args.bag}: {len(ranges)} frames of /uwb/ranges ({usable} usable), '
+          f'{p} tags, {len(config.anchor_names)} anchors; {note}', file=out)
+    progress.say(f'calibrating {usable} frames ...')
+    has_tag_ranges = bool(np.isfinite(tag_ranges).any())
+    try:
+        result = calibrate(before, ranges, tag_ranges=tag_ranges if has_tag_ranges else None,
+                           fixed_anchors=fixed, **settings)
+    except ValueError as exc:
+        text = str(exc).splitlines()[0]
+        text = text if len(text) <= 120 else text[:117] + '...'
+        raise CalibrationError(f'{args.bag}: cannot calibrate ({text}): the recording hardly '
+                               'determines the parameters; record the boom slewing and '
+                               'luffing through its range; nothing written') from None
+    for line in report_lines(config, before, result, fixed):
+        print(line, file=out)
+    written = None
+    if args.out is not None and (result.success or args.force):
+        try:
+            write_config(args.out, source_text, result)
+        except ConfigError as exc:
+            raise CalibrationError(f'the calibrated config does not validate ({exc}); '
+                                   'nothing written') from None
+        except OSError as exc:
+            raise CalibrationError(f'cannot write {args.out}: {exc}') from None
+        written = str(args.out)
+        print(f'wrote {args.out}: start the nodes with --params-file {args.out}', file=out)
+        if not result.success:
+            print(f'epp_calibrate: warning: --force wrote {args.out} although the recording '
+                  f'{result.status.replace("_", " ")}: its poorly determined parameters '
+                  f'({", ".join(result.poorly_determined) or "all"}) may be further off than '
+                  'if left as configured', file=sys.stderr)
+    elif args.out is not None:
+        print(f'nothing written to {args.out}: the verdict is {result.status} (--force '
+              'writes it anyway, at your risk)', file=out)
+    if args.plot:
+        plot(args.plot, config, before, result, ranges, fixed)
+        print(f'plotted {args.plot}', file=out)
+    if args.json:
+        print(json.dumps(result_json(config, before, result, fixed, written)), file=out)
+    if not result.success:
+        print(f'epp_calibrate: {args.bag}: {result.status}: {result.message}',
+              file=sys.stderr)
+        return 0 if written else 2
+    return 0
+
+
+def main(argv=None):
+    """Run ``epp_calibrate``; return the exit status."""
+    try:
+        args = parse_args(sys.argv[1:] if argv is None else argv)
+        from epp_ros import bags
+        from epp_ros.config import ConfigError
+        try:
+            return run(args)
+        except (bags.BagError, ConfigError, CalibrationError) as exc:
+            print(f'epp_calibrate: {exc.args[0] if exc.args else exc}', file=sys.stderr)
+            return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == '__main__':
+    sys.exit(main())
