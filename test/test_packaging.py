@@ -21,7 +21,7 @@ import xml.etree.ElementTree as ET
 
 ROOT = Path(__file__).resolve().parents[1]
 CONSOLE_SCRIPTS = {'uwb_driver', 'posture_estimator', 'uwb_emulator', 'epp_demo', 'epp_bench',
-                   'epp_bag'}
+                   'epp_bag', 'epp_calibrate'}
 
 
 def test_core_imports_no_ros():
