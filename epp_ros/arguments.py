@@ -21,7 +21,7 @@ gives argparse's one usage line and exit status 2, never a traceback or an all-N
 import argparse
 import math
 
-__all__ = ['Parser', 'number', 'integer', 'host_port', 'field_names']
+__all__ = ['Parser', 'number', 'integer', 'host_port', 'field_names', 'settle_noise_options']
 
 
 class Parser(argparse.ArgumentParser):
@@ -107,3 +107,20 @@ def field_names(text):
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
     return text
+
+
+def settle_noise_options(parser, args, defaults):
+    """
+    Refuse ``--field`` with the noise options it replaces; without it, fill in their defaults.
+
+    ``defaults`` maps each option's name (``sigma``, ``nlos``, ``drop``) to its default;
+    the options are parsed with default None, so that one given can be told apart.
+    """
+    given = [f'--{name}' for name in defaults if getattr(args, name) is not None]
+    if args.field and given:
+        parser.error(f'--field sets the range errors itself: give it or {"/".join(given)}, '
+                     'not both')
+    if not args.field:
+        for name, default in defaults.items():
+            if getattr(args, name) is None:
+                setattr(args, name, default)

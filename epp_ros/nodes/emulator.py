@@ -35,7 +35,8 @@ replaces the noise options, so giving both is refused.
 import sys
 
 from epp_ros import contract
-from epp_ros.arguments import field_names, host_port, integer, number, Parser
+from epp_ros.arguments import (field_names, host_port, integer, number, Parser,
+                               settle_noise_options)
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core.simulate import (FIELD_EFFECTS, field_effects, FieldEffects, FieldSimulator,
                                    make_motion, Motion, MOTIONS, RangeNoise, working_cycle)
@@ -96,13 +97,7 @@ def parse_args(argv):
                         help='stop after seconds')
     parser.add_argument('--seed', type=integer(0, 2 ** 63 - 1), default=0)
     args = parser.parse_args(argv)
-    given = [f'--{name}' for name in NOISE_DEFAULTS if getattr(args, name) is not None]
-    if args.field and given:
-        parser.error(f'--field sets the range errors itself: give it or {"/".join(given)}, '
-                     'not both')
-    for name, default in NOISE_DEFAULTS.items():
-        if getattr(args, name) is None:
-            setattr(args, name, default)
+    settle_noise_options(parser, args, NOISE_DEFAULTS)
     if args.tcp:
         args.host, args.port = args.tcp
     return args

@@ -40,7 +40,7 @@ import sys
 import time
 
 from epp_ros import bags, contract
-from epp_ros.arguments import field_names, integer, number, Parser
+from epp_ros.arguments import field_names, integer, number, Parser, settle_noise_options
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core import RANGE_METHODS
 from epp_ros.core.simulate import (FIELD_EFFECTS, field_effects, FieldEffects, FieldSimulator,
@@ -120,19 +120,8 @@ def parse_args(argv):
     show.add_argument('bag')
     args = parser.parse_args(argv)
     if args.command == 'synth':
-        _settle_noise_options(synth, args)
+        settle_noise_options(synth, args, NOISE_DEFAULTS)
     return args
-
-
-def _settle_noise_options(parser, args):
-    """Refuse --field with the noise options it replaces; fill in their defaults."""
-    given = [f'--{name}' for name in NOISE_DEFAULTS if getattr(args, name) is not None]
-    if args.field and given:
-        parser.error(f'--field sets the range errors itself: give it or {"/".join(given)}, '
-                     'not both')
-    for name, default in NOISE_DEFAULTS.items():
-        if getattr(args, name) is None:
-            setattr(args, name, default)
 
 
 def run_synth(args):

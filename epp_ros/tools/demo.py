@@ -45,7 +45,7 @@ import sys
 import tempfile
 import time
 
-from epp_ros.arguments import field_names, Parser
+from epp_ros.arguments import field_names, Parser, settle_noise_options
 from epp_ros.nodes.stopping import ignore_signals, shutdown_on_signals, ShutdownRequest
 
 # Only the standard library and the stop request above are imported before main() has
@@ -98,14 +98,7 @@ def parse_args(argv):
         parser.error('--rate and --duration must be positive')
     if args.postures is not None and args.postures < 1:
         parser.error('--postures must be >= 1')
-    given = [f'--{name}' for name in NOISE_DEFAULTS if getattr(args, name) is not None]
-    if args.field and given:
-        parser.error(f'--field sets the range errors itself: give it or {"/".join(given)}, '
-                     'not both')
-    if not args.field:
-        for name, default in NOISE_DEFAULTS.items():
-            if getattr(args, name) is None:
-                setattr(args, name, default)
+    settle_noise_options(parser, args, NOISE_DEFAULTS)
     return args
 
 
