@@ -145,6 +145,26 @@ def test_a_smooth_cycle_is_tracked_well_below_the_single_frame_error():
     assert errors['track'] < 0.75 * errors['chain']
 
 
+def test_a_fold_no_range_pins_is_never_ruled_out_by_time():
+    """
+    Tag 2 silent for seconds while its bend grows: its joint's fold cannot be known.
+
+    The chain once carried the wrong fold from frames where both were within a metre,
+    and time (the reach from that published posture) then ruled the right one out: 2.95 m
+    off at 0.27 m predicted sigma, valid. The reference now allows the joint at either.
+    """
+    rng = np.random.default_rng([0, sum(map(ord, 'dropouts'))])
+    frames = simulate_field(MODEL, WorkingMotion(MODEL, rng), 55.0, field_effects('dropouts'),
+                            rng)
+    estimator = PostureEstimator(MODEL, 'chain')
+    for frame in frames:
+        estimator.update(**frame.inputs())
+        diagnostics = estimator.last_diagnostics
+        if diagnostics['valid']:
+            error = np.linalg.norm(diagnostics['estimate'] - frame.joints, axis=1)
+            assert not np.any((error > 1.0) & (error > 5 * diagnostics['joint_std']))
+
+
 @pytest.mark.parametrize('method', ['chain', 'track'])
 def test_the_combined_field_case_publishes_nothing_confidently_wrong(method):
     """

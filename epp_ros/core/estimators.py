@@ -358,7 +358,8 @@ class PostureEstimator:
             self._warm = joints.copy()
         if not verdict.valid:
             return self._reject(verdict.status, diagnostics, measurements, start, joints)
-        self._previous = (joints.copy(), stamp, verdict.values['joint_std'])
+        # A fold about as likely widens what later frames allow (Integrity.fold_spread).
+        self._previous = (joints.copy(), stamp, verdict.values['reach_std'])
         self._failures = 0
         return self._finish(joints, 'ok', diagnostics, measurements, start)
 

@@ -415,6 +415,25 @@ class Integrity:
         return np.maximum(self.limits.ambiguity_distance,
                           3.0 * np.nan_to_num(joint_std, posinf=0.0))
 
+    def fold_spread(self, joints, measurements, slew):
+        """
+        Return how far each inner joint's fold lies when about as likely, metres (p,).
+
+        A fold within ``ambiguity_distance`` is not ambiguous now, but a joint no range
+        pins (a silent tag) keeps its fold from frame to frame, and the boom can bend the
+        two folds apart within any one frame's reach: the reference posture must allow the
+        joint at either (:meth:`reach`), or time would rule out the right one.
+        """
+        p = self.model.n_sections
+        positions = fold_alternatives(self.model, joints)                   # (p - 1, 3)
+        which = np.arange(p - 1)
+        costs = self._joint_cost(np.r_[np.arange(p), which], np.vstack([joints, positions]),
+                                 measurements, joints, slew)
+        close = costs[p:] - costs[which] < math.log(self.limits.ambiguity_odds)
+        spread = np.zeros(p)
+        spread[which[close]] = _norm(positions[close] - joints[which[close]])
+        return spread
+
     def ambiguous_joints(self, joints, measurements, joint_std, slew, reach=None):
         """
         Joints (0-based) with another position about as likely, and one such position.
@@ -585,15 +604,18 @@ class Integrity:
         joint_std = (self.bound(joints, measurements, kept, angles).joint_std if chain
                      else self.point_bound(joints, measurements, kept))
         rmse = float(np.sqrt(np.mean(joint_std ** 2)))
-        values.update(predicted_rmse=rmse, joint_std=joint_std)
+        # Postures are weighed where each tag was when it ranged (a moving boom, TDMA).
+        shift = 0.0 if timed_joints is None else np.asarray(timed_joints) - joints
+        seen = joints + shift
+        values.update(predicted_rmse=rmse, joint_std=joint_std, reach_std=np.maximum(
+            joint_std, self.fold_spread(seen, measurements, angles[0])))
         if not math.isfinite(rmse) or rmse > t.predicted_rmse_error:
             checks.append((ERROR, 'unobservable', f'predicted RMSE {rmse:.2f} m'))
         elif rmse > t.predicted_rmse_warn:
             checks.append((WARN, 'ok', f'predicted RMSE {rmse:.2f} m'))
-        ambiguous = set(self.ambiguous_joints(joints, measurements, joint_std, angles[0],
-                                              reach))
-        ambiguous |= self.ambiguous_postures(joints, measurements, joint_std, angles[0], reach,
-                                             alternatives)
+        ambiguous = set(self.ambiguous_joints(seen, measurements, joint_std, angles[0], reach))
+        ambiguous |= self.ambiguous_postures(seen, measurements, joint_std, angles[0], reach,
+                                             [np.asarray(a) + shift for a in alternatives])
         for rival in rivals:
             far = _norm(np.asarray(rival, dtype=float) - joints) > self.limits.ambiguity_distance
             ambiguous |= set(np.flatnonzero(far).tolist())
