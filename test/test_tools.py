@@ -36,7 +36,9 @@ def test_demo_runs_the_pipeline_and_ends_with_a_json_summary(tmp_path):
                             'latency_p99_ms', 'dropped_frames', 'method'}
     assert summary['frames'] >= 30 and summary['method'] == 'cepp'
     assert 0.0 < summary['rmse_m'] < 0.8                 # CEPP here: ~3.3 sigma
-    assert summary['dropped_frames'] == 0
+    # A frame the checks refuse gets no posture either (a cold start's first frames can be
+    # ambiguous); that none is lost on the way is test_pipeline_system's.
+    assert summary['dropped_frames'] <= 3
     assert 0.0 < summary['latency_p50_ms'] <= summary['latency_p99_ms']
     assert plot.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 
