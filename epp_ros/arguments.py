@@ -21,7 +21,8 @@ gives argparse's one usage line and exit status 2, never a traceback or an all-N
 import argparse
 import math
 
-__all__ = ['Parser', 'number', 'integer', 'host_port', 'field_names', 'settle_noise_options']
+__all__ = ['Parser', 'number', 'integer', 'host_port', 'field_names', 'add_field_options',
+           'settle_noise_options']
 
 
 class Parser(argparse.ArgumentParser):
@@ -124,3 +125,14 @@ def settle_noise_options(parser, args, defaults):
         for name, default in defaults.items():
             if getattr(args, name) is None:
                 setattr(args, name, default)
+
+
+def add_field_options(parser):
+    """Add ``--field`` (presets of ``core.simulate.FIELD_EFFECTS``) and ``--motion``."""
+    from epp_ros.core.simulate import FIELD_EFFECTS, MOTIONS
+    parser.add_argument('--field', metavar='NAMES', type=field_names,
+                        help='simulate field effects instead of --sigma/--nlos/--drop: '
+                             'comma-separated presets of ' + ', '.join(FIELD_EFFECTS))
+    parser.add_argument('--motion', choices=MOTIONS, default='working',
+                        help='working: the smooth pouring cycle; joystick: abrupt starts, '
+                             'stops and reversals (default working)')

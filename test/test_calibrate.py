@@ -14,7 +14,7 @@
 
 from epp_ros.core import calibrate, PostureEstimator
 from epp_ros.core.measurements import Measurements
-from epp_ros.core.simulate import (FieldEffects, FieldSimulator, Motion, truck_pump,
+from epp_ros.core.simulate import (FieldEffects, FieldSimulator, StillMotion, truck_pump,
                                    WorkingMotion)
 import numpy as np
 import pytest
@@ -106,22 +106,10 @@ def test_recovered_parameters_lie_within_their_standard_deviations():
     assert 0.3 < np.sqrt(np.mean(scores ** 2)) < 2.0     # not grossly over- or under-confident
 
 
-class Parked(Motion):
-    """A boom that does not move."""
-
-    def __init__(self, model):
-        self.model = model
-
-    def angles(self, times):
-        times = np.asarray(times, dtype=float)
-        return (np.full(times.shape, 0.4),
-                np.broadcast_to(np.radians([55.0, 30.0, 5.0, -20.0, -45.0]),
-                                times.shape + (5,)))
-
-
 def test_a_parked_boom_is_reported_as_poorly_excited():
     model = truck_pump()
-    _, _, ranges, _ = recording(6, 0.1, 10.0, motion=Parked(model))
+    parked = StillMotion(model, 0.4, np.radians([55.0, 30.0, 5.0, -20.0, -45.0]))
+    _, _, ranges, _ = recording(6, 0.1, 10.0, motion=parked)
     result = calibrate(model, ranges, fixed_anchors=FIXED)
     assert result.status == 'poorly_excited' and not result.success
     assert any(name.startswith('anchor') for name in result.poorly_determined)

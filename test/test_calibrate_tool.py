@@ -20,7 +20,7 @@ import sys
 
 from epp_ros import bags
 from epp_ros.config import ConfigError, load_pump_config, update_pump_yaml
-from epp_ros.core.simulate import FieldEffects, FieldSimulator, Motion
+from epp_ros.core.simulate import FieldEffects, FieldSimulator, StillMotion
 from epp_ros.tools import bag as bag_tool
 from epp_ros.tools import calibrate as tool
 from epp_ros.tools import calibration_bench
@@ -55,23 +55,11 @@ def calibrated(good_bag, tmp_path_factory):
 
 def parked_bag(path, seconds):
     """Write a bag of a boom that does not move, with offsets."""
-    class Parked(Motion):
-        """A boom that does not move."""
-
-        def __init__(self, model):
-            self.model = model
-
-        def angles(self, times):
-            times = np.asarray(times, dtype=float)
-            return (np.full(times.shape, 0.4),
-                    np.broadcast_to(np.radians([55.0, 30.0, 5.0, -20.0, -45.0]),
-                                    times.shape + (5,)))
-
     model = CONFIG.model()
     simulator = FieldSimulator(model, FieldEffects(sigma=0.1, tag_offset=0.1,
                                                    anchor_offset=0.1),
                                np.random.default_rng(1))
-    motion = Parked(model)
+    motion = StillMotion(model, 0.4, np.radians([55.0, 30.0, 5.0, -20.0, -45.0]))
 
     def cycles():
         for index in range(int(seconds * 10)):

@@ -39,7 +39,7 @@ import numpy as np
 from .model import BoomModel
 
 __all__ = ['XIE3DIM', 'xie3dim', 'truck_pump', 'random_posture', 'RangeNoise', 'AngleNoise',
-           'observe', 'Trajectory', 'working_cycle', 'Motion', 'WorkingMotion',
+           'observe', 'Trajectory', 'working_cycle', 'Motion', 'WorkingMotion', 'StillMotion',
            'JoystickMotion', 'STOP_PROBABILITY', 'MOTIONS', 'make_motion', 'FieldEffects',
            'FIELD_EFFECTS', 'field_effects', 'FieldFrame', 'FieldSimulator', 'simulate_field']
 
@@ -292,6 +292,21 @@ class Motion:
         """Return the joint positions at ``times`` (T,): shape (T, p, 3), metres."""
         slew, pitches = self.angles(times)
         return self.model.forward_kinematics(slew, pitches)
+
+
+class StillMotion(Motion):
+    """A boom that does not move: ``slew`` (rad) and ``pitches`` (p,) at every time."""
+
+    def __init__(self, model, slew, pitches):
+        self.model = model
+        self.slew = float(slew)
+        self.pitches = np.asarray(pitches, dtype=float)
+
+    def angles(self, times):
+        """Return the same slew (T,) and pitches (T, p) at ``times`` (:meth:`Motion.angles`)."""
+        times = np.asarray(times, dtype=float)
+        return (np.full(times.shape, self.slew),
+                np.broadcast_to(self.pitches, times.shape + self.pitches.shape))
 
 
 #: Seconds: period of the working cycle's slew sweep.

@@ -35,11 +35,11 @@ replaces the noise options, so giving both is refused.
 import sys
 
 from epp_ros import contract
-from epp_ros.arguments import (field_names, host_port, integer, number, Parser,
+from epp_ros.arguments import (add_field_options, host_port, integer, number, Parser,
                                settle_noise_options)
 from epp_ros.config import ConfigError, load_pump_config
-from epp_ros.core.simulate import (FIELD_EFFECTS, field_effects, FieldEffects, FieldSimulator,
-                                   make_motion, Motion, MOTIONS, RangeNoise, working_cycle)
+from epp_ros.core.simulate import (field_effects, FieldEffects, FieldSimulator, make_motion,
+                                   Motion, RangeNoise, working_cycle)
 from epp_ros.nodes.common import posture_message, POSTURE_QOS, run_node
 from epp_ros.nodes.stopping import shutdown_on_signals
 from epp_ros.uwb.emulation import channel_devices, corrupt, cycle_lines, PtyOutput, TcpOutput
@@ -83,12 +83,7 @@ def parse_args(argv):
                              'default 0)')
     parser.add_argument('--drop', type=number(0, 1),
                         help='link dropout probability (default 0)')
-    parser.add_argument('--field', metavar='NAMES', type=field_names,
-                        help='simulate field effects instead of --sigma/--nlos/--drop: '
-                             'comma-separated presets of ' + ', '.join(FIELD_EFFECTS))
-    parser.add_argument('--motion', choices=MOTIONS, default='working',
-                        help='working: the smooth pouring cycle; joystick: abrupt starts, '
-                             'stops and reversals (default working)')
+    add_field_options(parser)
     parser.add_argument('--garbage', type=number(0, 1), default=0.0,
                         help='probability that a line is corrupted or noise is sent')
     parser.add_argument('--truth', action='store_true',

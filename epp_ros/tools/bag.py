@@ -40,11 +40,10 @@ import sys
 import time
 
 from epp_ros import bags, contract
-from epp_ros.arguments import field_names, integer, number, Parser, settle_noise_options
+from epp_ros.arguments import add_field_options, integer, number, Parser, settle_noise_options
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core import RANGE_METHODS
-from epp_ros.core.simulate import (FIELD_EFFECTS, field_effects, FieldEffects, FieldSimulator,
-                                   make_motion, MOTIONS)
+from epp_ros.core.simulate import field_effects, FieldEffects, FieldSimulator, make_motion
 from epp_ros.uwb.formats import FORMATS
 import numpy as np
 
@@ -71,12 +70,7 @@ def parse_args(argv):
                        help=f'fraction of NLOS links (exponential excess, mean {NLOS_GAMMA:g} '
                             'm; default 0)')
     synth.add_argument('--drop', type=number(0, 1), help='link dropout probability (default 0)')
-    synth.add_argument('--field', metavar='NAMES', type=field_names,
-                       help='simulate field effects instead of --sigma/--nlos/--drop: '
-                            'comma-separated presets of ' + ', '.join(FIELD_EFFECTS))
-    synth.add_argument('--motion', choices=MOTIONS, default='working',
-                       help='working: the smooth pouring cycle; joystick: abrupt starts, '
-                            'stops and reversals (default working)')
+    add_field_options(synth)
     synth.add_argument('--seed', type=integer(0, 2 ** 63 - 1), default=0)
     synth.add_argument('--config')
     synth.add_argument('--raw', choices=list(FORMATS),

@@ -275,10 +275,7 @@ def side_view(estimate, truth=None, stds=None, width=60, height=20, axis=None,
     Drawing
 
     """
-    estimate = None if estimate is None else _points(estimate)
-    truth = None if truth is None else _points(truth)
-    first = estimate if estimate is not None else truth
-    axis = first[0, :2] if axis is None else np.asarray(axis, dtype=float)
+    estimate, truth, first, axis = _booms(estimate, truth, axis)
     reach, highest = _span(estimate, truth, axis)
     span, top = span or reach, top or highest
     canvas = Canvas(width, height, (-0.2 * span, 1.05 * span), (-0.08 * top, 1.05 * top))
@@ -289,6 +286,15 @@ def side_view(estimate, truth=None, stds=None, width=60, height=20, axis=None,
                None if truth is None else _reach(truth, axis), stds, magnify, nlos)
     canvas.title('side: reach / height')
     return canvas.drawing()
+
+
+def _booms(estimate, truth, axis):
+    """Return the estimate and truth as points (or None), the one drawn first, the axis."""
+    estimate = None if estimate is None else _points(estimate)
+    truth = None if truth is None else _points(truth)
+    first = estimate if estimate is not None else truth
+    axis = first[0, :2] if axis is None else np.asarray(axis, dtype=float)
+    return estimate, truth, first, axis
 
 
 def top_view(estimate, truth=None, stds=None, width=40, height=20, axis=None, span=None,
@@ -307,10 +313,7 @@ def top_view(estimate, truth=None, stds=None, width=40, height=20, axis=None, sp
     Drawing
 
     """
-    estimate = None if estimate is None else _points(estimate)
-    truth = None if truth is None else _points(truth)
-    first = estimate if estimate is not None else truth
-    axis = first[0, :2] if axis is None else np.asarray(axis, dtype=float)
+    estimate, truth, _, axis = _booms(estimate, truth, axis)
     span = span or _span(estimate, truth, axis)[0]
     canvas = Canvas(width, height, (-1.05 * span, 1.05 * span), (-1.05 * span, 1.05 * span))
     canvas.put(0.0, 0.0, GLYPHS['axis'], STYLES['axis'])
