@@ -186,7 +186,8 @@ def test_two_pumps_side_by_side_in_namespaces(processes, tmp_path):
     start_pump(processes, tmp_path, 'ttyPump2', '/pump2', seed=2)
     pumps = [Listener('listener1', '/pump1'), Listener('listener2', '/pump2')]
     try:
-        deadline = time.monotonic() + 25
+        # Six processes starting on a loaded machine: wait for the postures, generously.
+        deadline = time.monotonic() + 120
         while time.monotonic() < deadline and min(len(p.postures) for p in pumps) < 20:
             for pump in pumps:
                 rclpy.spin_once(pump, timeout_sec=0.02)
