@@ -13,7 +13,8 @@
 # limitations under the License.
 
 from epp_ros.core.edm import (align_to_known, centering_matrix, classical_mds, double_centre,
-                              project_edm_cone, rank_penalty, squared_distances, symmetric_eigh)
+                              project_edm_cone, rank_penalty, refine_stress, squared_distances,
+                              symmetric_eigh)
 import numpy as np
 
 
@@ -106,3 +107,39 @@ def test_coplanar_known_points_choose_the_upper_mirror_image():
     rotated = below @ random_rotation(np.random.default_rng(6), 3)
     aligned = align_to_known(rotated, np.arange(4), known)
     np.testing.assert_allclose(aligned, points, atol=1e-10)
+
+
+def stress(points, distances, weights):
+    gaps = np.sqrt(squared_distances(points)) - distances
+    return 0.5 * np.sum(weights * gaps ** 2)
+
+
+def test_stress_refinement_returns_points_their_exact_distances_determine():
+    rng = np.random.default_rng(3)
+    anchors = rng.uniform(-10.0, 10.0, (5, 3))
+    tags = rng.uniform(-10.0, 10.0, (4, 3))
+    truth = np.vstack([anchors, tags])
+    distances = np.sqrt(squared_distances(truth))
+    weights = np.ones(distances.shape) - np.eye(9)
+    weights[5:, 5:] = 0.0           # tag-tag distances unknown: anchors alone place the tags
+    start = truth + np.r_[np.zeros((5, 3)), rng.normal(0.0, 0.5, (4, 3))]
+    refined, evaluations = refine_stress(start, np.arange(5, 9), distances, weights)
+    np.testing.assert_allclose(refined, truth, atol=1e-8)
+    assert evaluations > 0
+    np.testing.assert_array_equal(refined[:5], anchors)
+
+
+def test_stress_refinement_lowers_the_stress_and_leaves_undetermined_points():
+    rng = np.random.default_rng(4)
+    points = rng.uniform(-5.0, 5.0, (6, 2))
+    distances = np.sqrt(squared_distances(points)) + np.triu(rng.normal(0, 0.3, (6, 6)), 1)
+    distances = np.triu(distances, 1) + np.triu(distances, 1).T
+    weights = rng.uniform(0.5, 2.0, (6, 6))
+    weights = np.triu(weights, 1) + np.triu(weights, 1).T
+    refined, _ = refine_stress(points, [3, 4, 5], distances, weights)
+    assert stress(refined, distances, weights) < stress(points, distances, weights)
+    # A free point with one distance has no unique place: it is left where it was.
+    lone = np.zeros((6, 6))
+    lone[0, 5] = lone[5, 0] = 1.0
+    unmoved, evaluations = refine_stress(points, [5], distances, lone)
+    assert evaluations == 0 and np.array_equal(unmoved, points)

@@ -179,6 +179,27 @@ def test_noise_weights_lower_the_error_when_noise_grows_with_range():
     assert np.mean(squared[True]) < 0.6 * np.mean(squared[False])
 
 
+def test_stress_refinement_lowers_the_error_and_keeps_fixed_lengths():
+    """Toh's post-processing (EMBED's), paired frame by frame against the embedding alone."""
+    from epp_ros.core.simulate import xie3dim
+    model, truth = xie3dim()
+    rng = np.random.default_rng(11)
+    gains, lengths = {'epp1': [], 'epp2': []}, []
+    for _ in range(40):
+        ranges = model.ranges(truth) + rng.normal(0.0, 1.0, (5, 4))
+        measurements = Measurements.clean(model, ranges)[0]
+        for name, cls in (('epp1', EPP1), ('epp2', EPP2)):
+            plain, refined = (cls(model, sigma=1.0, stress_refinement=flag).solve(
+                measurements, truth + 0.5)[0] for flag in (False, True))
+            gains[name].append(np.sum((plain - truth) ** 2) - np.sum((refined - truth) ** 2))
+            if name == 'epp2':
+                lengths.append(np.abs(model.arm_lengths - np.linalg.norm(np.diff(
+                    np.vstack([model.base, refined]), axis=0), axis=1)).max())
+    for name, gain in gains.items():     # the mean gain, 3 standard errors above zero
+        assert np.mean(gain) > 3.0 * np.std(gain) / np.sqrt(len(gain)), name
+    assert max(lengths) < 1e-2
+
+
 def test_beyond_the_paper_is_off_with_irls_iterations_0():
     paper = CEPP(MODEL, irls_iterations=0)
     assert not (paper.noise_weights or paper.cold_search or paper.fold_search)
@@ -193,7 +214,8 @@ def test_beyond_the_paper_is_off_with_irls_iterations_0():
 @pytest.mark.parametrize('name, value', [('silent_weight', -1.0), ('silent_weight', True),
                                          ('silent_weight', float('inf')),
                                          ('noise_weights', 1), ('cold_search', 'yes'),
-                                         ('fold_search', 0), ('lowest_joint', float('nan'))])
+                                         ('fold_search', 0), ('lowest_joint', float('nan')),
+                                         ('stress_refinement', 1)])
 def test_new_options_are_checked(name, value):
     with pytest.raises(ValueError, match=name):
         CEPP(MODEL, **{name: value})

@@ -35,7 +35,7 @@ from numbers import Integral, Real
 import numpy as np
 
 from .chain import grow_chains
-from .edm import align_to_known, squared_distances
+from .edm import align_to_known, refine_stress, squared_distances
 from .measurements import Measurements
 from .nedm import nearest_edm
 from .nlos import NlosMixture
@@ -87,6 +87,13 @@ class _EDMMethod:
         Mean NLOS excess, metres.
     irls_iterations : int
         Re-solves with the links reweighted under the NLOS mixture; 0: the paper's H = 1.
+    stress_refinement : bool
+        After each embedding, move the tags to a local minimum of the stress of the
+        unsquared distances the NEDM was given (``edm.refine_stress``, each weighted by its
+        entry of H squared, as in the NEDM's objective): the post-processing of the
+        authors' EMBED, which applies it where no distance is fixed (their EPP1 and CEPP1).
+        Here fixed distances (the section lengths) are held by ``FIXED_STRESS_WEIGHT``, so
+        EPP2 and CEPP keep their lengths. Off by default, as in the paper's text.
 
     """
 
@@ -102,9 +109,13 @@ class _EDMMethod:
     NOISE_FACTOR_RANGE = (0.1, 10.0)
     #: Weight the links by the range noise model (``_noise_factors``); False: H = 1.
     noise_weights = False
+    #: Stress weight of a fixed distance in the refinement: holds it to about a thousandth
+    #: of the range errors the unit weights leave.
+    FIXED_STRESS_WEIGHT = 1e6
 
     def __init__(self, model, prior_weight=0.0, anchor_weight=np.inf, tol=1e-6, max_iter=500,
-                 sigma=0.1, eta=0.0, nlos_fraction=0.1, nlos_gamma=1.0, irls_iterations=0):
+                 sigma=0.1, eta=0.0, nlos_fraction=0.1, nlos_gamma=1.0, irls_iterations=0,
+                 stress_refinement=False):
         self.model = model
         self.prior_weight = float(prior_weight)
         self.anchor_weight = float(anchor_weight)
@@ -115,6 +126,10 @@ class _EDMMethod:
             raise ValueError(f'irls_iterations: must be an integer >= 0, got '
                              f'{irls_iterations!r}')
         self.irls_iterations = int(irls_iterations)
+        if not isinstance(stress_refinement, (bool, np.bool_)):
+            raise ValueError(f'stress_refinement: must be true or false, got '
+                             f'{stress_refinement!r}')
+        self.stress_refinement = bool(stress_refinement)
         self.sigma, self.eta, self.nlos = _checked_noise(sigma, eta, nlos_fraction, nlos_gamma)
         base_anchor = model.base_anchor()
         self._base_anchor = base_anchor
@@ -333,6 +348,10 @@ class _EDMMethod:
         info = {'iterations': result.iterations, 'inner_iterations': result.inner_iterations,
                 'rank_error': result.rank_error, 'kkt_residual': result.kkt_residual,
                 'converged': result.converged}
+        if self.stress_refinement:
+            aligned, info['refinement_evaluations'] = refine_stress(
+                np.vstack([known, aligned[tags]]), np.arange(k, n), np.sqrt(target),
+                np.where(fixed, self.FIXED_STRESS_WEIGHT, weights ** 2))
         return aligned[tags], info
 
 
