@@ -15,13 +15,22 @@
 """
 How healthy an estimate is: the estimator's diagnostics as a level and key values.
 
-Shared by the estimator node (``/diagnostics``) and the tools that print or record it.
+Shared by the estimator node (``/diagnostics``) and the tools that print, record or read
+it back (:func:`nlos_pairs`, :func:`joint_stds`): the one home of those values' keys.
 """
 from epp_ros.core.integrity import ERROR, OK, Thresholds, WARN
 import numpy as np
 
 __all__ = ['OK', 'WARN', 'ERROR', 'Thresholds', 'grade', 'report', 'assess',
-           'nlos_text']
+           'nlos_text', 'nlos_pairs', 'joint_stds', 'NLOS_FLAGGED']
+
+#: Key of the links judged NLOS (:func:`nlos_text`).
+NLOS_FLAGGED = 'NLOS flagged links'
+
+
+def _joint_std_key(k, tracked):
+    """Key of joint k's (1-based) standard deviation: a motion model's, or the bound's."""
+    return f'joint {k} {"tracked" if tracked else "predicted"} std [m]'
 
 
 def grade(diagnostics):
@@ -72,6 +81,49 @@ def nlos_text(nlos_links):
     return ' '.join(f'{k + 1}:{j + 1}' for k, j in np.argwhere(blocked))
 
 
+def nlos_pairs(text):
+    """
+    Read :func:`nlos_text` back: ``'2:3 5:1'`` -> [(2, 3), (5, 1)].
+
+    The pairs are (joint, anchor), 1-based; what is not a pair of numbers is left out.
+    """
+    pairs = []
+    for word in (text or '').split():
+        joint, _, anchor = word.partition(':')
+        if joint.isdigit() and anchor.isdigit():
+            pairs.append((int(joint), int(anchor)))
+    return pairs
+
+
+def joint_stds(values, joints):
+    """
+    Each joint's standard deviation from the values of :func:`report`, metres.
+
+    A motion model's own (``tracked``) where the method has one, else the Cramér–Rao
+    bound at the estimate (``predicted``); NaN where neither is given.
+
+    Parameters
+    ----------
+    values : dict of str
+        The key values of a ``/diagnostics`` status.
+    joints : int
+        Joints of the boom, p.
+
+    Returns
+    -------
+    list of float, length p
+
+    """
+    stds = []
+    for k in range(1, joints + 1):
+        text = values.get(_joint_std_key(k, True), values.get(_joint_std_key(k, False), 'nan'))
+        try:
+            stds.append(float(text))
+        except ValueError:
+            stds.append(float('nan'))
+    return stds
+
+
 def report(diagnostics, lengths):
     """
     Return the key values of one frame's diagnostics, as text for ``/diagnostics``.
@@ -88,10 +140,10 @@ def report(diagnostics, lengths):
     if 'predicted_rmse' in diagnostics:              # the Cramér–Rao bound at the estimate
         values['predicted RMSE [m]'] = f'{diagnostics["predicted_rmse"]:.4f}'
         for k, std in enumerate(diagnostics['joint_std'], start=1):
-            values[f'joint {k} predicted std [m]'] = f'{std:.4f}'
+            values[_joint_std_key(k, False)] = f'{std:.4f}'
     if 'posterior_joint_std' in diagnostics:         # a motion model's own uncertainty
         for k, std in enumerate(diagnostics['posterior_joint_std'], start=1):
-            values[f'joint {k} tracked std [m]'] = f'{std:.4f}'
+            values[_joint_std_key(k, True)] = f'{std:.4f}'
     if 'hypotheses' in diagnostics:
         values['hypotheses'] = str(diagnostics['hypotheses'])
     noise = diagnostics.get('noise')
@@ -104,7 +156,7 @@ def report(diagnostics, lengths):
     if 'nlos_links' in diagnostics:
         blocked = np.asarray(diagnostics['nlos_links'])
         values['NLOS links'] = str(int(np.sum(blocked)))
-        values['NLOS flagged links'] = nlos_text(blocked)
+        values[NLOS_FLAGGED] = nlos_text(blocked)
     if 'chi_square' in diagnostics:
         values['range chi-square'] = (f'{diagnostics["chi_square"]:.1f} (limit '
                                       f'{diagnostics["chi_square_limit"]:.1f})')

@@ -32,7 +32,7 @@ import termios
 import time
 
 from epp_ros import bags
-from epp_ros.health import nlos_text
+from epp_ros.health import nlos_pairs, nlos_text
 from epp_ros.tools import demo
 from epp_ros.tools.demo_view import Canvas, draw, GLYPHS, side_view, STYLES, to_rich, top_view
 import numpy as np
@@ -182,8 +182,8 @@ def test_the_demo_reads_and_lists_the_flagged_links():
     blocked = np.zeros((5, 6), dtype=bool)
     blocked[1, 2] = blocked[4, 0] = True
     text = nlos_text(blocked)
-    assert text == '2:3 5:1' and demo.nlos_pairs(text) == [(2, 3), (5, 1)]
-    assert demo.nlos_pairs('') == demo.nlos_pairs(None) == demo.nlos_pairs('a:1 2') == []
+    assert text == '2:3 5:1' and nlos_pairs(text) == [(2, 3), (5, 1)]
+    assert nlos_pairs('') == nlos_pairs(None) == nlos_pairs('a:1 2') == []
     assert demo.nlos_line({'NLOS links': '2', 'NLOS flagged links': text}) == \
         'NLOS links 2: joint 2-anchor 3, joint 5-anchor 1'
     assert demo.nlos_line({'NLOS links': '3', 'NLOS flagged links': '1:2 1:5 3:4'}) == \

@@ -14,7 +14,8 @@
 
 from epp_ros.core import PostureEstimator
 from epp_ros.core.simulate import random_posture, RangeNoise, truck_pump
-from epp_ros.health import assess, ERROR, nlos_text, OK, Thresholds, WARN
+from epp_ros.health import (assess, ERROR, joint_stds, nlos_pairs, nlos_text, OK,
+                            Thresholds, WARN)
 import numpy as np
 import pytest
 
@@ -56,6 +57,19 @@ def test_the_links_judged_nlos_are_named_joint_then_anchor():
     blocked[[0, 4], [5, 0]] = True
     assert nlos_text(blocked) == '1:6 5:1'
     assert nlos_text(np.zeros(0)) == ''
+
+
+def test_what_the_node_reports_the_tools_read_back():
+    ranges = MODEL.ranges(JOINTS)
+    ranges[1, 2] += 6.0
+    diagnostics = diagnostics_of('chain', ranges)
+    _, _, values = assess(diagnostics, MODEL.arm_lengths)
+    assert nlos_pairs(values['NLOS flagged links']) == [(2, 3)]
+    np.testing.assert_allclose(joint_stds(values, 5), diagnostics['joint_std'], atol=1e-4)
+    # A motion model's own uncertainty is preferred to the bound's; unknown is NaN.
+    _, _, values = assess(dict(diagnostics, posterior_joint_std=[0.5] * 5), MODEL.arm_lengths)
+    assert np.isnan(joint_stds(values, 6)[5])
+    assert joint_stds(values, 5) == [0.5] * 5
 
 
 def test_levels_follow_the_thresholds():

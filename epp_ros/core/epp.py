@@ -469,11 +469,6 @@ class CEPP(_EDMMethod):
             raise ValueError(f'lowest_joint: must be a finite number, got {lowest_joint!r}')
         self.lowest_joint = float(lowest_joint)
         self.clip_weight = float(clip_weight)
-        if isinstance(silent_weight, bool) or not isinstance(silent_weight, Real) \
-                or not np.isfinite(silent_weight) or silent_weight < 0:
-            raise ValueError(f'silent_weight: must be a finite number >= 0, got '
-                             f'{silent_weight!r}')
-        self.silent_weight = float(silent_weight)
         if not isinstance(predict_slew, (bool, np.bool_)):
             raise ValueError(f'predict_slew: must be true or false, got {predict_slew!r}')
         self.predict_slew = bool(predict_slew)

@@ -192,21 +192,9 @@ class Monitor:
         return False
 
     def joint_stds(self, joints):
-        """
-        Each joint's standard deviation from the diagnostics, metres (NaN where unknown).
-
-        A motion model's own (``tracked``) where the method has one, else the Cramér–Rao
-        bound at the estimate (``predicted``).
-        """
-        stds = []
-        for k in range(1, joints + 1):
-            text = self.values.get(f'joint {k} tracked std [m]',
-                                   self.values.get(f'joint {k} predicted std [m]', 'nan'))
-            try:
-                stds.append(float(text))
-            except ValueError:
-                stds.append(float('nan'))
-        return stds
+        """Each joint's standard deviation from the diagnostics, metres (NaN where unknown)."""
+        from epp_ros.health import joint_stds
+        return joint_stds(self.values, joints)
 
     def recent_rate(self, window=RATE_WINDOW):
         """Return the postures per second over the last ``window`` seconds."""
@@ -241,21 +229,6 @@ class Monitor:
                 'dropped_frames': self.unanswered_frames(), 'method': method}
 
 
-def nlos_pairs(text):
-    """
-    Read the ``NLOS flagged links`` of ``/diagnostics``: ``'2:3 5:1'`` -> [(2, 3), (5, 1)].
-
-    The pairs are (joint, anchor), 1-based (``health.nlos_text``); what is not a pair of
-    numbers is left out.
-    """
-    pairs = []
-    for word in (text or '').split():
-        joint, _, anchor = word.partition(':')
-        if joint.isdigit() and anchor.isdigit():
-            pairs.append((int(joint), int(anchor)))
-    return pairs
-
-
 def nlos_line(values, width=None):
     """
     Return the live view's line of NLOS links from the estimator's diagnostic values.
@@ -263,8 +236,9 @@ def nlos_line(values, width=None):
     ``NLOS links 3: joint 2-anchor 3, joint 5-anchors 1 4``: the count, then the links by
     joint; when that is wider than ``width``, ``NLOS links 3 (joint-anchor): 2-3 5-1 5-4``.
     """
+    from epp_ros.health import NLOS_FLAGGED, nlos_pairs
     count = values.get('NLOS links', '-')
-    pairs = nlos_pairs(values.get('NLOS flagged links'))
+    pairs = nlos_pairs(values.get(NLOS_FLAGGED))
     if not pairs:
         return f'NLOS links {count}'
     anchors = {}
@@ -316,13 +290,14 @@ def live_view(monitor, args, elapsed, width, height, scene, skipped=0):
     and ``top`` (its highest reach), metres, which keep the picture still, and ``anchors``
     (their positions, (m, 3) metres), drawn in the top view with the links judged NLOS.
     """
+    from epp_ros.health import NLOS_FLAGGED, nlos_pairs
     from epp_ros.tools import demo_view
     from rich.console import Group
     from rich.text import Text
     summary = monitor.summary(args.method)
     estimate, truth = monitor.last if monitor.last is not None else (monitor.estimate, None)
     values = monitor.values
-    nlos = nlos_pairs(values.get('NLOS flagged links'))
+    nlos = nlos_pairs(values.get(NLOS_FLAGGED))
     header = Text.assemble(('epp_demo', 'bold'), '  method ', (args.method, 'bold cyan'),
                            f'  {_noise_text(args)}  {elapsed:.1f} s  Ctrl-C stops')
     lines = [header]
