@@ -38,14 +38,14 @@ determine, or which puts the boom where it cannot be, publishes no pose and is c
 reason; after ``reset_after_failures`` frames in a row that could not be solved or did not
 fit, the estimator starts cold. Which frames are solved at all is ``core.frame_policy``'s:
 a stamp not newer than the last is ignored and counted, one more than 1 s older is a clock
-jump and the estimator starts over, a zero stamp is malformed. Topic names are relative:
+jump and the estimator starts over, a zero stamp is malformed. Those steps are
+``epp_ros.pipeline``'s, which ``epp_bag eval`` takes too. Topic names are relative:
 ``-r __ns:=/pump7`` runs one per pump.
 
 Parameters (``SETTINGS``) are live: a change is checked as at start (refused with the
 reason otherwise) and applies from the next frame; a new ``method`` starts cold, which
 ``/diagnostics`` counts. The pump's description and the angle sensors' names are read-only.
 """
-from collections import Counter
 from dataclasses import dataclass
 import sys
 
@@ -55,12 +55,12 @@ from epp_ros.config import PUMP_PARAMETERS
 from epp_ros.contract import ANGLES, DIAGNOSTICS, MARKERS, POSTURE, RANGES
 from epp_ros.core import METHODS, PostureEstimator, RANGE_METHODS
 from epp_ros.core.estimators import ESTIMATOR_OPTIONS
-from epp_ros.core.frame_policy import ADMIT, CLOCK_JUMP, FramePolicy
 from epp_ros.core.integrity import IntegrityLimits, Thresholds
 from epp_ros.health import assess, grade
 from epp_ros.nodes.common import (declare, declare_pump_parameters, posture_markers,
                                   posture_message, POSTURE_QOS, RANGES_INPUT_QOS, run_node,
                                   StartupError, to_seconds, to_time)
+from epp_ros.pipeline import RangePipeline
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, SetParametersResult
 from rclpy.node import Node
@@ -194,7 +194,7 @@ class PostureEstimatorNode(Node):
                        for name, setting in SETTINGS.items()}
         try:
             settings = estimator_settings(self.values)
-            self.estimator = PostureEstimator(self.model, **settings)
+            self.pipeline = RangePipeline(self.config, PostureEstimator(self.model, **settings))
             self.angle_samples = self._angle_samples(self.values)
         except ImportError as exc:
             raise StartupError(f'method: {exc}') from None
@@ -210,13 +210,21 @@ class PostureEstimatorNode(Node):
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.create_timer(1.0, self.publish_diagnostics)
-        self.frame_policy = FramePolicy()
-        self.counts = Counter()
         self.last_frame_time = None
         self.worst = None               # worst (level, message) since the last report
         self.status_name = f'{self.get_fully_qualified_name()}'
         self.get_logger().info(f'{self.estimator.method} on {self.model.n_sections} '
                                f'sections, {self.model.n_anchors} anchors')
+
+    @property
+    def estimator(self):
+        """Return the PostureEstimator the frames go to."""
+        return self.pipeline.estimator
+
+    @property
+    def counts(self):
+        """Return the frames by what became of them (``RangePipeline.counts``)."""
+        return self.pipeline.counts
 
     def _default(self, name):
         if name == 'pitch_names':
@@ -267,7 +275,7 @@ class PostureEstimatorNode(Node):
         settings = estimator_settings(self.values)
         method = settings.pop('method')
         if method != self.estimator.method:
-            self.estimator = PostureEstimator(self.model, method, **settings)
+            self.pipeline.estimator = PostureEstimator(self.model, method, **settings)
             self.counts['method_changes'] += 1
             self.get_logger().info(f'method changed to {method}: starting cold')
         else:
@@ -290,46 +298,27 @@ class PostureEstimatorNode(Node):
             self.get_logger().error(f'frame dropped: {exc!r}', throttle_duration_sec=5.0)
 
     def _on_ranges(self, message):
-        self.counts['received'] += 1
         stamp = to_seconds(message.header.stamp)
-        decision = self.frame_policy.admit(stamp)
-        if decision not in (ADMIT, CLOCK_JUMP):
-            self.counts[decision] += 1
-            return
-        if decision == CLOCK_JUMP:
-            self.counts['clock_jumps'] += 1
-            self.estimator.reset()
-        try:
-            frame = self.config.link_frame(message.name, message.position, message.effort)
-        except ValueError:
-            self.counts['malformed'] += 1
-            return
-        self.counts['unknown_links'] += frame.unknown
-        self.last_frame_time = self._now()
         slew, pitches = (None, None) if self.angles is None else self.angles.at(stamp)
-        joints = self.estimator.update(frame.ranges, tag_ranges=frame.tag_ranges,
-                                       pitches=pitches, slew=slew, stamp=stamp,
-                                       range_stamps=frame.range_stamps(stamp))
-        self._count(self.estimator.last_diagnostics)
-        if not self.estimator.last_diagnostics['valid']:   # the estimator's decision
+        step = self.pipeline.step(stamp, message.name, message.position, message.effort,
+                                  slew=slew, pitches=pitches)
+        if step.diagnostics is not None:
+            self.last_frame_time = self._now()
+            self._keep_worst(step.diagnostics)
+        if step.joints is None:
             return
-        self.counts['published'] += 1
         frame_id = message.header.frame_id or self.config.frame_id
         stamp = message.header.stamp                 # the frame's, exactly
-        pivot = self.model.pivot_of(joints)
-        self.posture.publish(posture_message(pivot, joints, stamp, frame_id))
+        pivot = self.model.pivot_of(step.joints)
+        self.posture.publish(posture_message(pivot, step.joints, stamp, frame_id))
         if self.values['publish_markers']:
-            self.markers.publish(posture_markers(pivot, joints, stamp, frame_id))
+            self.markers.publish(posture_markers(pivot, step.joints, stamp, frame_id))
 
-    def _count(self, diagnostics):
+    def _keep_worst(self, diagnostics):
+        """Keep the worst frame since the last report, for ``/diagnostics``."""
         level, summary = grade(diagnostics)
         if self.worst is None or level > self.worst[0]:
             self.worst = (level, summary)
-        self.counts['cold_restarts'] += diagnostics.get('cold_restart', False)
-        self.counts['reacquired'] += diagnostics.get('reacquired', False)
-        if not diagnostics['valid']:
-            self.counts['unsolved'] += 1
-            self.counts[f'rejected {diagnostics["status"]}'] += 1
 
     def _now(self):
         """Return the node's time, seconds (simulated under use_sim_time)."""
