@@ -590,29 +590,16 @@ class Integrity:
             reference, self.reach(reference, elapsed, reference_std))
         angles = angles_from_joints(self.model, joints)
         self._plausibility(joints, angles[0], reach, elapsed, checks, values)
-        failures, found, kept = self.consistency(
-            joints if timed_joints is None else timed_joints, measurements)
-        values.update(found)
-        if failures:
-            checks.append((ERROR, 'inconsistent', '; '.join(failures)))
-        t = self.thresholds
-        rms = values['los_residual_rms']
-        if rms > t.residual_error:
-            checks.append((ERROR, 'inconsistent', f'line-of-sight range residual {rms:.2f} m'))
-        elif rms > t.residual_warn:
-            checks.append((WARN, 'ok', f'line-of-sight range residual {rms:.2f} m'))
+        kept = self._consistency(joints if timed_joints is None else timed_joints,
+                                 measurements, checks, values)
         joint_std = (self.bound(joints, measurements, kept, angles).joint_std if chain
                      else self.point_bound(joints, measurements, kept))
-        rmse = float(np.sqrt(np.mean(joint_std ** 2)))
         # Postures are weighed where each tag was when it ranged (a moving boom, TDMA).
         shift = 0.0 if timed_joints is None else np.asarray(timed_joints) - joints
         seen = joints + shift
-        values.update(predicted_rmse=rmse, joint_std=joint_std, reach_std=np.maximum(
-            joint_std, self.fold_spread(seen, measurements, angles[0])))
-        if not math.isfinite(rmse) or rmse > t.predicted_rmse_error:
-            checks.append((ERROR, 'unobservable', f'predicted RMSE {rmse:.2f} m'))
-        elif rmse > t.predicted_rmse_warn:
-            checks.append((WARN, 'ok', f'predicted RMSE {rmse:.2f} m'))
+        self._observability(joint_std, checks, values)
+        values['reach_std'] = np.maximum(joint_std,
+                                         self.fold_spread(seen, measurements, angles[0]))
         ambiguous = set(self.ambiguous_joints(seen, measurements, joint_std, angles[0], reach))
         ambiguous |= self.ambiguous_postures(seen, measurements, joint_std, angles[0], reach,
                                              [np.asarray(a) + shift for a in alternatives])
@@ -624,12 +611,31 @@ class Integrity:
             checks.append((ERROR, 'ambiguous', 'joint(s) ' + ', '.join(
                 str(k + 1) for k in sorted(ambiguous)) + ' could be elsewhere: another '
                 'posture fits about as well'))
-        if not checks:
-            return Verdict(OK, 'ok', 'tracking', values)
-        level = max(level for level, _, _ in checks)
-        worst = [check for check in checks if check[0] == level]
-        return Verdict(level, worst[0][1], '; '.join(message for _, _, message in worst),
-                       values)
+        return _verdict(checks, values)
+
+    def _consistency(self, joints, measurements, checks, values):
+        """The residual checks, appended to ``checks``; return the links judged clear."""
+        failures, found, kept = self.consistency(joints, measurements)
+        values.update(found)
+        if failures:
+            checks.append((ERROR, 'inconsistent', '; '.join(failures)))
+        t = self.thresholds
+        rms = values['los_residual_rms']
+        if rms > t.residual_error:
+            checks.append((ERROR, 'inconsistent', f'line-of-sight range residual {rms:.2f} m'))
+        elif rms > t.residual_warn:
+            checks.append((WARN, 'ok', f'line-of-sight range residual {rms:.2f} m'))
+        return kept
+
+    def _observability(self, joint_std, checks, values):
+        """The predicted uncertainty against the thresholds, appended to ``checks``."""
+        t = self.thresholds
+        rmse = float(np.sqrt(np.mean(joint_std ** 2)))
+        values.update(predicted_rmse=rmse, joint_std=joint_std)
+        if not math.isfinite(rmse) or rmse > t.predicted_rmse_error:
+            checks.append((ERROR, 'unobservable', f'predicted RMSE {rmse:.2f} m'))
+        elif rmse > t.predicted_rmse_warn:
+            checks.append((WARN, 'ok', f'predicted RMSE {rmse:.2f} m'))
 
     def _across_plane(self, joints, slew):
         """Signed distances (p,) of the joints from the vertical plane of ``slew``."""
@@ -664,3 +670,12 @@ class Integrity:
             if jumped.size:
                 checks.append((ERROR, 'implausible', f'joint {jumped[0] + 1} moved '
                                f'{moved[jumped[0]]:.1f} m in {elapsed:.2f} s'))
+
+
+def _verdict(checks, values):
+    """The :class:`Verdict` of the checks (level, status, message): the worst ones named."""
+    if not checks:
+        return Verdict(OK, 'ok', 'tracking', values)
+    level = max(level for level, _, _ in checks)
+    worst = [check for check in checks if check[0] == level]
+    return Verdict(level, worst[0][1], '; '.join(message for _, _, message in worst), values)
