@@ -614,7 +614,7 @@ class Integrity:
         return _verdict(checks, values)
 
     def _consistency(self, joints, measurements, checks, values):
-        """The residual checks, appended to ``checks``; return the links judged clear."""
+        """Append the residual checks to ``checks``; return the links judged clear."""
         failures, found, kept = self.consistency(joints, measurements)
         values.update(found)
         if failures:
@@ -628,7 +628,7 @@ class Integrity:
         return kept
 
     def _observability(self, joint_std, checks, values):
-        """The predicted uncertainty against the thresholds, appended to ``checks``."""
+        """Append the predicted uncertainty against the thresholds to ``checks``."""
         t = self.thresholds
         rmse = float(np.sqrt(np.mean(joint_std ** 2)))
         values.update(predicted_rmse=rmse, joint_std=joint_std)
@@ -673,7 +673,7 @@ class Integrity:
 
 
 def _verdict(checks, values):
-    """The :class:`Verdict` of the checks (level, status, message): the worst ones named."""
+    """Return the :class:`Verdict` of (level, status, message) checks, naming the worst."""
     if not checks:
         return Verdict(OK, 'ok', 'tracking', values)
     level = max(level for level, _, _ in checks)
