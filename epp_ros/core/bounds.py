@@ -305,43 +305,11 @@ def posterior_crlb(model, slew, pitches, sigma, frame_period, process_noise, mea
     """
     p, m = model.n_sections, model.n_anchors
     size = p + 1
-    try:
-        slew = np.array(slew, dtype=float)
-        pitches = np.array(pitches, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError('slew and pitches must be numeric arrays') from exc
-    if slew.ndim != 1:
-        raise ValueError(f'slew must have shape (T,), got {slew.shape}')
+    slew, pitches = _checked_trajectory(slew, pitches, p)
     frames = slew.size
-    if pitches.shape != (frames, p):
-        raise ValueError(f'pitches must have shape ({frames}, {p}), got {pitches.shape}')
-    if not (np.all(np.isfinite(slew)) and np.all(np.isfinite(pitches))):
-        raise ValueError('slew and pitches must be finite')
-    try:
-        dt = float(frame_period)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f'frame_period must be a number, got {frame_period!r}') from exc
-    if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f'frame_period must be finite and > 0, got {frame_period!r}')
-    try:
-        q = np.array(process_noise, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError('process_noise must be a number or an array of shape '
-                         f'({size},)') from exc
-    if q.shape not in ((), (size,)):
-        raise ValueError(f'process_noise must be a scalar or have shape ({size},), '
-                         f'got {q.shape}')
-    if not np.all(np.isfinite(q)) or np.any(q < 0):
-        raise ValueError(f'process_noise must be finite and >= 0, got {process_noise!r}')
-    if measured is None:
-        masks = np.ones((frames, p, m), bool)
-    else:
-        masks = np.asarray(measured, dtype=bool)
-        if masks.shape == (p, m):
-            masks = np.broadcast_to(masks, (frames, p, m))
-        elif masks.shape != (frames, p, m):
-            raise ValueError(f'measured must have shape ({p}, {m}) or ({frames}, {p}, {m}), '
-                             f'got {masks.shape}')
+    dt = _checked_period(frame_period)
+    q = _checked_process_noise(process_noise, size)
+    masks = _link_masks(measured, frames, p, m)
     if initial_information is None:
         initial_information = np.zeros((2 * size, 2 * size))
     else:
@@ -361,3 +329,58 @@ def posterior_crlb(model, slew, pitches, sigma, frame_period, process_noise, mea
     return [bound_from_information(model, slew[k], pitches[k],
                                    _marginal_information(posterior[k], size))
             for k in range(frames)]
+
+
+def _checked_trajectory(slew, pitches, p):
+    """Return slew (T,) and pitches (T, p) as finite float arrays; ValueError otherwise."""
+    try:
+        slew = np.array(slew, dtype=float)
+        pitches = np.array(pitches, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError('slew and pitches must be numeric arrays') from exc
+    if slew.ndim != 1:
+        raise ValueError(f'slew must have shape (T,), got {slew.shape}')
+    if pitches.shape != (slew.size, p):
+        raise ValueError(f'pitches must have shape ({slew.size}, {p}), got {pitches.shape}')
+    if not (np.all(np.isfinite(slew)) and np.all(np.isfinite(pitches))):
+        raise ValueError('slew and pitches must be finite')
+    return slew, pitches
+
+
+def _checked_period(frame_period):
+    """Return the frame period as a float > 0, seconds; ValueError otherwise."""
+    try:
+        dt = float(frame_period)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'frame_period must be a number, got {frame_period!r}') from exc
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f'frame_period must be finite and > 0, got {frame_period!r}')
+    return dt
+
+
+def _checked_process_noise(process_noise, size):
+    """Return q, a scalar or (size,) array, finite and >= 0; ValueError otherwise."""
+    try:
+        q = np.array(process_noise, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError('process_noise must be a number or an array of shape '
+                         f'({size},)') from exc
+    if q.shape not in ((), (size,)):
+        raise ValueError(f'process_noise must be a scalar or have shape ({size},), '
+                         f'got {q.shape}')
+    if not np.all(np.isfinite(q)) or np.any(q < 0):
+        raise ValueError(f'process_noise must be finite and >= 0, got {process_noise!r}')
+    return q
+
+
+def _link_masks(measured, frames, p, m):
+    """Return the links measured in each frame, (T, p, m) bool: all when ``measured`` is None."""
+    if measured is None:
+        return np.ones((frames, p, m), bool)
+    masks = np.asarray(measured, dtype=bool)
+    if masks.shape == (p, m):
+        return np.broadcast_to(masks, (frames, p, m))
+    if masks.shape != (frames, p, m):
+        raise ValueError(f'measured must have shape ({p}, {m}) or ({frames}, {p}, {m}), '
+                         f'got {masks.shape}')
+    return masks
