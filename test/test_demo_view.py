@@ -240,8 +240,9 @@ PLAIN_LINE = re.compile(r'postures \d+   \d+\.\d Hz   running RMSE (\d+\.\d+|nan
 def test_plain_lines_field_effects_and_a_recording(tmp_path):
     bag = tmp_path / 'shown'
     result = subprocess.run(
-        [sys.executable, '-m', 'epp_ros.tools.demo', '--plain', '--duration', '8',
-         '--field', 'nlos_persistent', '--garbage', '0', '--record', str(bag)],
+        [sys.executable, '-m', 'epp_ros.tools.demo', '--plain', '--postures', '60',
+         '--duration', str(TIMEOUT / 2), '--field', 'nlos_persistent', '--garbage', '0',
+         '--record', str(bag)],
         capture_output=True, text=True, timeout=TIMEOUT)
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()

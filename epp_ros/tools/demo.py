@@ -447,14 +447,42 @@ def run(args, stop_request):
     if args.record and Path(args.record).exists():
         print(f'epp_demo: {args.record} exists already', file=sys.stderr)
         return 2
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
     view = sys.stderr if args.json else sys.stdout
     live = view.isatty() and not args.plain
     workdir = tempfile.TemporaryDirectory(prefix='epp_demo_')
     # The live view owns the screen: the nodes' own messages go to a file meanwhile.
     log = open(Path(workdir.name) / 'pipeline.log', 'w+') if live else None
+    monitor, failure, recorder = _monitored(args, config, config_path, workdir.name, log, view,
+                                            live, stop_request)
+    result = monitor.summary(args.method)
+    if args.plot and monitor.last is not None:
+        plot(monitor, args.plot)
+    if failure:
+        print(f'epp_demo: {failure}', file=sys.stderr)
+        if log is not None:
+            log.seek(0)
+            sys.stderr.write(''.join(log.readlines()[-20:]))
+    if log is not None:
+        log.close()
+    workdir.cleanup()
+    _summarise(args, view, recorder, result)
+    return 0
+
+
+def _monitored(args, config, config_path, workdir, log, view, live, stop_request):
+    """
+    Start the pipeline (and recorder), watch it until stopped, stop it.
+
+    Returns
+    -------
+    monitor : Monitor
+    failure : str or None
+    recorder : subprocess.Popen or None
+
+    """
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     monitor = Monitor()
     executor = SingleThreadedExecutor()
@@ -463,7 +491,7 @@ def run(args, stop_request):
     try:
         if args.record:
             recorder = start_recorder(args.record, log)
-        processes, started = start_pipeline(args, config_path, workdir.name, log)
+        processes, started = start_pipeline(args, config_path, workdir, log)
         if not started and not stop_request.requested:
             failure = 'the emulator did not start'
         elif started:
@@ -476,20 +504,14 @@ def run(args, stop_request):
         stop(processes)
         if recorder is not None:
             stop([recorder], RECORD_WAIT)
-    result = monitor.summary(args.method)
-    if args.plot and monitor.last is not None:
-        plot(monitor, args.plot)
     executor.remove_node(monitor.node)
     monitor.node.destroy_node()
     rclpy.try_shutdown()
-    if failure:
-        print(f'epp_demo: {failure}', file=sys.stderr)
-        if log is not None:
-            log.seek(0)
-            sys.stderr.write(''.join(log.readlines()[-20:]))
-    if log is not None:
-        log.close()
-    workdir.cleanup()
+    return monitor, failure, recorder
+
+
+def _summarise(args, view, recorder, result):
+    """Print the recorder's output and the run's summary line (and JSON with ``--json``)."""
     if recorder is not None:
         view.write(recorder.stdout.read())
         recorder.stdout.close()
@@ -500,7 +522,6 @@ def run(args, stop_request):
     view.flush()
     if args.json:
         print(json.dumps(result))
-    return 0
 
 
 def watch(monitor, executor, processes, args, view, live, scene, stop_request):
