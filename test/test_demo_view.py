@@ -227,6 +227,23 @@ def test_field_and_noise_options():
         demo.parse_args(['--field', 'rain'])
 
 
+def test_a_calibrated_description_goes_to_driver_and_estimator_not_the_emulator(tmp_path,
+                                                                               capsys):
+    args = demo.parse_args(['--calibrated', str(tmp_path / 'calibrated.yaml'),
+                            '--field', 'offsets'])
+    emulator, driver, estimator = demo.pipeline_commands(args, 'pump.yaml', 'LINK')
+    assert emulator[emulator.index('--config') + 1] == 'pump.yaml'
+    assert 'offsets' in emulator
+    for node in (driver, estimator):
+        assert node[node.index('--params-file') + 1] == str(tmp_path / 'calibrated.yaml')
+    args = demo.parse_args([])
+    assert all(command[command.index('--params-file') + 1] == 'pump.yaml'
+               for command in demo.pipeline_commands(args, 'pump.yaml', 'LINK')[1:])
+    # A description that cannot be read stops the demo with one line.
+    assert demo.main(['--calibrated', str(tmp_path / 'missing.yaml'), '--duration', '1']) == 2
+    assert capsys.readouterr().err.count('\n') == 1
+
+
 def test_record_refuses_an_existing_bag(tmp_path, capsys):
     assert demo.main(['--record', str(tmp_path), '--duration', '1']) == 2
     assert 'exists already' in capsys.readouterr().err

@@ -86,6 +86,9 @@ def parse_args(argv):
                         help='probability of a corrupted line')
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--config', help='pump description (default: the packaged one)')
+    parser.add_argument('--calibrated', metavar='PUMP.yaml',
+                        help='driver and estimator start from this pump description (e.g. '
+                             "epp_calibrate's), the emulator still simulates --config's")
     parser.add_argument('--plot', metavar='FILE.png', help='save estimated vs. true boom')
     parser.add_argument('--record', metavar='BAG',
                         help="record the demo's topics into this rosbag2 (a new directory)")
@@ -364,27 +367,36 @@ def emulator_noise(args):
     return ['--sigma', str(args.sigma), '--drop', str(args.drop), '--nlos', str(args.nlos)]
 
 
+def pipeline_commands(args, config_path, link):
+    """
+    Return the command lines of the emulator, the driver and the estimator.
+
+    The emulator simulates the pump of ``config_path`` (with ``--field``'s effects, drawn
+    from ``--seed``); driver and estimator start from ``--calibrated`` when given (e.g.
+    what ``epp_calibrate`` wrote from a recording of this demo), else from the same file.
+    """
+    python = [sys.executable, '-m']
+    emulator = python + ['epp_ros.nodes.emulator', '--protocol', 'json', '--pty', '--link',
+                         link, '--truth', '--config', str(config_path), '--rate',
+                         str(args.rate), *emulator_noise(args), '--garbage', str(args.garbage),
+                         '--seed', str(args.seed)]
+    ros = ['--ros-args', '--params-file', str(args.calibrated or config_path),
+           '--log-level', 'warn']
+    driver = python + ['epp_ros.nodes.driver', *ros, '-p', f'port:={link}',
+                       '-p', 'protocol:=json']
+    estimator = python + ['epp_ros.nodes.estimator', *ros, '-p', f'method:={args.method}']
+    return emulator, driver, estimator
+
+
 def start_pipeline(args, config_path, workdir, stderr=None):
     """Emulator, driver and estimator processes; ``stderr`` a file for their output."""
-    python = [sys.executable, '-m']
-    link = str(Path(workdir) / 'ttyUWB')
-    emulator = subprocess.Popen(
-        python + ['epp_ros.nodes.emulator', '--protocol', 'json', '--pty', '--link', link,
-                  '--truth', '--config', str(config_path), '--rate', str(args.rate),
-                  *emulator_noise(args), '--garbage', str(args.garbage),
-                  '--seed', str(args.seed)],
-        stdout=subprocess.PIPE, stderr=stderr, text=True)
+    emulator, *nodes = pipeline_commands(args, config_path, str(Path(workdir) / 'ttyUWB'))
+    emulator = subprocess.Popen(emulator, stdout=subprocess.PIPE, stderr=stderr, text=True)
     processes = [emulator]
     announced = emulator.stdout.readline().split()
     if not announced or announced[0] != 'PTY':
         return processes, False
-    ros = ['--ros-args', '--params-file', str(config_path), '--log-level', 'warn']
-    processes.append(subprocess.Popen(
-        python + ['epp_ros.nodes.driver', *ros, '-p', f'port:={link}', '-p', 'protocol:=json'],
-        stderr=stderr))
-    processes.append(subprocess.Popen(
-        python + ['epp_ros.nodes.estimator', *ros, '-p', f'method:={args.method}'],
-        stderr=stderr))
+    processes += [subprocess.Popen(command, stderr=stderr) for command in nodes]
     return processes, True
 
 
@@ -441,6 +453,8 @@ def run(args, stop_request):
     try:
         config_path = Path(args.config) if args.config else default_config_path()
         config = load_pump_config(config_path)
+        if args.calibrated:         # what driver and estimator are told, and the view draws
+            config = load_pump_config(args.calibrated)
     except ConfigError as exc:
         print(f'epp_demo: {exc}', file=sys.stderr)
         return 2
