@@ -227,8 +227,7 @@ def test_field_and_noise_options():
         demo.parse_args(['--field', 'rain'])
 
 
-def test_a_calibrated_description_goes_to_driver_and_estimator_not_the_emulator(tmp_path,
-                                                                               capsys):
+def test_a_calibrated_description_goes_to_driver_and_estimator(tmp_path, capsys):
     args = demo.parse_args(['--calibrated', str(tmp_path / 'calibrated.yaml'),
                             '--field', 'offsets'])
     emulator, driver, estimator = demo.pipeline_commands(args, 'pump.yaml', 'LINK')
