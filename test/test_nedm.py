@@ -142,3 +142,33 @@ def test_invalid_arguments_raise(kwargs, message):
     target = args.pop('target')
     with pytest.raises(ValueError, match=message):
         nearest_edm(target, **args)
+
+
+def test_status_says_how_the_iterations_ended():
+    rng = np.random.default_rng(13)
+    edm, noisy = noisy_edm(rng, 8, 3, 2.0)
+    exact = nearest_edm(edm, rank=3)
+    assert (exact.status, exact.converged) == (1, True)
+    np.testing.assert_allclose(exact.edm, edm, atol=1e-8 * edm.max())
+    warm = nearest_edm(noisy, rank=3, initial=edm)
+    assert (warm.status, warm.converged) == (1, True) and warm.iterations > 0
+    stopped = nearest_edm(noisy, rank=3, max_iter=1)
+    assert (stopped.status, stopped.converged) == (0, False)
+    assert 'max_iter' in stopped.message and 'converged' in warm.message
+
+
+def test_a_weighted_relaxation_already_of_rank_r_is_iterated_to_its_minimum():
+    # Unequal and missing weights on points in a plane: the convex relaxation's first cycle
+    # is already of rank 3 but far from its minimiser (it was returned as converged).
+    rng = np.random.default_rng(14)
+    n = 6
+    edm = squared_distances(rng.standard_normal((n, 2)) * 10)
+    noisy = edm + rng.normal(0.0, 1.0, (n, n))
+    noisy = 0.5 * (noisy + noisy.T)
+    np.fill_diagonal(noisy, 0.0)
+    weights = rng.uniform(0.05, 2.0, (n, n)) * (rng.uniform(size=(n, n)) < 0.8)
+    weights = np.triu(weights, 1) + np.triu(weights, 1).T
+    result = nearest_edm(noisy, weights, rank=3)
+    assert result.converged and result.rank_error < 1e-8
+    again = nearest_edm(noisy, weights, rank=3, initial=result.edm, tol=1e-10)
+    assert again.objective >= 0.98 * result.objective     # the old answer: 4,700 times it

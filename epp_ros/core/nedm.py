@@ -30,8 +30,13 @@ weighted norm, onto the EDM cone intersected with the linear constraints. Substi
 negative semidefinite on ``sqrt(w)``-perp, which is solved through its dual by a semismooth
 Newton method (H.-D. Qi, SIAM J. Matrix Anal. Appl. 34:67-93, 2013) with a dense generalized
 Jacobian; our problems have n <= ~20 points.
+
+:func:`nearest_edm` checks its input and drives the penalty iterations; ``_PenaltySolver``
+holds one problem's fixed data and takes its MM steps and SQUAREM cycles; the iterates are
+``_Iterate`` values, and the multipliers carried between subproblems a ``_DualState``.
 """
 from dataclasses import dataclass
+from typing import NamedTuple, Optional
 
 import numpy as np
 from scipy.linalg import lapack
@@ -63,8 +68,10 @@ class NearestEDMResult:
     iterations: int             #: outer (penalty/majorization) iterations
     inner_iterations: int       #: Newton iterations summed over all subproblems
     kkt_residual: float         #: of the last subproblem, in the units of G
-    penalty_parameter: float
-    converged: bool
+    penalty_parameter: float    #: c at the end, in the units of G
+    converged: bool             #: ``status > 0``
+    status: int                 #: 1 converged, 0 max_iter reached
+    message: str                #: ``status`` in words
 
 
 def _constraint_operator(n, pairs):
@@ -206,62 +213,180 @@ def project_constrained_edm(target, q, rows, cols, values, multipliers=None, tol
                      multipliers, tol, max_iter)
 
 
-def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1e-7,
-                rank_tol=1e-8, max_iter=300, tau=0.1, penalty_parameter=None,
-                inner_tol=1e-9):
+#: ``NearestEDMResult.status``: the stopping rule held in the penalty iterations.
+_CONVERGED = 1
+#: ``NearestEDMResult.status``: ``max_iter`` reached before the stopping rule held.
+_MAX_ITER_REACHED = 0
+_MESSAGES = {
+    _CONVERGED: 'converged: rank error <= rank_tol and relative change of sqrt(f + c p) <= tol',
+    _MAX_ITER_REACHED: 'not converged: max_iter reached',
+}
+
+# Initial c without a warm start: the convex solution's p(D), scaled units, clamped here.
+_INITIAL_PENALTY_RANGE = (1.0, 1e3)
+# Growth of c per outer step while the rank error is above rank_tol (PenCorr's alpha_max and
+# alpha_min): fast far from rank r, gently near it so that c does not outrun the iterates
+# and lock them into the rank-r configuration closest to where they happen to be.
+_FAST_GROWTH = 4.0
+_SLOW_GROWTH = 1.2
+_MAX_PENALTY = 1e12                 # scaled units; beyond it c J(I-U)J swamps f in round-off
+# The rank error counts as large above this times ``rank``: more than 10 % of the points'
+# spread per embedding dimension lies beyond the r leading directions. A heuristic taken
+# from PenCorr (Gao & Sun 2010), whose test is rankErr / max(1, r) > 0.1 with an absolute
+# rankErr (eigenvalues of a correlation matrix); here it is the fraction p(D) / trace(-JDJ)
+# in [0, 1], so nothing is derived from it, and for rank >= 10 it never holds.
+_LARGE_RANK_ERROR_PER_DIMENSION = 0.1
+# Below this ||second - 2 first + start|| the MM map has stopped moving: no extrapolation.
+_FLAT_CURVATURE = 1e-15
+
+
+class _Iterate(NamedTuple):
+    """An EDM of the penalty iterations with what one eigendecomposition tells of its rank."""
+
+    edm: np.ndarray             #: (n, n) squared distances, scaled units
+    penalty: float              #: p(D) = sum_{i>r} lambda_i(-JDJ), scaled units
+    trace: float                #: sum of the positive eigenvalues of -JDJ, scaled units
+    leading: np.ndarray         #: (n, r) eigenvectors of the r largest: U = P1 P1^T
+
+    @classmethod
+    def at(cls, edm, rank):
+        """Return ``edm`` with its rank penalty, trace and leading eigenvectors (one eigh)."""
+        return cls._make((edm, *rank_penalty(edm, rank)))
+
+    @property
+    def rank_error(self):
+        """Return ``p(D) / trace(-JDJ)``: the fraction of the spread beyond r dimensions."""
+        return self.penalty / self.trace if self.trace > 0 else 0.0
+
+
+class _DualState(NamedTuple):
+    """What one convex subproblem passes to the next, and the counts reported at the end."""
+
+    multipliers: Optional[np.ndarray]   #: (k,) of the last projection: the next warm start
+    inner_iterations: int               #: Newton iterations, summed over all projections
+    kkt_residual: float                 #: of the projection that gave the iterate kept
+
+
+class _Outcome(NamedTuple):
+    """Where the iterations of one ``nearest_edm`` call stopped, scaled units."""
+
+    iterate: _Iterate
+    duals: _DualState
+    penalty_parameter: float            #: c
+    iterations: int                     #: MM steps of the penalty iterations
+    status: int                         #: one of _MESSAGES
+
+
+class _PenaltySolver:
     """
-    Nearest EDM of embedding dimension ``rank`` to a partly known squared-distance matrix.
+    The fixed data of one ``nearest_edm`` problem, in scaled units, and its MM steps.
 
     Parameters
     ----------
-    target : ndarray, shape (n, n), symmetric
-        G, squared distances. Entries with zero weight that are not fixed are ignored
-        (they may be NaN).
-    weights : ndarray, shape (n, n), symmetric, >= 0, optional
-        H, the weight of each entry of G; ones by default. Use 0 for unknown entries.
-    rank : int
-        Embedding dimension r (3 for space, 2 for a plane).
-    fixed : ndarray of bool, shape (n, n), symmetric, optional
-        Entries of D held equal to G (e.g. known anchor distances or squared arm lengths).
-    initial : ndarray, shape (n, n), optional
-        Starting EDM D^0 of rank <= r (a warm start), from which the penalty iterations
-        start with c = 1. Without one they start from the convex relaxation (c = 0).
-    tol : float
-        Stop when the relative change of ``sqrt(f + c p)`` falls below ``tol`` ...
-    rank_tol : float
-        ... and the relative rank error ``p(D) / trace(-JDJ)`` is below ``rank_tol``.
-    max_iter : int
-        Outer iterations at most.
-    tau : float
-        Floor of the majorization weights ``w_i = max(tau, max_j H_ij)``.
-    penalty_parameter : float, optional
-        Initial c; by default from the rank error of the convex solution, clamped to
-        [1, 1e3] in the scaled problem (1 from a warm start); multiplied by 4 while the
-        rank error is large and by 1.2 while it is above ``rank_tol``.
-    inner_tol : float
-        Relative tolerance of the convex subproblem: fixed entries are held to about this
-        fraction of the largest squared distance (1e-9: under a micrometre on a 40 m boom).
-
-    Returns
-    -------
-    NearestEDMResult
-
-    Notes
-    -----
-    The problem is solved in units where the largest known squared distance is 1; results
-    are returned in the units of ``target``.
+    goal : ndarray, shape (n, n)
+        G over the scale, symmetric, zero where not known.
+    weights : ndarray, shape (n, n)
+        H, zero diagonal.
+    fixed : ndarray of bool, shape (n, n)
+        Symmetric, false diagonal.
+    rank, tau, inner_tol
+        As in :func:`nearest_edm`.
 
     """
-    target = np.asarray(target, dtype=float)
-    n = target.shape[0]
-    if target.shape != (n, n):
-        raise ValueError(f'target must be square, got shape {target.shape}')
+
+    def __init__(self, goal, weights, fixed, rank, tau, inner_tol):
+        n = goal.shape[0]
+        self.goal, self.rank, self.inner_tol = goal, rank, inner_tol
+        self.sq_weights = weights ** 2
+        rows, cols = _constraint_operator(n, np.argwhere(np.triu(fixed, 1)))
+        majorizer = np.maximum(tau, weights.max(axis=1))      # w_i w_j >= H_ij^2
+        q = np.sqrt(majorizer)
+        self.w_outer = np.outer(majorizer, majorizer)
+        self.q_outer = np.outer(q, q)
+        # Fixed entries of D, as entries of Y = W^1/2 D W^1/2.
+        self.constraint_values = goal[rows, cols] * self.q_outer[rows, cols]
+        self.projector = _Projector(q, rows, cols)
+        self.centering = centering_matrix(np.ones(n))
+
+    def iterate(self, edm):
+        """Return ``edm`` (n, n) as an :class:`_Iterate` of this problem's rank."""
+        return _Iterate.at(edm, self.rank)
+
+    def objective(self, edm):
+        """Return ``f(D) = 1/2 ||H o (D - G)||^2``, scaled units."""
+        return 0.5 * np.sum(self.sq_weights * (edm - self.goal) ** 2)
+
+    def merit(self, iterate, c):
+        """Return ``f + c p`` at ``iterate``: what the MM steps decrease."""
+        return self.objective(iterate.edm) + c * iterate.penalty
+
+    def mm_step(self, iterate, c, duals):
+        """
+        Minimise the majorant of ``f + c p`` at ``iterate`` over the constraint set.
+
+        ``p`` is concave, so its linearisation ``<D, -J (I - U) J>`` lies above it, and the
+        diagonal weights ``w`` put a quadratic above ``f``: the minimiser is one weighted
+        projection, warm-started from the last multipliers. Returns the new iterate and
+        ``duals`` with this projection's multipliers, Newton iterations and residual.
+        """
+        edm = iterate.edm
+        basis = self.centering @ iterate.leading if c > 0 else np.zeros((edm.shape[0], 0))
+        complement = self.centering - basis @ basis.T          # J (I - U) J
+        shifted = edm - (self.sq_weights * (edm - self.goal) - c * complement) / self.w_outer
+        projected = self.projector(shifted * self.q_outer, self.constraint_values,
+                                   duals.multipliers, tol=self.inner_tol)
+        duals = _DualState(projected.multipliers, duals.inner_iterations + projected.iterations,
+                           projected.kkt_residual)
+        return self.iterate(projected.matrix / self.q_outer), duals
+
+    def squarem_cycle(self, iterate, c, duals):
+        """
+        One SQUAREM cycle (Varadhan & Roland 2008) on the MM map, never worse than 2 steps.
+
+        The MM map converges linearly and slowly along weakly determined directions (zero
+        or unequal weights); squared extrapolation removes most of that tail. Returns the
+        iterate kept, ``duals`` (the residual of that iterate's projection) and the MM
+        steps taken, 2 or 3.
+        """
+        first, duals = self.mm_step(iterate, c, duals)
+        second, duals = self.mm_step(first, c, duals)
+        step, curvature = first.edm - iterate.edm, second.edm - 2.0 * first.edm + iterate.edm
+        norm_curvature = np.linalg.norm(curvature)
+        if not norm_curvature > _FLAT_CURVATURE:          # MM has stopped (or NaN)
+            return second, duals, 2
+        alpha = min(-np.linalg.norm(step) / norm_curvature, -1.0)     # -1 gives `second`
+        extrapolated = iterate.edm - 2.0 * alpha * step + alpha ** 2 * curvature
+        residual = duals.kkt_residual
+        candidate, duals = self.mm_step(self.iterate(extrapolated), c, duals)
+        if self.merit(candidate, c) <= self.merit(second, c):
+            return candidate, duals, 3
+        # The multipliers stay the last projection's (the candidate's): only a warm start.
+        return second, _DualState(duals.multipliers, duals.inner_iterations, residual), 3
+
+
+def _checked_weights(weights, fixed, n):
+    """Return ``weights`` and ``fixed`` as (n, n) float and bool arrays, defaults filled in."""
     weights = np.ones((n, n)) if weights is None else np.asarray(weights, dtype=float)
     fixed = np.zeros((n, n), bool) if fixed is None else np.asarray(fixed, dtype=bool)
     if weights.shape != (n, n) or fixed.shape != (n, n):
         raise ValueError('weights and fixed must have the shape of target')
     if np.any(weights < 0) or not np.all(np.isfinite(weights)):
         raise ValueError('weights must be finite and >= 0')
+    return weights, fixed
+
+
+def _checked_input(target, weights, fixed, rank):
+    """
+    Validate the arguments of :func:`nearest_edm`, raising ValueError.
+
+    Returns target (n, n), weights with a zero diagonal, fixed made symmetric with a false
+    diagonal, and the known entries (weighted or fixed), as new arrays.
+    """
+    target = np.asarray(target, dtype=float)
+    n = target.shape[0]
+    if target.shape != (n, n):
+        raise ValueError(f'target must be square, got shape {target.shape}')
+    weights, fixed = _checked_weights(weights, fixed, n)
     weights = weights.copy()
     np.fill_diagonal(weights, 0.0)
     fixed = fixed | fixed.T
@@ -271,103 +396,152 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
         raise ValueError('target must be finite where weights > 0 or fixed')
     if not 1 <= rank < n:
         raise ValueError(f'rank must be in [1, n-1], got {rank}')
+    return target, weights, fixed, known
 
+
+def _scaled_goal(target, known):
+    """
+    Return ``G / scale`` (symmetric, zero where not known) and ``scale``.
+
+    ``scale`` is the largest known |G| (1 if there is none): the tolerances and the range of
+    the initial c are then independent of the units of ``target``.
+    """
     scale = float(np.max(np.abs(target[known]))) if known.any() else 1.0
     scale = scale if scale > 0 else 1.0
     goal = np.where(known, target, 0.0) / scale
-    goal = 0.5 * (goal + goal.T)
-    sq_weights = weights ** 2
+    return 0.5 * (goal + goal.T), scale
 
-    upper = np.argwhere(np.triu(fixed, 1))
-    rows, cols = _constraint_operator(n, upper)
-    fixed_values = goal[rows, cols]
-    majorizer = np.maximum(tau, weights.max(axis=1))      # w
-    q = np.sqrt(majorizer)
-    w_outer = np.outer(majorizer, majorizer)
-    q_outer = np.outer(q, q)
-    constraint_values = fixed_values * q_outer[rows, cols]
 
-    def objective(edm):
-        return 0.5 * np.sum(sq_weights * (edm - goal) ** 2)
+def _start(solver, known, initial, scale, penalty_parameter):
+    """
+    First iterate, dual state and penalty parameter c of the penalty iterations.
 
-    projector = _Projector(q, rows, cols)
-    centering = centering_matrix(np.ones(n))
-    state = {'multipliers': None, 'inner_iterations': 0, 'kkt_residual': 0.0}
-
-    def point(edm):
-        """Return an iterate with its rank penalty, trace and leading eigenvectors (one eigh)."""
-        return edm, rank_penalty(edm, rank)
-
-    def mm_step(current, c):
-        """Minimiser of the majorant of f + c p at ``current`` over the constraint set."""
-        edm, (_, _, leading) = current
-        basis = centering @ leading if c > 0 else np.zeros((n, 0))
-        complement = centering - basis @ basis.T          # J (I - U) J
-        shifted = edm - (sq_weights * (edm - goal) - c * complement) / w_outer
-        projected = projector(shifted * q_outer, constraint_values, state['multipliers'],
-                              tol=inner_tol)
-        state['multipliers'] = projected.multipliers
-        state['inner_iterations'] += projected.iterations
-        return point(projected.matrix / q_outer), projected.kkt_residual
-
-    def squarem_step(current, c):
-        """
-        One SQUAREM cycle (Varadhan & Roland 2008) on the MM map, never worse than 2 steps.
-
-        The MM map converges linearly and slowly along weakly determined directions (zero
-        or unequal weights); squared extrapolation removes most of that tail.
-        """
-        first, _ = mm_step(current, c)
-        second, residual = mm_step(first, c)
-        step, curvature = first[0] - current[0], second[0] - 2.0 * first[0] + current[0]
-        norm_curvature = np.linalg.norm(curvature)
-        if norm_curvature > 1e-15:
-            alpha = min(-np.linalg.norm(step) / norm_curvature, -1.0)
-            candidate, candidate_residual = mm_step(
-                point(current[0] - 2.0 * alpha * step + alpha ** 2 * curvature), c)
-            if merit(candidate, c) <= merit(second, c):
-                second, residual = candidate, candidate_residual
-        state['kkt_residual'] = residual          # of the iterate kept
-        return second, 3 if norm_curvature > 1e-15 else 2
-
-    def merit(current, c):
-        return objective(current[0]) + c * current[1][0]
-
+    Without a warm start: one SQUAREM cycle on the convex relaxation (c = 0) from the known
+    entries, and c of the size of its rank penalty (a heuristic). A warm start is already
+    of rank r: the penalty applies from it, with c = 1.
+    """
+    duals = _DualState(None, 0, 0.0)
     if initial is None:
-        # Start from the convex relaxation (c = 0), with c set by its rank error.
-        current, _ = squarem_step(point(np.where(known, goal, 0.0)), 0.0)
-        c = float(np.clip(current[1][0], 1.0, 1e3))
+        relaxed = solver.iterate(np.where(known, solver.goal, 0.0))
+        iterate, duals, _ = solver.squarem_cycle(relaxed, 0.0, duals)
+        c = float(np.clip(iterate.penalty, *_INITIAL_PENALTY_RANGE))
     else:
-        # A warm start is already of rank r: penalise from it directly.
-        current = point(np.asarray(initial, dtype=float) / scale)
+        iterate = solver.iterate(np.asarray(initial, dtype=float) / scale)
         c = 1.0
     if penalty_parameter is not None:
         c = float(penalty_parameter) / scale
+    return iterate, duals, c
 
-    def relative_rank_error(current):
-        penalty, trace, _ = current[1]
-        return penalty / trace if trace > 0 else 0.0
 
-    rank_error = relative_rank_error(current)
-    converged = initial is None and rank_error <= rank_tol
+def _next_penalty(c, rank_error, rank, rank_tol):
+    """Return c for the next step: grown while the rank error is above ``rank_tol``."""
+    if rank_error > rank_tol:
+        large = rank_error > _LARGE_RANK_ERROR_PER_DIMENSION * rank
+        return min(c * (_FAST_GROWTH if large else _SLOW_GROWTH), _MAX_PENALTY)
+    return c
+
+
+def _relative_change(previous, current):
+    """
+    Return the change of ``sqrt(f + c p)`` relative to its old value, or absolute below 1.
+
+    1 is the largest known squared distance: near an exact fit a relative change is noise.
+    """
+    return abs(previous - current) / max(1.0, previous)
+
+
+def _penalty_iterations(solver, iterate, duals, c, tol, rank_tol, max_iter):
+    """
+    SQUAREM cycles on ``f + c p``, c following the schedule, until the stopping rule holds.
+
+    The rule: of rank r (rank error <= ``rank_tol``) and no longer moving (relative change
+    of ``sqrt(f + c p)`` <= ``tol``); a rank-r point still moving has not yet settled where
+    the penalty put it. Returns an :class:`_Outcome`.
+    """
     iterations = 0
-    while not converged and iterations < max_iter:
-        previous = np.sqrt(merit(current, c))
-        current, steps = squarem_step(current, c)
+    while iterations < max_iter:
+        previous = np.sqrt(solver.merit(iterate, c))
+        iterate, duals, steps = solver.squarem_cycle(iterate, c, duals)
         iterations += steps
-        rank_error = relative_rank_error(current)
-        relative_change = abs(previous - np.sqrt(merit(current, c))) / max(1.0, previous)
-        if rank_error <= rank_tol and relative_change <= tol:
-            converged = True
-        elif rank_error > rank_tol:
-            c = min(c * (4.0 if rank_error > 0.1 * rank else 1.2), 1e12)
+        rank_error = iterate.rank_error
+        change = _relative_change(previous, np.sqrt(solver.merit(iterate, c)))
+        if rank_error <= rank_tol and change <= tol:
+            return _Outcome(iterate, duals, c, iterations, _CONVERGED)
+        c = _next_penalty(c, rank_error, solver.rank, rank_tol)
+    return _Outcome(iterate, duals, c, iterations, _MAX_ITER_REACHED)
 
-    edm = current[0]
+
+def _result(solver, outcome, scale):
+    """Return ``outcome`` as a :class:`NearestEDMResult` in the units of the target."""
+    edm = outcome.iterate.edm
     edm = 0.5 * (edm + edm.T) * scale
     np.fill_diagonal(edm, 0.0)
     return NearestEDMResult(
-        edm=edm, points=classical_mds(edm, rank), objective=objective(edm / scale) * scale ** 2,
-        rank_error=float(rank_error), iterations=iterations,
-        inner_iterations=state['inner_iterations'], kkt_residual=state['kkt_residual'] * scale,
-        penalty_parameter=c * scale,
-        converged=bool(converged))
+        edm=edm, points=classical_mds(edm, solver.rank),
+        objective=solver.objective(edm / scale) * scale ** 2,
+        rank_error=float(outcome.iterate.rank_error), iterations=outcome.iterations,
+        inner_iterations=outcome.duals.inner_iterations,
+        kkt_residual=outcome.duals.kkt_residual * scale,
+        penalty_parameter=outcome.penalty_parameter * scale,
+        converged=outcome.status != _MAX_ITER_REACHED, status=outcome.status,
+        message=_MESSAGES[outcome.status])
+
+
+def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1e-7,
+                rank_tol=1e-8, max_iter=300, tau=0.1, penalty_parameter=None,
+                inner_tol=1e-9):
+    """
+    Nearest EDM of embedding dimension ``rank`` to a partly known squared-distance matrix.
+
+    Parameters
+    ----------
+    target : ndarray, shape (n, n), symmetric
+        G, squared distances (m^2 for ranges in metres). Entries with zero weight that are
+        not fixed are ignored (they may be NaN).
+    weights : ndarray, shape (n, n), symmetric, >= 0, optional
+        H, the weight of each entry of G; ones by default. Use 0 for unknown entries.
+    rank : int
+        Embedding dimension r (3 for space, 2 for a plane).
+    fixed : ndarray of bool, shape (n, n), symmetric, optional
+        Entries of D held equal to G (e.g. known anchor distances or squared arm lengths).
+    initial : ndarray, shape (n, n), optional
+        Starting EDM D^0 of rank <= r (a warm start), units of ``target``, from which the
+        penalty iterations start with c = 1. Without one they start from the convex
+        relaxation (c = 0).
+    tol : float
+        Stop when the relative change of ``sqrt(f + c p)`` falls below ``tol`` ...
+    rank_tol : float
+        ... and the relative rank error ``p(D) / trace(-JDJ)`` is below ``rank_tol``.
+    max_iter : int
+        Outer iterations (MM steps) at most; a SQUAREM cycle of 2 or 3 steps may pass it.
+    tau : float
+        Floor of the majorization weights ``w_i = max(tau, max_j H_ij)``.
+    penalty_parameter : float, optional
+        Initial c, units of ``target``. By default from the rank penalty ``p(D)`` of the
+        convex solution, clamped to [1, 1e3] in the scaled problem (1 from a warm start);
+        multiplied by 4 while the rank error is above ``0.1 * rank`` and by 1.2 while it is
+        above ``rank_tol``, up to 1e12 (scaled).
+    inner_tol : float
+        Relative tolerance of the convex subproblem: fixed entries are held to about this
+        fraction of the largest squared distance (1e-9: under a micrometre on a 40 m boom).
+
+    Returns
+    -------
+    NearestEDMResult
+        ``status`` is 1 (converged: rank error <= ``rank_tol`` and relative change
+        <= ``tol``) or 0 (``max_iter`` reached); ``converged`` is ``status > 0``. A convex
+        relaxation already of rank r is iterated on until it too stops moving: its first
+        SQUAREM cycle is its minimiser only when every weight is equal and >= ``tau``.
+
+    Notes
+    -----
+    The problem is solved in units where the largest known squared distance is 1; results
+    are returned in the units of ``target``.
+
+    """
+    target, weights, fixed, known = _checked_input(target, weights, fixed, rank)
+    goal, scale = _scaled_goal(target, known)
+    solver = _PenaltySolver(goal, weights, fixed, rank, tau, inner_tol)
+    iterate, duals, c = _start(solver, known, initial, scale, penalty_parameter)
+    outcome = _penalty_iterations(solver, iterate, duals, c, tol, rank_tol, max_iter)
+    return _result(solver, outcome, scale)
