@@ -24,7 +24,7 @@ MODEL = CONFIG.model()
 
 
 def message_of(ranges):
-    """The name and position of a ``uwb/ranges`` message of tag-anchor ranges (p, m)."""
+    """Return the name and position of a ``uwb/ranges`` message of tag-anchor ranges (p, m)."""
     return list(CONFIG.link_names), list(np.asarray(ranges, dtype=float).ravel())
 
 
