@@ -16,7 +16,7 @@ from pathlib import Path
 
 from epp_ros.core import BoomModel, PostureEstimator, RANGE_METHODS
 from epp_ros.core.simulate import random_posture, RangeNoise, truck_pump, working_cycle, xie3dim
-from epp_ros.tools.bench import method_estimate
+from epp_ros.tools.experiments import method_estimate
 import numpy as np
 import pytest
 import yaml

@@ -18,7 +18,7 @@ from epp_ros.core.bounds import crlb, fisher_information
 from epp_ros.core.measurements import Measurements, Residuals, SensorNoise
 from epp_ros.core.simulate import (AngleNoise, observe, random_posture, RangeNoise, truck_pump,
                                    working_cycle)
-from epp_ros.tools.bench import method_estimate
+from epp_ros.tools.experiments import method_estimate
 from monte_carlo import assert_mse_at_bound
 import numpy as np
 import pytest

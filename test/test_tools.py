@@ -19,7 +19,7 @@ from pathlib import Path
 import subprocess
 import sys
 
-from epp_ros.tools import bench, demo, field_bench
+from epp_ros.tools import bench, demo, experiments, field_bench, reports
 import numpy as np
 import pytest
 
@@ -95,6 +95,34 @@ def test_bench_paper_writes_tables_json_and_plots(tmp_path, capsys):
                and row['rmse_same_posture_m'] > 0 for row in targets)
     for name in ('rmse_vs_eta.png', 'rmse_vs_sigma.png'):
         assert (out / name).read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+
+
+def test_the_authors_cepp_solves_in_the_true_plane_from_cold_starts():
+    from epp_ros.core.plane import fit_slew
+    from epp_ros.core.simulate import xie3dim
+    model, truth = xie3dim()
+    authors = experiments.TruthPlaneCEPP(model, truth, sigma=1.0)
+    frames = experiments.xie3dim_frames(model, truth, 5, seed=1)
+    rmses, lengths, _ = experiments.run_frames(authors, frames, [truth] * 5, cold=True)
+    assert len(authors.slews) == 5 and authors.slew_error() < 1e-9
+    np.testing.assert_allclose(authors.slews, fit_slew(truth, model.base), atol=1e-9)
+    assert np.all(rmses < 5.0) and np.all(lengths < 1e-4)     # CEPP holds the lengths
+
+
+def test_xie3dim_gives_the_mean_and_rms_next_to_the_published_means_of_3000_trials():
+    variants = [v for v in experiments.PAPER_XIE3DIM if v.truth_plane or v.method == 'srls']
+    report = experiments.xie3dim_experiment(variants, 4, seed=0)
+    assert [row.method for row in report.rows] == [v.label for v in variants]
+    for row in report.rows:
+        assert 0.0 < row.mean_rmse_m <= row.rmse_m
+        assert row.published.trials == 3000
+    assert [row.published.mean_rmse_m for row in report.rows] == [0.947, 0.947, 2.27]
+    assert report.truth_plane_slew_error_rad < 1e-9
+    text = reports.markdown(report)
+    assert 'mean RMSE of 3,000 trials' in text and '0.947 (EMBED/CEPP); RMS 0.997' in text
+    assert 'one trial' not in text
+    with pytest.raises(TypeError):
+        reports.markdown({'suite': 'xie3dim'})
 
 
 def test_bench_refuses_tpsm_where_no_angles_are_simulated():

@@ -20,6 +20,7 @@ transport takes them; this process reads them with the driver's own path
 (:class:`~epp_ros.uwb.source.LineSource` and :class:`~epp_ros.uwb.decoder.LineDecoder`).
 The child's CPU is not counted. No ROS.
 """
+from dataclasses import dataclass
 import os
 import socket
 import subprocess
@@ -31,7 +32,8 @@ import tty
 from epp_ros.uwb.decoder import LineDecoder
 from epp_ros.uwb.source import LineSource
 
-__all__ = ['measure_reading', 'run_driver_bench', 'TRANSPORTS']
+__all__ = ['measure_reading', 'run_driver_bench', 'DriverReport', 'run', 'markdown',
+           'TRANSPORTS']
 
 TRANSPORTS = ('tcp', 'pty')
 DEFAULT_LINE = '{"tag":"1","links":[{"A":"1782","R":"2.300"},{"A":"1783","R":"4.125"}]}'
@@ -126,6 +128,19 @@ def run_driver_bench(count=20000, transports=TRANSPORTS):
     return [measure_reading(kind, count) for kind in transports]
 
 
+@dataclass
+class DriverReport:
+    """The report of ``epp_bench driver``: :func:`measure_reading`'s dict per transport."""
+
+    rows: list
+    suite: str = 'driver'
+
+
+def run(count=20000, transports=TRANSPORTS):
+    """Measure every transport; the :class:`DriverReport`."""
+    return DriverReport(run_driver_bench(count, transports))
+
+
 def format_rows(rows):
     """Format :func:`run_driver_bench` rows as a plain table."""
     lines = ['transport   lines   seconds   lines/s   CPU ms / 1000 lines   reads']
@@ -133,6 +148,12 @@ def format_rows(rows):
               f"{r['lines_per_s']:>9.0f} {r['cpu_ms_per_1000_lines']:>21.1f} {r['reads']:>7}"
               for r in rows]
     return '\n'.join(lines)
+
+
+def markdown(report):
+    """Format a :class:`DriverReport`: a heading and the plain table."""
+    return '\n'.join(['### UWB driver: lines read per second over TCP and a pty', '',
+                      '```', format_rows(report.rows), '```'])
 
 
 if __name__ == '__main__':

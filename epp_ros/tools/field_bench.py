@@ -32,6 +32,7 @@ noise (every link measured, none blocked; ``sigma0 + k r`` per link):
 
 Offsets and moved anchors are calibration's (no target here): they must not diverge.
 """
+from dataclasses import dataclass
 import time
 
 from epp_ros.core import PostureEstimator
@@ -43,7 +44,7 @@ from epp_ros.core.simulate import (field_effects, FieldEffects, JoystickMotion, 
 import numpy as np
 from scipy.optimize import least_squares
 
-__all__ = ['CASES', 'run', 'markdown']
+__all__ = ['CASES', 'FieldReport', 'run', 'markdown']
 
 RATE = 10.0                     #: frames per second
 WARM_UP_S = 5.0                 #: seconds not scored: a cold start, the noise being learned
@@ -250,21 +251,51 @@ def cost_row(seconds, seed):
             'largest_difference_rad': float(np.max(agree))}
 
 
+@dataclass
+class FieldReport:
+    """
+    The report of ``epp_bench field`` (see :func:`run`).
+
+    Attributes
+    ----------
+    seconds : float
+        Per run of a case.
+    seeds : int
+        Runs per case.
+    rows : list of dict
+        :func:`field_rows`.
+    posterior : dict
+        :func:`posterior_row`.
+    authors : list of dict
+        :func:`authors_rows`.
+    cost : dict
+        :func:`cost_row`.
+
+    """
+
+    seconds: float
+    seeds: int
+    rows: list
+    posterior: dict
+    authors: list
+    cost: dict
+    suite: str = 'field'
+
+
 def run(seconds=60.0, seeds=2, seed=0, trials=100):
-    """Run every part; the report of ``epp_bench field``."""
-    return {'suite': 'field', 'seconds': seconds, 'seeds': seeds,
-            'rows': field_rows(seconds, seeds), 'posterior': posterior_row(seconds, seeds),
-            'authors': authors_rows(trials, seed), 'cost': cost_row(seconds, seed)}
+    """Run every part; the :class:`FieldReport` of ``epp_bench field``."""
+    return FieldReport(seconds, seeds, field_rows(seconds, seeds), posterior_row(seconds, seeds),
+                       authors_rows(trials, seed), cost_row(seconds, seed))
 
 
 def markdown(report):
     """Return the report as the README's tables."""
     lines = [f'### Field effects, defaults: RMSE / clean line-of-sight CRLB at the true noise '
-             f'({report["seeds"]} x {report["seconds"]:g} s per case at {RATE:g} Hz, first '
+             f'({report.seeds} x {report.seconds:g} s per case at {RATE:g} Hz, first '
              f'{WARM_UP_S:g} s not scored)', '',
              '| case | CRLB [m] | ' + ' | '.join(METHODS) + ' | valid (chain / cepp / track) |',
              '|---|---|' + '---|' * len(METHODS) + '---|']
-    for row in report['rows']:
+    for row in report.rows:
         cells = []
         for method in METHODS:
             target = TARGETS.get(method)
@@ -281,28 +312,28 @@ def markdown(report):
               'more than 5 bounds + 0.5 m off. Offsets and moved anchors: no target.', '']
     lines += ['The same over the frames each method published (valid):', '',
               '| case | ' + ' | '.join(METHODS) + ' |', '|---|' + '---|' * len(METHODS)]
-    for row in report['rows']:
+    for row in report.rows:
         cells = [f'{row[m]["published_ratio"]:.2f}' for m in METHODS]
         lines.append(f'| {row["case"]} | ' + ' | '.join(cells) + ' |')
     lines.append('')
-    for row in report['rows']:
+    for row in report.rows:
         if row['heard'] < 1.0:      # a silent tag: no single frame determines its joint
             lines.append(f'{row["case"]}: on the {100 * row["heard"]:.0f} % of frames with '
                          'every tag heard, ' + ', '.join(
                              f'{m} {row[m]["heard_ratio"]:.2f}' for m in METHODS) + '.')
     lines.append('')
-    posterior = report['posterior']
+    posterior = report.posterior
     lines += [f'Track where its motion model holds (``cv``, {posterior["frames"]} frames): '
               f'{posterior["posterior_ratio"]:.2f} x the posterior CRLB, '
               f'{posterior["single_ratio"]:.2f} x the single-frame CRLB (the posterior bound '
               f'is {posterior["posterior_over_single"]:.2f} x the single-frame one).', '']
     lines += ["| authors' geometry, new estimator per frame | CRLB [m] | chain | cepp |",
               '|---|---|---|---|']
-    for row in report['authors']:
+    for row in report.authors:
         lines.append(f'| sigma {row["sigma_m"]:g} m | {row["bound_m"]:.3f} | '
                      + ' | '.join(f'{row[m]["ratio"]:.2f} ({row[m]["gross"]} gross)'
                                   for m in ('chain', 'cepp')) + ' |')
-    cost = report['cost']
+    cost = report.cost
     lines += ['', f'Cost per frame (median, clean case, one run): chain {cost["chain_ms"]:.2f} '
               f'ms, track {cost["track_ms"]:.2f} ms ({cost["track_ms"] / cost["chain_ms"]:.2f} '
               f'x), cepp {cost["cepp_ms"]:.2f} ms. One warm fit: chain '

@@ -42,7 +42,7 @@ from epp_ros.uwb.formats import Cycle, FORMATS
 from epp_ros.uwb.frames import FrameAssembler
 import yaml
 
-__all__ = ['fuzz_protocol', 'fuzz_field', 'protocol_seeds', 'run', 'markdown',
+__all__ = ['fuzz_protocol', 'fuzz_field', 'protocol_seeds', 'FuzzReport', 'run', 'markdown',
            'LINE_MUTATIONS', 'VALUE_MUTATIONS']
 
 #: Distinct escapes (exception type and where it was raised) kept per row; all are counted.
@@ -390,8 +390,35 @@ def fuzz_field(field, inputs, seed=0, base=None):
             'slowest_s': slowest[0], 'slowest_input': slowest[1]}
 
 
+@dataclasses.dataclass
+class FuzzReport:
+    """
+    The report of ``epp_bench fuzz`` (see :func:`run`).
+
+    Attributes
+    ----------
+    inputs : int
+        Per protocol and per field.
+    seed : int
+    protocols : list of dict
+        :func:`fuzz_protocol` rows.
+    fields : list of dict
+        :func:`fuzz_field` rows.
+    escaped : int
+        Exceptions that escaped, in all.
+
+    """
+
+    inputs: int
+    seed: int
+    protocols: list
+    fields: list
+    escaped: int
+    suite: str = 'fuzz'
+
+
 def run(inputs=100_000, seed=0, progress=None, protocols=None, fields=None):
-    """Fuzz every protocol (and ``auto``) and every configuration field; one report."""
+    """Fuzz every protocol (and ``auto``) and every configuration field; a :class:`FuzzReport`."""
     protocol_rows, field_rows = [], []
     for name in protocols or [*FORMATS, 'auto']:
         protocol_rows.append(fuzz_protocol(name, inputs, seed))
@@ -403,26 +430,25 @@ def run(inputs=100_000, seed=0, progress=None, protocols=None, fields=None):
         if progress:
             progress(f'fuzz {field}: {field_rows[-1]["escaped"]} escaped')
     escaped = sum(row['escaped'] for row in protocol_rows + field_rows)
-    return {'suite': 'fuzz', 'inputs': inputs, 'seed': seed, 'protocols': protocol_rows,
-            'fields': field_rows, 'escaped': escaped}
+    return FuzzReport(inputs, seed, protocol_rows, field_rows, escaped)
 
 
 def markdown(report, traceback_details=True):
     """Format a :func:`run` report as two markdown tables, the escapes and their tracebacks."""
-    lines = [f'### Fuzz: {report["inputs"]} generated inputs per protocol and per '
-             f'configuration field (seed {report["seed"]})', '',
+    lines = [f'### Fuzz: {report.inputs} generated inputs per protocol and per '
+             f'configuration field (seed {report.seed})', '',
              '| protocol | inputs | gave records | frames closed | escaped | s |',
              '|---|---|---|---|---|---|']
     lines += [f'| {r["protocol"]} | {r["inputs"]} | {r["parsed"]} | {r["frames"]} | '
-              f'{r["escaped"]} | {r["seconds"]:.1f} |' for r in report['protocols']]
+              f'{r["escaped"]} | {r["seconds"]:.1f} |' for r in report.protocols]
     lines += ['', '| configuration field | inputs | accepted | ConfigError | escaped | s | '
               'slowest input [s] |', '|---|---|---|---|---|---|---|']
     lines += [f'| {r["field"]} | {r["inputs"]} | {r["accepted"]} | {r["refused"]} | '
               f'{r["escaped"]} | {r["seconds"]:.1f} | {r["slowest_s"]:.3f} '
-              f'({r["slowest_input"]}) |' for r in report['fields']]
-    lines += ['', f'Exceptions escaping: {report["escaped"]}.']
+              f'({r["slowest_input"]}) |' for r in report.fields]
+    lines += ['', f'Exceptions escaping: {report.escaped}.']
     escapes = [(row.get('protocol') or row['field'], escape)
-               for row in report['protocols'] + report['fields'] for escape in row['escapes']]
+               for row in report.protocols + report.fields for escape in row['escapes']]
     if escapes:
         lines += ['', '| protocol or field | exception, raised at | count | first input '
                   '(its mutation) |', '|---|---|---|---|']

@@ -42,8 +42,8 @@ from epp_ros.core.model import BoomModel
 from epp_ros.core.simulate import RangeNoise, truck_pump, working_cycle
 import numpy as np
 
-__all__ = ['CASES', 'Stream', 'FrameLog', 'CaseResult', 'MethodSummary', 'build_streams',
-           'run_stream', 'score_case', 'summarize_method', 'run', 'markdown']
+__all__ = ['CASES', 'Stream', 'FrameLog', 'CaseResult', 'MethodSummary', 'IntegrityReport',
+           'build_streams', 'run_stream', 'score_case', 'summarize_method', 'run', 'markdown']
 
 RATE = 10.0                         #: frames per second
 SIGMA = 0.1                         #: range noise, and what the estimators are told, metres
@@ -545,9 +545,44 @@ def summarize_method(method, results):
         1e3 * float(np.median(seconds)), 1e3 * float(np.percentile(seconds, 99)))
 
 
+@dataclass
+class IntegrityReport:
+    """
+    The report of ``epp_bench integrity`` (see :func:`run`).
+
+    Attributes
+    ----------
+    seconds : float
+    seed : int
+    sigma_m, dropout : float
+    cases : dict
+        Name -> description.
+    rows : list of dict
+        :class:`MethodSummary` per method, with ``false_rejection_clean`` and
+        ``false_rejection_broken``.
+    case_rows : list of dict
+        :class:`CaseResult` per method and case, without the frame times.
+    wrong_frames, slow_recoveries, rejections : list of dict
+        See :func:`score_case`.
+
+    """
+
+    seconds: float
+    seed: int
+    sigma_m: float
+    dropout: float
+    cases: dict
+    rows: list = field(default_factory=list)
+    case_rows: list = field(default_factory=list)
+    wrong_frames: list = field(default_factory=list)
+    slow_recoveries: list = field(default_factory=list)
+    rejections: list = field(default_factory=list)
+    suite: str = 'integrity'
+
+
 def run(methods, seconds=60.0, seed=0, options=None, cases=CASES):
     """
-    Run the integrity suite; return its report (a JSON-ready dict).
+    Run the integrity suite; return its :class:`IntegrityReport`.
 
     Parameters
     ----------
@@ -562,22 +597,10 @@ def run(methods, seconds=60.0, seed=0, options=None, cases=CASES):
     cases : sequence of str
         Of :data:`CASES`.
 
-    Returns
-    -------
-    dict
-        ``suite`` ('integrity'), ``seconds``, ``seed``, ``sigma_m``, ``dropout``,
-        ``cases`` (name -> description), ``rows`` (:class:`MethodSummary` per method,
-        with ``false_rejection_clean`` and ``false_rejection_broken``), ``case_rows``
-        (:class:`CaseResult` per method and case, without the frame times),
-        ``wrong_frames``, ``slow_recoveries`` and ``rejections`` (see
-        :func:`score_case`).
-
     """
     streams = build_streams(seconds, seed, cases)
-    report = {'suite': 'integrity', 'seconds': seconds, 'seed': seed, 'sigma_m': SIGMA,
-              'dropout': DROPOUT, 'cases': {case: DESCRIPTIONS[case] for case in cases},
-              'rows': [], 'case_rows': [], 'wrong_frames': [], 'slow_recoveries': [],
-              'rejections': []}
+    report = IntegrityReport(seconds, seed, SIGMA, DROPOUT,
+                             {case: DESCRIPTIONS[case] for case in cases})
     for method in methods:
         results = []
         for stream in streams:
@@ -585,13 +608,13 @@ def run(methods, seconds=60.0, seed=0, options=None, cases=CASES):
                                                                     options or {}))
             results.append(result)
             for key, items in details.items():
-                report[key].extend(items)
+                getattr(report, key).extend(items)
         summary = summarize_method(method, results)
-        report['rows'].append(dict(asdict(summary),
-                                   false_rejection_clean=summary.false_rejection_clean,
-                                   false_rejection_broken=summary.false_rejection_broken))
-        report['case_rows'] += [{key: value for key, value in asdict(result).items()
-                                 if key != 'seconds'} for result in results]
+        report.rows.append(dict(asdict(summary),
+                                false_rejection_clean=summary.false_rejection_clean,
+                                false_rejection_broken=summary.false_rejection_broken))
+        report.case_rows += [{key: value for key, value in asdict(result).items()
+                              if key != 'seconds'} for result in results]
     return report
 
 
@@ -612,13 +635,13 @@ def _case_cell(row):
 
 def markdown(report):
     """Return the report as markdown: per-method targets, per-case table, frames missing them."""
-    lines = [f'### Integrity: truck pump, working cycle at 10 Hz, sigma = {report["sigma_m"]} '
-             f'm, {report["dropout"]:.0%} dropouts, {report["seconds"]:g} s per stream, '
-             f'seed {report["seed"]}', '',
+    lines = [f'### Integrity: truck pump, working cycle at 10 Hz, sigma = {report.sigma_m} '
+             f'm, {report.dropout:.0%} dropouts, {report.seconds:g} s per stream, '
+             f'seed {report.seed}', '',
              '| method | wrong & valid [frames] | recovery worst [s] | median [s] | '
              'not recovered | false rejections: clean stream | broken streams | '
              'ms/frame p50 | p99 |', '|---|---|---|---|---|---|---|---|---|']
-    for row in report['rows']:
+    for row in report.rows:
         lines.append(
             f'| {row["method"]} | {row["wrong_valid"]} of {row["frames"]} | '
             f'{_seconds(row["recovery_worst_s"])} | {_seconds(row["recovery_median_s"])} | '
@@ -630,11 +653,11 @@ def markdown(report):
     lines += ['', f'Targets: no frame valid with a joint > {WRONG_METRES:g} m and > '
               f'{WRONG_SIGMAS:g} predicted sigma off; recovery <= {RECOVERY_TARGET_S:g} s; '
               f'false rejections <= {FALSE_REJECTION_TARGET:.1%}.', '']
-    methods = [row['method'] for row in report['rows']]
+    methods = [row['method'] for row in report.rows]
     lines += ['| case | frames | ' + ' | '.join(methods) + ' |',
               '|---|---|' + '---|' * len(methods)]
-    cells = {(row['method'], row['case']): row for row in report['case_rows']}
-    for case, description in report['cases'].items():
+    cells = {(row['method'], row['case']): row for row in report.case_rows}
+    for case, description in report.cases.items():
         frames = cells[methods[0], case]['frames'] if methods else 0
         lines.append(f'| {case}: {description} | {frames} | '
                      + ' | '.join(_case_cell(cells[method, case]) for method in methods)
@@ -661,9 +684,9 @@ def _detail_lines(report):
     """Bullets for the frames that miss a target."""
     lines = []
     firsts = {}
-    for d in report['wrong_frames']:
+    for d in report.wrong_frames:
         firsts.setdefault((d['method'], d['case']), d)
-    wrong = [row for row in report['case_rows'] if row['wrong_valid']]
+    wrong = [row for row in report.case_rows if row['wrong_valid']]
     if wrong:
         lines += ['', 'Wrong and valid (the first of each method and case):']
     for row in wrong:
@@ -674,14 +697,14 @@ def _detail_lines(report):
                      f'({_index_runs(row["wrong_indices"])}); frame {d["frame"]} '
                      f'({d["stamp_s"]:.1f} s): joints {joints}; {d["status"]}: '
                      f'{d["message"]}')
-    if report['slow_recoveries']:
+    if report.slow_recoveries:
         lines += ['', f'Recoveries over {RECOVERY_TARGET_S:g} s:']
         lines += [f'- {d["method"]} {d["case"]} frame {d["frame"]} ({d["label"]}): '
                   + ('not recovered before the next' if d['recovery_s'] is None
                      else f'{d["recovery_s"]:.1f} s')
                   + f'; the next {RECOVERY_TARGET_S:g} s: {d["statuses_after"]}'
-                  for d in report['slow_recoveries']]
-    why = {row['method']: row['rejected_statuses'] for row in report['case_rows']
+                  for d in report.slow_recoveries]
+    why = {row['method']: row['rejected_statuses'] for row in report.case_rows
            if row['case'] == 'clean' and row['rejected']}
     if why:
         lines += ['', 'Clean-stream frames rejected, by status: ' + '; '.join(

@@ -35,6 +35,7 @@ The resident set (VmRSS of ``/proc/<pid>/status``) is read at the start, after w
 live. The target is nothing lost and the end within 10 % of the warm-up value.
 """
 from collections import Counter
+from dataclasses import dataclass
 import math
 import os
 from pathlib import Path
@@ -53,7 +54,8 @@ from epp_ros.uwb.emulation import cycle_lines
 from epp_ros.uwb.frames import FrameAssembler
 import numpy as np
 
-__all__ = ['rss_mb', 'soak_in_process', 'soak_live', 'run', 'markdown', 'RSS_TOLERANCE']
+__all__ = ['rss_mb', 'soak_in_process', 'soak_live', 'SoakReport', 'run', 'markdown',
+           'RSS_TOLERANCE']
 
 RATE = 10.0                 #: ranging cycles per second of the simulated pump
 WARMUP = 0.01               #: fraction of the frames after which RSS is the reference
@@ -317,9 +319,33 @@ def soak_live(frames, method='chain', seed=0, progress=None, timeout=None):
             'estimator_log_tail': log_tail if not complete or counts['errors'] else ''}
 
 
+@dataclass
+class SoakReport:
+    """
+    The report of ``epp_bench soak`` (see :func:`run`).
+
+    Attributes
+    ----------
+    method : str
+    in_process : dict
+        :func:`soak_in_process`.
+    live : dict or None
+        :func:`soak_live`; None when not run.
+    summary : dict
+        The headline figures (see :func:`run`).
+
+    """
+
+    method: str
+    in_process: dict
+    live: dict | None
+    summary: dict
+    suite: str = 'soak'
+
+
 def run(frames=1_000_000, live_frames=100_000, method='chain', seed=0, progress=None):
     """
-    Run both soaks; the report's ``summary`` holds the headline figures.
+    Run both soaks; the :class:`SoakReport`'s ``summary`` holds the headline figures.
 
     ``summary``: ``frames`` and ``frames_lost`` over both parts, ``rss_start_mb``,
     ``rss_warm_mb``, ``rss_end_mb`` and ``rss_growth_pct`` of the in-process part (this
@@ -344,8 +370,7 @@ def run(frames=1_000_000, live_frames=100_000, method='chain', seed=0, progress=
                            ('rss_start_mb', 'rss_warm_mb', 'rss_end_mb', 'rss_growth_pct')}})
     summary['rss_ok'] = all(part['rss_growth_pct'] is not None and
                             abs(part['rss_growth_pct']) <= 100 * RSS_TOLERANCE for part in parts)
-    return {'suite': 'soak', 'method': method, 'in_process': in_process, 'live': live,
-            'summary': summary}
+    return SoakReport(method, in_process, live, summary)
 
 
 def _mb(value):
@@ -358,12 +383,12 @@ def _percent(value):
 
 def markdown(report):
     """Format a :func:`run` report as a markdown table."""
-    lines = [f'### Soak: {report["method"]}, parser + assembler + estimator in-process, '
+    lines = [f'### Soak: {report.method}, parser + assembler + estimator in-process, '
              'and epp_bag play --fast through the live node', '',
              '| part | frames | decisions (postures / rejected) | frames lost | frames/s | '
              'RSS start [MB] | after warm-up | end | peak | end vs warm-up |',
              '|---|---|---|---|---|---|---|---|---|---|']
-    for name, part in (('in-process', report['in_process']), ('live node', report['live'])):
+    for name, part in (('in-process', report.in_process), ('live node', report.live)):
         if part is None:
             continue
         if name == 'in-process':
@@ -376,7 +401,7 @@ def markdown(report):
                      f'{part["frames_per_s"]:.0f} | {_mb(part["rss_start_mb"])} | '
                      f'{_mb(part["rss_warm_mb"])} | {_mb(part["rss_end_mb"])} | '
                      f'{_mb(part["rss_peak_mb"])} | {_percent(part["rss_growth_pct"])} |')
-    in_process = report['in_process']
+    in_process = report.in_process
     lines += ['', 'Frames lost: cycles sent that reached no decision (in-process), frames '
               'played that the node did not receive (live). Rejections are decisions.']
     if in_process['rejected']:
@@ -384,11 +409,11 @@ def markdown(report):
     if in_process['errors']:
         lines += [f'{in_process["errors"]} updates raised; the first:', '```',
                   in_process['first_error'].rstrip(), '```']
-    live = report['live']
+    live = report.live
     if live and not live['complete']:
         lines.append("The live part did not complete in time; the node's log ends:")
         lines += ['```', live['estimator_log_tail'].rstrip(), '```']
-    verdict = 'met' if report['summary']['frames_lost'] == 0 and report['summary']['rss_ok'] \
+    verdict = 'met' if report.summary['frames_lost'] == 0 and report.summary['rss_ok'] \
         else 'NOT met'
     lines.append(f'Target (nothing lost, RSS at the end within {RSS_TOLERANCE:.0%} of warm-up): '
                  f'{verdict}.')
