@@ -18,7 +18,7 @@ import subprocess
 import sys
 
 from epp_ros.config import PUMP_PARAMETERS
-from epp_ros.tools import bench, fuzz_bench
+from epp_ros.tools import bench, fuzz_bench, reports
 from epp_ros.uwb.formats import FORMATS
 import pytest
 
@@ -63,7 +63,7 @@ def test_only_config_errors_come_out_of_the_validation(field):
 
 def test_fuzz_report_names_every_protocol_and_field():
     report = fuzz_bench.run(20, seed=2, protocols=['json'], fields=['frame_id'])
-    text = fuzz_bench.markdown(report)
+    text = reports.markdown(report)
     assert '| json | 20 |' in text and '| frame_id | 20 |' in text
     assert 'Exceptions escaping: 0.' in text
 

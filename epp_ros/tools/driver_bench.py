@@ -32,8 +32,7 @@ import tty
 from epp_ros.uwb.decoder import LineDecoder
 from epp_ros.uwb.source import LineSource
 
-__all__ = ['measure_reading', 'run_driver_bench', 'DriverReport', 'run', 'markdown',
-           'TRANSPORTS']
+__all__ = ['measure_reading', 'run_driver_bench', 'DriverReport', 'run', 'TRANSPORTS']
 
 TRANSPORTS = ('tcp', 'pty')
 DEFAULT_LINE = '{"tag":"1","links":[{"A":"1782","R":"2.300"},{"A":"1783","R":"4.125"}]}'
@@ -141,20 +140,7 @@ def run(count=20000, transports=TRANSPORTS):
     return DriverReport(run_driver_bench(count, transports))
 
 
-def format_rows(rows):
-    """Format :func:`run_driver_bench` rows as a plain table."""
-    lines = ['transport   lines   seconds   lines/s   CPU ms / 1000 lines   reads']
-    lines += [f"{r['transport']:<9} {r['lines']:>7} {r['seconds']:>9.2f} "
-              f"{r['lines_per_s']:>9.0f} {r['cpu_ms_per_1000_lines']:>21.1f} {r['reads']:>7}"
-              for r in rows]
-    return '\n'.join(lines)
-
-
-def markdown(report):
-    """Format a :class:`DriverReport`: a heading and the plain table."""
-    return '\n'.join(['### UWB driver: lines read per second over TCP and a pty', '',
-                      '```', format_rows(report.rows), '```'])
-
-
 if __name__ == '__main__':
-    print(format_rows(run_driver_bench(int(sys.argv[1]) if len(sys.argv) > 1 else 20000)))
+    # reports imports this module; as a script, this one imports it only now: no circle
+    from epp_ros.tools.reports import driver_table
+    print(driver_table(run_driver_bench(int(sys.argv[1]) if len(sys.argv) > 1 else 20000)))

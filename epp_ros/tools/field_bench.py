@@ -44,7 +44,7 @@ from epp_ros.core.simulate import (field_effects, FieldEffects, JoystickMotion, 
 import numpy as np
 from scipy.optimize import least_squares
 
-__all__ = ['CASES', 'FieldReport', 'run', 'markdown']
+__all__ = ['CASES', 'FieldReport', 'run']
 
 RATE = 10.0                     #: frames per second
 WARM_UP_S = 5.0                 #: seconds not scored: a cold start, the noise being learned
@@ -145,38 +145,58 @@ def _ratio(squared, bounds):
     return float(np.sqrt(np.mean(squared) / np.mean(bounds ** 2)))
 
 
+def _case_runs(name, seconds, seeds):
+    """
+    Run a case once per seed.
+
+    Returns
+    -------
+    bounds : ndarray
+        The clean bound of each scored frame, metres, every run.
+    heard : ndarray of bool
+        Of those, the frames with every tag heard.
+    runs : dict
+        Per method, a list of :func:`run_case`'s results, one per run, each with its
+        ``gross``: frames more than 5 bounds + 0.5 m off.
+
+    """
+    bounds, heard, runs = [], [], {method: [] for method in METHODS}
+    for seed in range(seeds):
+        results, case_bounds, frames, _ = run_case(name, seconds, seed)
+        bounds.append(case_bounds)
+        heard.append([not f.silent.any() for f in frames if f.stamp >= WARM_UP_S])
+        for method in METHODS:
+            squared = results[method]['squared']
+            gross = int(np.sum(np.sqrt(squared) > 5 * case_bounds + 0.5))
+            runs[method].append(dict(results[method], gross=gross))
+    return np.concatenate(bounds), np.concatenate(heard), runs
+
+
+def _ratio_over(squared, bounds, frames):
+    """Return :func:`_ratio` over some frames (a boolean mask), NaN when there are none."""
+    return _ratio(squared[frames], bounds[frames]) if frames.any() else float('nan')
+
+
+def _method_cell(runs, bounds, heard):
+    """Return a method's figures in a case from its runs (see :func:`_case_runs`)."""
+    squared = np.concatenate([run['squared'] for run in runs])
+    published = np.concatenate([run['published'] for run in runs])
+    return {'ratio': _ratio(squared, bounds), 'heard_ratio': _ratio_over(squared, bounds, heard),
+            'published_ratio': _ratio_over(squared, bounds, published),
+            'valid': sum(run['valid'] for run in runs) / bounds.size,
+            'gross': sum(run['gross'] for run in runs)}
+
+
 def field_rows(seconds, seeds):
     """Ratio to the clean bound per case and method, pooled over seeds."""
     rows = []
     for name in CASES:
-        pooled = {method: [] for method in METHODS}
-        shown = {method: [] for method in METHODS}
-        valid, gross = dict.fromkeys(METHODS, 0), dict.fromkeys(METHODS, 0)
-        bounds, heard = [], []
-        for seed in range(seeds):
-            results, case_bounds, frames, _ = run_case(name, seconds, seed)
-            bounds.append(case_bounds)
-            heard.append([not f.silent.any() for f in frames if f.stamp >= WARM_UP_S])
-            for method in METHODS:
-                pooled[method].append(results[method]['squared'])
-                shown[method].append(results[method]['published'])
-                valid[method] += results[method]['valid']
-                gross[method] += int(np.sum(np.sqrt(results[method]['squared'])
-                                            > 5 * case_bounds + 0.5))
-        bounds, heard = np.concatenate(bounds), np.concatenate(heard)
-        squared = {method: np.concatenate(pooled[method]) for method in METHODS}
-        shown = {method: np.concatenate(shown[method]) for method in METHODS}
+        bounds, heard, runs = _case_runs(name, seconds, seeds)
         rows.append({'case': name, 'frames': int(bounds.size),
                      'bound_m': float(np.sqrt(np.mean(bounds ** 2))),
                      'heard': float(np.mean(heard)),
-                     **{method: {'ratio': _ratio(squared[method], bounds),
-                                 'heard_ratio': _ratio(squared[method][heard], bounds[heard])
-                                 if heard.any() else float('nan'),
-                                 'published_ratio': _ratio(squared[method][shown[method]],
-                                                           bounds[shown[method]])
-                                 if shown[method].any() else float('nan'),
-                                 'valid': valid[method] / bounds.size,
-                                 'gross': gross[method]} for method in METHODS}})
+                     **{method: _method_cell(runs[method], bounds, heard)
+                        for method in METHODS}})
     return rows
 
 
@@ -286,58 +306,3 @@ def run(seconds=60.0, seeds=2, seed=0, trials=100):
     """Run every part; the :class:`FieldReport` of ``epp_bench field``."""
     return FieldReport(seconds, seeds, field_rows(seconds, seeds), posterior_row(seconds, seeds),
                        authors_rows(trials, seed), cost_row(seconds, seed))
-
-
-def markdown(report):
-    """Return the report as the README's tables."""
-    lines = [f'### Field effects, defaults: RMSE / clean line-of-sight CRLB at the true noise '
-             f'({report.seeds} x {report.seconds:g} s per case at {RATE:g} Hz, first '
-             f'{WARM_UP_S:g} s not scored)', '',
-             '| case | CRLB [m] | ' + ' | '.join(METHODS) + ' | valid (chain / cepp / track) |',
-             '|---|---|' + '---|' * len(METHODS) + '---|']
-    for row in report.rows:
-        cells = []
-        for method in METHODS:
-            target = TARGETS.get(method)
-            over = (target is not None and row['case'] not in CALIBRATION
-                    and row[method]['ratio'] > target)
-            gross = row[method]['gross']
-            cells.append(f'{row[method]["ratio"]:.2f}' + (' (!)' if over else '')
-                         + (f' [{gross} gross]' if gross else ''))
-        valid = ' / '.join(f'{100 * row[m]["valid"]:.0f} %' for m in ('chain', 'cepp', 'track'))
-        lines.append(f'| {row["case"]} | {row["bound_m"]:.3f} | ' + ' | '.join(cells)
-                     + f' | {valid} |')
-    lines += ['', f'Targets: chain <= {TARGETS["chain"]}, cepp <= {TARGETS["cepp"]}, track <= '
-              f'{TARGETS["track"]} (track on smooth cycles); (!) misses one; gross: frames '
-              'more than 5 bounds + 0.5 m off. Offsets and moved anchors: no target.', '']
-    lines += ['The same over the frames each method published (valid):', '',
-              '| case | ' + ' | '.join(METHODS) + ' |', '|---|' + '---|' * len(METHODS)]
-    for row in report.rows:
-        cells = [f'{row[m]["published_ratio"]:.2f}' for m in METHODS]
-        lines.append(f'| {row["case"]} | ' + ' | '.join(cells) + ' |')
-    lines.append('')
-    for row in report.rows:
-        if row['heard'] < 1.0:      # a silent tag: no single frame determines its joint
-            lines.append(f'{row["case"]}: on the {100 * row["heard"]:.0f} % of frames with '
-                         'every tag heard, ' + ', '.join(
-                             f'{m} {row[m]["heard_ratio"]:.2f}' for m in METHODS) + '.')
-    lines.append('')
-    posterior = report.posterior
-    lines += [f'Track where its motion model holds (``cv``, {posterior["frames"]} frames): '
-              f'{posterior["posterior_ratio"]:.2f} x the posterior CRLB, '
-              f'{posterior["single_ratio"]:.2f} x the single-frame CRLB (the posterior bound '
-              f'is {posterior["posterior_over_single"]:.2f} x the single-frame one).', '']
-    lines += ["| authors' geometry, new estimator per frame | CRLB [m] | chain | cepp |",
-              '|---|---|---|---|']
-    for row in report.authors:
-        lines.append(f'| sigma {row["sigma_m"]:g} m | {row["bound_m"]:.3f} | '
-                     + ' | '.join(f'{row[m]["ratio"]:.2f} ({row[m]["gross"]} gross)'
-                                  for m in ('chain', 'cepp')) + ' |')
-    cost = report.cost
-    lines += ['', f'Cost per frame (median, clean case, one run): chain {cost["chain_ms"]:.2f} '
-              f'ms, track {cost["track_ms"]:.2f} ms ({cost["track_ms"] / cost["chain_ms"]:.2f} '
-              f'x), cepp {cost["cepp_ms"]:.2f} ms. One warm fit: chain '
-              f'{cost["fit_ms"]:.3f} ms, scipy least_squares (lm) {cost["scipy_ms"]:.3f} ms '
-              f'({cost["fit_ms"] / cost["scipy_ms"]:.2f} x; answers within '
-              f'{cost["largest_difference_rad"]:.1e} rad).']
-    return '\n'.join(lines)

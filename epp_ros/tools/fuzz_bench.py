@@ -42,7 +42,7 @@ from epp_ros.uwb.formats import Cycle, FORMATS
 from epp_ros.uwb.frames import FrameAssembler
 import yaml
 
-__all__ = ['fuzz_protocol', 'fuzz_field', 'protocol_seeds', 'FuzzReport', 'run', 'markdown',
+__all__ = ['fuzz_protocol', 'fuzz_field', 'protocol_seeds', 'FuzzReport', 'run',
            'LINE_MUTATIONS', 'VALUE_MUTATIONS']
 
 #: Distinct escapes (exception type and where it was raised) kept per row; all are counted.
@@ -202,6 +202,12 @@ def _record_escape(escapes, kind, value, error):
                         'traceback': ''.join(traceback.format_exception(error))})
 
 
+def _mutated_line(mutate, rng, seeds):
+    """Mutate a random one of the real lines ``seeds`` (a splice also takes the others)."""
+    original = rng.choice(seeds)
+    return mutate(rng, original, seeds) if mutate is _splice else mutate(rng, original)
+
+
 def fuzz_protocol(name, inputs, seed=0):
     """
     Feed ``inputs`` generated lines of one protocol (or ``'auto'``) to decoder and assembler.
@@ -227,8 +233,7 @@ def fuzz_protocol(name, inputs, seed=0):
         kind, mutate = mutations[k % len(mutations)]
         line = None
         try:
-            original = rng.choice(seeds)
-            line = mutate(rng, original, seeds) if mutate is _splice else mutate(rng, original)
+            line = _mutated_line(mutate, rng, seeds)
             if name == 'auto' and k % 5 == 0:
                 decoder = LineDecoder('auto')            # detect afresh now and then
             records = decoder.decode(line)
@@ -346,6 +351,24 @@ VALUE_MUTATIONS = {'wrong type': _value_wrong_type, 'list of anything': _value_l
 _SLOW = {'huge list': 1000}
 
 
+def _split_mutations():
+    """Return :data:`VALUE_MUTATIONS` as (name, mutation) lists: the fast ones, the slow ones."""
+    fast = [(kind, mutate) for kind, mutate in VALUE_MUTATIONS.items() if kind not in _SLOW]
+    slow = [(kind, mutate) for kind, mutate in VALUE_MUTATIONS.items() if kind in _SLOW]
+    return fast, slow
+
+
+def _value_mutation(k, fast, slow):
+    """Return the ``k``-th input's mutation: the fast ones in turn, a slow one now and then."""
+    every = _SLOW['huge list']
+    return slow[k // every % len(slow)] if slow and k % every == 0 else fast[k % len(fast)]
+
+
+def _described(kind, value):
+    """Name a mutated value for ``slowest_input``: its mutation, and its length if it has one."""
+    return kind + (f', {len(value)} entries' if isinstance(value, (list, str)) else '')
+
+
 def fuzz_field(field, inputs, seed=0, base=None):
     """
     Validate ``inputs`` pump descriptions with one field mutated; only ConfigError may escape.
@@ -361,14 +384,12 @@ def fuzz_field(field, inputs, seed=0, base=None):
     rng = random.Random(f'{seed}:{field}')
     base = shipped_parameters() if base is None else base
     shipped = base.get(field, PUMP_PARAMETERS[field][0])
-    fast = [(kind, mutate) for kind, mutate in VALUE_MUTATIONS.items() if kind not in _SLOW]
-    slow = [(kind, mutate) for kind, mutate in VALUE_MUTATIONS.items() if kind in _SLOW]
+    fast, slow = _split_mutations()
     escapes, escaped, accepted, refused = [], 0, 0, 0
     slowest = (0.0, '')
     start = time.perf_counter()
     for k in range(inputs):
-        kind, mutate = slow[k // _SLOW['huge list'] % len(slow)] \
-            if slow and k % _SLOW['huge list'] == 0 else fast[k % len(fast)]
+        kind, mutate = _value_mutation(k, fast, slow)
         value = None
         begun = time.perf_counter()
         try:
@@ -383,8 +404,7 @@ def fuzz_field(field, inputs, seed=0, base=None):
             _record_escape(escapes, kind, value, error)
         took = time.perf_counter() - begun
         if took > slowest[0]:
-            size = f', {len(value)} entries' if isinstance(value, (list, str)) else ''
-            slowest = (took, f'{kind}{size}')
+            slowest = (took, _described(kind, value))
     return {'field': field, 'inputs': inputs, 'accepted': accepted, 'refused': refused,
             'escaped': escaped, 'escapes': escapes, 'seconds': time.perf_counter() - start,
             'slowest_s': slowest[0], 'slowest_input': slowest[1]}
@@ -431,33 +451,3 @@ def run(inputs=100_000, seed=0, progress=None, protocols=None, fields=None):
             progress(f'fuzz {field}: {field_rows[-1]["escaped"]} escaped')
     escaped = sum(row['escaped'] for row in protocol_rows + field_rows)
     return FuzzReport(inputs, seed, protocol_rows, field_rows, escaped)
-
-
-def markdown(report, traceback_details=True):
-    """Format a :func:`run` report as two markdown tables, the escapes and their tracebacks."""
-    lines = [f'### Fuzz: {report.inputs} generated inputs per protocol and per '
-             f'configuration field (seed {report.seed})', '',
-             '| protocol | inputs | gave records | frames closed | escaped | s |',
-             '|---|---|---|---|---|---|']
-    lines += [f'| {r["protocol"]} | {r["inputs"]} | {r["parsed"]} | {r["frames"]} | '
-              f'{r["escaped"]} | {r["seconds"]:.1f} |' for r in report.protocols]
-    lines += ['', '| configuration field | inputs | accepted | ConfigError | escaped | s | '
-              'slowest input [s] |', '|---|---|---|---|---|---|---|']
-    lines += [f'| {r["field"]} | {r["inputs"]} | {r["accepted"]} | {r["refused"]} | '
-              f'{r["escaped"]} | {r["seconds"]:.1f} | {r["slowest_s"]:.3f} '
-              f'({r["slowest_input"]}) |' for r in report.fields]
-    lines += ['', f'Exceptions escaping: {report.escaped}.']
-    escapes = [(row.get('protocol') or row['field'], escape)
-               for row in report.protocols + report.fields for escape in row['escapes']]
-    if escapes:
-        lines += ['', '| protocol or field | exception, raised at | count | first input '
-                  '(its mutation) |', '|---|---|---|---|']
-        lines += [f'| {name} | {e["error"]}, {e["where"]} | {e["count"]} | '
-                  f'`{e["input"][:120]}` ({e["mutation"]}) |' for name, e in escapes]
-        seen = set()
-        for name, escape in escapes:
-            if escape['where'] not in seen and traceback_details:
-                seen.add(escape['where'])
-                lines += ['', f'{name}: {escape["where"]}, input {escape["input"]}', '```',
-                          escape['traceback'].rstrip(), '```']
-    return '\n'.join(lines)

@@ -43,7 +43,7 @@ from epp_ros.core.simulate import RangeNoise, truck_pump, working_cycle
 import numpy as np
 
 __all__ = ['CASES', 'Stream', 'FrameLog', 'CaseResult', 'MethodSummary', 'IntegrityReport',
-           'build_streams', 'run_stream', 'score_case', 'summarize_method', 'run', 'markdown']
+           'build_streams', 'run_stream', 'score_case', 'summarize_method', 'run']
 
 RATE = 10.0                         #: frames per second
 SIGMA = 0.1                         #: range noise, and what the estimators are told, metres
@@ -528,20 +528,37 @@ class MethodSummary:
         return self.broken_rejected / max(self.broken_scored, 1)
 
 
+def _rejected_of_scored(results):
+    """Return the rejected and the scored frames of some :class:`CaseResult`, summed."""
+    return sum(r.rejected for r in results), sum(r.scored for r in results)
+
+
+def _recovery_figures(broken):
+    """
+    Return the recovery figures of the broken streams' :class:`CaseResult` list.
+
+    Returns
+    -------
+    events, unrecovered : int
+        Broken runs, and of those the ones not recovered before the next.
+    worst, median : float or None
+        Over the recovered runs, seconds; None when none recovered.
+
+    """
+    times = [t for r in broken for t in r.recoveries_s]
+    recovered = [t for t in times if t is not None]
+    worst, median = (max(recovered), float(np.median(recovered))) if recovered else (None, None)
+    return len(times), len(times) - len(recovered), worst, median
+
+
 def summarize_method(method, results):
     """Return the :class:`MethodSummary` of a method's :class:`CaseResult` list."""
     broken = [r for r in results if r.case in BROKEN_CASES]
-    times = [t for r in broken for t in r.recoveries_s]
-    recovered = [t for t in times if t is not None]
     clean = [r for r in results if r.case == 'clean']
     seconds = np.concatenate([r.seconds for r in results])
     return MethodSummary(
         method, sum(r.frames for r in results), sum(r.wrong_valid for r in results),
-        len(times), len(times) - len(recovered),
-        max(recovered) if recovered else None,
-        float(np.median(recovered)) if recovered else None,
-        sum(r.rejected for r in clean), sum(r.scored for r in clean),
-        sum(r.rejected for r in broken), sum(r.scored for r in broken),
+        *_recovery_figures(broken), *_rejected_of_scored(clean), *_rejected_of_scored(broken),
         1e3 * float(np.median(seconds)), 1e3 * float(np.percentile(seconds, 99)))
 
 
@@ -616,98 +633,3 @@ def run(methods, seconds=60.0, seed=0, options=None, cases=CASES):
         report.case_rows += [{key: value for key, value in asdict(result).items()
                               if key != 'seconds'} for result in results]
     return report
-
-
-def _seconds(value):
-    return '-' if value is None else f'{value:.1f}'
-
-
-def _case_cell(row):
-    """Format ``valid % / wrong and valid / worst recovery`` of one method on one case."""
-    cell = f'{100.0 * row["valid"] / max(row["frames"], 1):.1f} % / {row["wrong_valid"]}'
-    if row['events']:
-        times = row['recoveries_s']
-        recovered = [t for t in times if t is not None]
-        cell += ' / ' + ('never' if len(recovered) < len(times)
-                         else _seconds(max(recovered)))
-    return cell
-
-
-def markdown(report):
-    """Return the report as markdown: per-method targets, per-case table, frames missing them."""
-    lines = [f'### Integrity: truck pump, working cycle at 10 Hz, sigma = {report.sigma_m} '
-             f'm, {report.dropout:.0%} dropouts, {report.seconds:g} s per stream, '
-             f'seed {report.seed}', '',
-             '| method | wrong & valid [frames] | recovery worst [s] | median [s] | '
-             'not recovered | false rejections: clean stream | broken streams | '
-             'ms/frame p50 | p99 |', '|---|---|---|---|---|---|---|---|---|']
-    for row in report.rows:
-        lines.append(
-            f'| {row["method"]} | {row["wrong_valid"]} of {row["frames"]} | '
-            f'{_seconds(row["recovery_worst_s"])} | {_seconds(row["recovery_median_s"])} | '
-            f'{row["unrecovered"]} of {row["events"]} | '
-            f'{row["false_rejection_clean"]:.2%} ({row["clean_rejected"]}/'
-            f'{row["clean_scored"]}) | {row["false_rejection_broken"]:.2%} '
-            f'({row["broken_rejected"]}/{row["broken_scored"]}) | '
-            f'{row["ms_median"]:.2f} | {row["ms_p99"]:.2f} |')
-    lines += ['', f'Targets: no frame valid with a joint > {WRONG_METRES:g} m and > '
-              f'{WRONG_SIGMAS:g} predicted sigma off; recovery <= {RECOVERY_TARGET_S:g} s; '
-              f'false rejections <= {FALSE_REJECTION_TARGET:.1%}.', '']
-    methods = [row['method'] for row in report.rows]
-    lines += ['| case | frames | ' + ' | '.join(methods) + ' |',
-              '|---|---|' + '---|' * len(methods)]
-    cells = {(row['method'], row['case']): row for row in report.case_rows}
-    for case, description in report.cases.items():
-        frames = cells[methods[0], case]['frames'] if methods else 0
-        lines.append(f'| {case}: {description} | {frames} | '
-                     + ' | '.join(_case_cell(cells[method, case]) for method in methods)
-                     + ' |')
-    lines += ['', 'Cells: frames valid / wrong and valid / worst recovery [s] (broken '
-              'streams; "never": a run not recovered before the next).']
-    lines += _detail_lines(report)
-    return '\n'.join(lines)
-
-
-def _index_runs(indices, most=12):
-    """``[3, 4, 5, 9]`` -> ``'3-5, 9'``; after ``most`` runs, ``', ...'``."""
-    runs = []
-    for index in indices:
-        if runs and index == runs[-1][1] + 1:
-            runs[-1][1] = index
-        else:
-            runs.append([index, index])
-    text = ', '.join(str(a) if a == b else f'{a}-{b}' for a, b in runs[:most])
-    return text + (', ...' if len(runs) > most else '')
-
-
-def _detail_lines(report):
-    """Bullets for the frames that miss a target."""
-    lines = []
-    firsts = {}
-    for d in report.wrong_frames:
-        firsts.setdefault((d['method'], d['case']), d)
-    wrong = [row for row in report.case_rows if row['wrong_valid']]
-    if wrong:
-        lines += ['', 'Wrong and valid (the first of each method and case):']
-    for row in wrong:
-        d = firsts[row['method'], row['case']]
-        joints = ', '.join(f'{k} {error:.2f} m (joint_std {std:.3f})' for k, error, std
-                           in zip(d['joints'], d['errors_m'], d['joint_std_m']))
-        lines.append(f'- {row["method"]} {row["case"]}: {row["wrong_valid"]} frames '
-                     f'({_index_runs(row["wrong_indices"])}); frame {d["frame"]} '
-                     f'({d["stamp_s"]:.1f} s): joints {joints}; {d["status"]}: '
-                     f'{d["message"]}')
-    if report.slow_recoveries:
-        lines += ['', f'Recoveries over {RECOVERY_TARGET_S:g} s:']
-        lines += [f'- {d["method"]} {d["case"]} frame {d["frame"]} ({d["label"]}): '
-                  + ('not recovered before the next' if d['recovery_s'] is None
-                     else f'{d["recovery_s"]:.1f} s')
-                  + f'; the next {RECOVERY_TARGET_S:g} s: {d["statuses_after"]}'
-                  for d in report.slow_recoveries]
-    why = {row['method']: row['rejected_statuses'] for row in report.case_rows
-           if row['case'] == 'clean' and row['rejected']}
-    if why:
-        lines += ['', 'Clean-stream frames rejected, by status: ' + '; '.join(
-            f'{method} ' + ', '.join(f'{status} {count}' for status, count in counts.items())
-            for method, counts in why.items()) + '.']
-    return lines

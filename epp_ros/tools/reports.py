@@ -15,9 +15,12 @@
 """
 The benchmarks' reports as text and files: markdown, JSON and plots, chosen by report type.
 
-:func:`markdown` formats any suite's report: those of :mod:`epp_ros.tools.experiments`
-here, those of the suites with a module of their own (integrity, field, soak, fuzz, driver,
-calibration) by that module's ``markdown``, all listed in one table, :data:`MARKDOWN`.
+:func:`markdown` formats any suite's report by its type, all listed in one table,
+:data:`MARKDOWN`: those of :mod:`epp_ros.tools.experiments` and of the suites with a module of
+their own (integrity, field, soak, fuzz, driver) here; calibration's by
+``calibration_bench.markdown``. The suites' modules hold what is run and their typed reports,
+and do not import this one (but ``python -m epp_ros.tools.driver_bench``, when it prints
+:func:`driver_table`).
 :func:`to_json` gives a report's JSON object, :func:`write_paper` the paper's files.
 """
 import dataclasses
@@ -260,6 +263,318 @@ def paper_markdown(report):
     return paper_document(report) + (f'\nwritten to {report.out}/' if report.out else '')
 
 
+# -- the suites with a module of their own --------------------------------------------------
+def _or_dash(value, spec='.1f', unit=''):
+    """Format a figure that may be missing (None: '-')."""
+    return '-' if value is None else f'{value:{spec}}{unit}'
+
+
+def _integrity_case_cell(row):
+    """Format ``valid % / wrong and valid / worst recovery`` of one method on one case."""
+    cell = f'{100.0 * row["valid"] / max(row["frames"], 1):.1f} % / {row["wrong_valid"]}'
+    if row['events']:
+        times = row['recoveries_s']
+        recovered = [t for t in times if t is not None]
+        cell += ' / ' + ('never' if len(recovered) < len(times)
+                         else _or_dash(max(recovered)))
+    return cell
+
+
+def _integrity_method_table(rows):
+    """Return the lines of the per-method table: the suite's targets."""
+    lines = ['| method | wrong & valid [frames] | recovery worst [s] | median [s] | '
+             'not recovered | false rejections: clean stream | broken streams | '
+             'ms/frame p50 | p99 |', '|---|---|---|---|---|---|---|---|---|']
+    lines += [f'| {row["method"]} | {row["wrong_valid"]} of {row["frames"]} | '
+              f'{_or_dash(row["recovery_worst_s"])} | {_or_dash(row["recovery_median_s"])} | '
+              f'{row["unrecovered"]} of {row["events"]} | '
+              f'{row["false_rejection_clean"]:.2%} ({row["clean_rejected"]}/'
+              f'{row["clean_scored"]}) | {row["false_rejection_broken"]:.2%} '
+              f'({row["broken_rejected"]}/{row["broken_scored"]}) | '
+              f'{row["ms_median"]:.2f} | {row["ms_p99"]:.2f} |' for row in rows]
+    return lines
+
+
+def _integrity_case_table(report):
+    """Return the lines of the per-case table, a column per method."""
+    methods = [row['method'] for row in report.rows]
+    lines = ['| case | frames | ' + ' | '.join(methods) + ' |',
+             '|---|---|' + '---|' * len(methods)]
+    cells = {(row['method'], row['case']): row for row in report.case_rows}
+    for case, description in report.cases.items():
+        frames = cells[methods[0], case]['frames'] if methods else 0
+        lines.append(f'| {case}: {description} | {frames} | '
+                     + ' | '.join(_integrity_case_cell(cells[method, case])
+                                  for method in methods) + ' |')
+    return lines
+
+
+def _index_runs(indices, most=12):
+    """``[3, 4, 5, 9]`` -> ``'3-5, 9'``; after ``most`` runs, ``', ...'``."""
+    runs = []
+    for index in indices:
+        if runs and index == runs[-1][1] + 1:
+            runs[-1][1] = index
+        else:
+            runs.append([index, index])
+    text = ', '.join(str(a) if a == b else f'{a}-{b}' for a, b in runs[:most])
+    return text + (', ...' if len(runs) > most else '')
+
+
+def _wrong_valid_bullet(row, first):
+    """Return the bullet of a method on a case with wrong-and-valid frames, and the first."""
+    joints = ', '.join(f'{k} {error:.2f} m (joint_std {std:.3f})' for k, error, std
+                       in zip(first['joints'], first['errors_m'], first['joint_std_m']))
+    return (f'- {row["method"]} {row["case"]}: {row["wrong_valid"]} frames '
+            f'({_index_runs(row["wrong_indices"])}); frame {first["frame"]} '
+            f'({first["stamp_s"]:.1f} s): joints {joints}; {first["status"]}: '
+            f'{first["message"]}')
+
+
+def _wrong_valid_lines(report):
+    """Return the bullets of the wrong-and-valid frames, none when there are none."""
+    firsts = {}
+    for detail in report.wrong_frames:
+        firsts.setdefault((detail['method'], detail['case']), detail)
+    wrong = [row for row in report.case_rows if row['wrong_valid']]
+    if not wrong:
+        return []
+    return ['', 'Wrong and valid (the first of each method and case):'] + [
+        _wrong_valid_bullet(row, firsts[row['method'], row['case']]) for row in wrong]
+
+
+def _slow_recovery_lines(report):
+    """Return the bullets of the recoveries over the target, none when there are none."""
+    if not report.slow_recoveries:
+        return []
+    target = integrity_bench.RECOVERY_TARGET_S
+    lines = ['', f'Recoveries over {target:g} s:']
+    for d in report.slow_recoveries:
+        took = ('not recovered before the next' if d['recovery_s'] is None
+                else f'{d["recovery_s"]:.1f} s')
+        lines.append(f'- {d["method"]} {d["case"]} frame {d["frame"]} ({d["label"]}): {took}'
+                     f'; the next {target:g} s: {d["statuses_after"]}')
+    return lines
+
+
+def _clean_rejection_lines(report):
+    """Return the line of the clean stream's rejections by status, none when there are none."""
+    why = {row['method']: row['rejected_statuses'] for row in report.case_rows
+           if row['case'] == 'clean' and row['rejected']}
+    if not why:
+        return []
+    return ['', 'Clean-stream frames rejected, by status: ' + '; '.join(
+        f'{method} ' + ', '.join(f'{status} {count}' for status, count in counts.items())
+        for method, counts in why.items()) + '.']
+
+
+def _integrity_targets():
+    """Return the line stating the integrity suite's targets."""
+    return (f'Targets: no frame valid with a joint > {integrity_bench.WRONG_METRES:g} m and > '
+            f'{integrity_bench.WRONG_SIGMAS:g} predicted sigma off; recovery <= '
+            f'{integrity_bench.RECOVERY_TARGET_S:g} s; false rejections <= '
+            f'{integrity_bench.FALSE_REJECTION_TARGET:.1%}.')
+
+
+def integrity_markdown(report):
+    """
+    Format an :class:`~epp_ros.tools.integrity_bench.IntegrityReport`.
+
+    Per-method targets, the per-case table, then the frames that miss a target.
+    """
+    lines = [f'### Integrity: truck pump, working cycle at 10 Hz, sigma = {report.sigma_m} '
+             f'm, {report.dropout:.0%} dropouts, {report.seconds:g} s per stream, '
+             f'seed {report.seed}', '', *_integrity_method_table(report.rows), '',
+             _integrity_targets(), '', *_integrity_case_table(report), '',
+             'Cells: frames valid / wrong and valid / worst recovery [s] (broken '
+             'streams; "never": a run not recovered before the next).']
+    lines += _wrong_valid_lines(report) + _slow_recovery_lines(report)
+    return '\n'.join(lines + _clean_rejection_lines(report))
+
+
+def _field_cell(row, method):
+    """Format a method's ratio in a case: '(!)' when over its target, and its gross frames."""
+    target = field_bench.TARGETS.get(method)
+    over = (target is not None and row['case'] not in field_bench.CALIBRATION
+            and row[method]['ratio'] > target)
+    gross = row[method]['gross']
+    return (f'{row[method]["ratio"]:.2f}' + (' (!)' if over else '')
+            + (f' [{gross} gross]' if gross else ''))
+
+
+def _field_table(rows):
+    """Return the lines of the table of every case: each method's ratio, and how often valid."""
+    methods = field_bench.METHODS
+    lines = ['| case | CRLB [m] | ' + ' | '.join(methods) + ' | valid (chain / cepp / track) |',
+             '|---|---|' + '---|' * len(methods) + '---|']
+    for row in rows:
+        valid = ' / '.join(f'{100 * row[m]["valid"]:.0f} %' for m in ('chain', 'cepp', 'track'))
+        lines.append(f'| {row["case"]} | {row["bound_m"]:.3f} | '
+                     + ' | '.join(_field_cell(row, method) for method in methods)
+                     + f' | {valid} |')
+    return lines
+
+
+def _field_published_table(rows):
+    """Return the lines of the table of the ratios over the frames each method published."""
+    methods = field_bench.METHODS
+    return ['| case | ' + ' | '.join(methods) + ' |', '|---|' + '---|' * len(methods)] + [
+        f'| {row["case"]} | ' + ' | '.join(f'{row[m]["published_ratio"]:.2f}' for m in methods)
+        + ' |' for row in rows]
+
+
+def _field_heard_lines(rows):
+    """Return a line per case with a tag unheard: the ratios over the frames with every tag."""
+    # with a silent tag, no single frame determines its joint
+    return [f'{row["case"]}: on the {100 * row["heard"]:.0f} % of frames with every tag '
+            'heard, ' + ', '.join(f'{m} {row[m]["heard_ratio"]:.2f}'
+                                  for m in field_bench.METHODS) + '.'
+            for row in rows if row['heard'] < 1.0]
+
+
+def _field_authors_table(authors):
+    """Return the lines of the table of the authors' geometry, a new estimator per frame."""
+    return ["| authors' geometry, new estimator per frame | CRLB [m] | chain | cepp |",
+            '|---|---|---|---|'] + [
+        f'| sigma {row["sigma_m"]:g} m | {row["bound_m"]:.3f} | '
+        + ' | '.join(f'{row[m]["ratio"]:.2f} ({row[m]["gross"]} gross)'
+                     for m in ('chain', 'cepp')) + ' |' for row in authors]
+
+
+def field_markdown(report):
+    """Format a :class:`~epp_ros.tools.field_bench.FieldReport`: the README's tables."""
+    targets, posterior, cost = field_bench.TARGETS, report.posterior, report.cost
+    lines = [f'### Field effects, defaults: RMSE / clean line-of-sight CRLB at the true noise '
+             f'({report.seeds} x {report.seconds:g} s per case at {field_bench.RATE:g} Hz, '
+             f'first {field_bench.WARM_UP_S:g} s not scored)', '', *_field_table(report.rows),
+             '', f'Targets: chain <= {targets["chain"]}, cepp <= {targets["cepp"]}, track <= '
+             f'{targets["track"]} (track on smooth cycles); (!) misses one; gross: frames '
+             'more than 5 bounds + 0.5 m off. Offsets and moved anchors: no target.', '',
+             'The same over the frames each method published (valid):', '',
+             *_field_published_table(report.rows), '', *_field_heard_lines(report.rows), '',
+             f'Track where its motion model holds (``cv``, {posterior["frames"]} frames): '
+             f'{posterior["posterior_ratio"]:.2f} x the posterior CRLB, '
+             f'{posterior["single_ratio"]:.2f} x the single-frame CRLB (the posterior bound '
+             f'is {posterior["posterior_over_single"]:.2f} x the single-frame one).', '',
+             *_field_authors_table(report.authors), '',
+             f'Cost per frame (median, clean case, one run): chain {cost["chain_ms"]:.2f} '
+             f'ms, track {cost["track_ms"]:.2f} ms ({cost["track_ms"] / cost["chain_ms"]:.2f} '
+             f'x), cepp {cost["cepp_ms"]:.2f} ms. One warm fit: chain '
+             f'{cost["fit_ms"]:.3f} ms, scipy least_squares (lm) {cost["scipy_ms"]:.3f} ms '
+             f'({cost["fit_ms"] / cost["scipy_ms"]:.2f} x; answers within '
+             f'{cost["largest_difference_rad"]:.1e} rad).']
+    return '\n'.join(lines)
+
+
+def _soak_row(name, part):
+    """Return the table row of a soak's part: ``'in-process'`` or ``'live node'``."""
+    if name == 'in-process':
+        rejected = sum(part['rejected'].values())
+        decided = f'{part["decisions"]} ({part["postures"]} / {rejected})'
+    else:
+        decided = (f'{part["received"]} received ({part["published"]} / '
+                   f'{part["unsolved"]}), {part["postures"]} postures here')
+    return (f'| {name} | {part["frames"]} | {decided} | {part["frames_lost"]} | '
+            f'{part["frames_per_s"]:.0f} | {_or_dash(part["rss_start_mb"])} | '
+            f'{_or_dash(part["rss_warm_mb"])} | {_or_dash(part["rss_end_mb"])} | '
+            f'{_or_dash(part["rss_peak_mb"])} | '
+            f'{_or_dash(part["rss_growth_pct"], "+.1f", " %")} |')
+
+
+def _soak_notes(report):
+    """Return the lines on what went wrong: rejections, updates that raised, a live timeout."""
+    in_process, live = report.in_process, report.live
+    lines = []
+    if in_process['rejected']:
+        lines.append(f'In-process rejections by reason: {in_process["rejected"]}.')
+    if in_process['errors']:
+        lines += [f'{in_process["errors"]} updates raised; the first:', '```',
+                  in_process['first_error'].rstrip(), '```']
+    if live and not live['complete']:
+        lines.append("The live part did not complete in time; the node's log ends:")
+        lines += ['```', live['estimator_log_tail'].rstrip(), '```']
+    return lines
+
+
+def soak_markdown(report):
+    """Format a :class:`~epp_ros.tools.soak_bench.SoakReport` as a markdown table and notes."""
+    parts = (('in-process', report.in_process), ('live node', report.live))
+    met = report.summary['frames_lost'] == 0 and report.summary['rss_ok']
+    lines = [f'### Soak: {report.method}, parser + assembler + estimator in-process, '
+             'and epp_bag play --fast through the live node', '',
+             '| part | frames | decisions (postures / rejected) | frames lost | frames/s | '
+             'RSS start [MB] | after warm-up | end | peak | end vs warm-up |',
+             '|---|---|---|---|---|---|---|---|---|---|',
+             *[_soak_row(name, part) for name, part in parts if part is not None], '',
+             'Frames lost: cycles sent that reached no decision (in-process), frames '
+             'played that the node did not receive (live). Rejections are decisions.',
+             *_soak_notes(report),
+             f'Target (nothing lost, RSS at the end within {soak_bench.RSS_TOLERANCE:.0%} of '
+             f'warm-up): {"met" if met else "NOT met"}.']
+    return '\n'.join(lines)
+
+
+def _fuzz_escape_table(escapes):
+    """Return the lines of the table of escapes: (protocol or field, escape) pairs."""
+    return ['', '| protocol or field | exception, raised at | count | first input '
+            '(its mutation) |', '|---|---|---|---|'] + [
+        f'| {name} | {e["error"]}, {e["where"]} | {e["count"]} | '
+        f'`{e["input"][:120]}` ({e["mutation"]}) |' for name, e in escapes]
+
+
+def _fuzz_tracebacks(escapes):
+    """Return the input and traceback of the first escape from each place."""
+    lines, seen = [], set()
+    for name, escape in escapes:
+        if escape['where'] not in seen:
+            seen.add(escape['where'])
+            lines += ['', f'{name}: {escape["where"]}, input {escape["input"]}', '```',
+                      escape['traceback'].rstrip(), '```']
+    return lines
+
+
+def fuzz_markdown(report, traceback_details=True):
+    """
+    Format a :class:`~epp_ros.tools.fuzz_bench.FuzzReport`.
+
+    Two tables (protocols, configuration fields), then the escapes and, with
+    ``traceback_details``, their tracebacks.
+    """
+    lines = [f'### Fuzz: {report.inputs} generated inputs per protocol and per '
+             f'configuration field (seed {report.seed})', '',
+             '| protocol | inputs | gave records | frames closed | escaped | s |',
+             '|---|---|---|---|---|---|']
+    lines += [f'| {r["protocol"]} | {r["inputs"]} | {r["parsed"]} | {r["frames"]} | '
+              f'{r["escaped"]} | {r["seconds"]:.1f} |' for r in report.protocols]
+    lines += ['', '| configuration field | inputs | accepted | ConfigError | escaped | s | '
+              'slowest input [s] |', '|---|---|---|---|---|---|---|']
+    lines += [f'| {r["field"]} | {r["inputs"]} | {r["accepted"]} | {r["refused"]} | '
+              f'{r["escaped"]} | {r["seconds"]:.1f} | {r["slowest_s"]:.3f} '
+              f'({r["slowest_input"]}) |' for r in report.fields]
+    lines += ['', f'Exceptions escaping: {report.escaped}.']
+    escapes = [(row.get('protocol') or row['field'], escape)
+               for row in report.protocols + report.fields for escape in row['escapes']]
+    if escapes:
+        lines += _fuzz_escape_table(escapes)
+        lines += _fuzz_tracebacks(escapes) if traceback_details else []
+    return '\n'.join(lines)
+
+
+def driver_table(rows):
+    """Format :func:`~epp_ros.tools.driver_bench.run_driver_bench` rows as a plain table."""
+    lines = ['transport   lines   seconds   lines/s   CPU ms / 1000 lines   reads']
+    lines += [f"{r['transport']:<9} {r['lines']:>7} {r['seconds']:>9.2f} "
+              f"{r['lines_per_s']:>9.0f} {r['cpu_ms_per_1000_lines']:>21.1f} {r['reads']:>7}"
+              for r in rows]
+    return '\n'.join(lines)
+
+
+def driver_markdown(report):
+    """Format a :class:`~epp_ros.tools.driver_bench.DriverReport`: a heading, the plain table."""
+    return '\n'.join(['### UWB driver: lines read per second over TCP and a pty', '',
+                      '```', driver_table(report.rows), '```'])
+
+
 #: The formatter of each report type.
 MARKDOWN = {
     Xie3dimReport: xie3dim_markdown,
@@ -267,11 +582,11 @@ MARKDOWN = {
     LatencyReport: latency_markdown,
     BagsReport: bags_markdown,
     PaperReport: paper_markdown,
-    integrity_bench.IntegrityReport: integrity_bench.markdown,
-    field_bench.FieldReport: field_bench.markdown,
-    soak_bench.SoakReport: soak_bench.markdown,
-    fuzz_bench.FuzzReport: fuzz_bench.markdown,
-    driver_bench.DriverReport: driver_bench.markdown,
+    integrity_bench.IntegrityReport: integrity_markdown,
+    field_bench.FieldReport: field_markdown,
+    soak_bench.SoakReport: soak_markdown,
+    fuzz_bench.FuzzReport: fuzz_markdown,
+    driver_bench.DriverReport: driver_markdown,
     CalibrationReport: lambda report: calibration_bench.markdown(report.fields),
 }
 

@@ -54,8 +54,7 @@ from epp_ros.uwb.emulation import cycle_lines
 from epp_ros.uwb.frames import FrameAssembler
 import numpy as np
 
-__all__ = ['rss_mb', 'soak_in_process', 'soak_live', 'SoakReport', 'run', 'markdown',
-           'RSS_TOLERANCE']
+__all__ = ['rss_mb', 'soak_in_process', 'soak_live', 'SoakReport', 'run', 'RSS_TOLERANCE']
 
 RATE = 10.0                 #: ranging cycles per second of the simulated pump
 WARMUP = 0.01               #: fraction of the frames after which RSS is the reference
@@ -92,6 +91,96 @@ def _cycle_index(i, n):
     return k if k < n else period - k
 
 
+class _Memory:
+    """
+    The resident set of a process: at the start, after warm-up, its peak and at the end.
+
+    The start is read when made, the warm-up value once :data:`WARMUP` of ``frames`` are
+    done (:meth:`after`), the peak at each :meth:`sample`, the end at :meth:`finish`.
+    """
+
+    def __init__(self, frames, pid='self'):
+        self.pid = pid
+        self.warm_at = max(1, int(round(frames * WARMUP)))
+        self.start = self.warm = rss_mb(pid)
+        self.warmed = False
+        self.peak = self.start or 0.0
+        self.end = None
+
+    def after(self, count):
+        """Read the warm-up value, once, after ``count`` frames if they are enough."""
+        if not self.warmed and count >= self.warm_at:
+            self.warm, self.warmed = rss_mb(self.pid), True
+
+    def sample(self):
+        """Take a reading into the peak."""
+        self.peak = max(self.peak, rss_mb(self.pid) or 0.0)
+
+    def finish(self):
+        """Read the end value."""
+        self.end = rss_mb(self.pid)
+
+    def fields(self):
+        """Return ``rss_start_mb``, ``_warm_mb``, ``_end_mb``, ``_peak_mb``, ``rss_growth_pct``."""
+        return {'rss_start_mb': self.start, 'rss_warm_mb': self.warm, 'rss_end_mb': self.end,
+                'rss_peak_mb': max(self.peak, self.end or 0.0),
+                'rss_growth_pct': _growth(self.warm, self.end)}
+
+
+class _Pipeline:
+    """Decoder, assembler and estimator, chained as uwb_driver and posture_estimator chain them."""
+
+    def __init__(self, config, model, method, protocol):
+        self.config, self.protocol = config, protocol
+        self.decoder = LineDecoder(protocol)
+        self.whole = self.decoder.format.whole_tag
+        self.assembler = FrameAssembler(config, frame_period=1.0 / RATE)
+        self.estimator = PostureEstimator(model, method, sigma=0.1)
+        self.counts = Counter()
+        self.first_error = None
+
+    def decide(self, frame):
+        """Update the estimator with an assembled frame; count the decision or what raised."""
+        self.counts['frames_assembled'] += 1
+        try:
+            self.estimator.update(frame.ranges, tag_ranges=frame.tag_ranges, stamp=frame.stamp)
+        except Exception:  # noqa: BLE001 - a soak counts what escapes, it does not stop
+            self.counts['errors'] += 1
+            self.first_error = self.first_error or traceback.format_exc()
+            return
+        self.counts['decisions'] += 1
+        diagnostics = self.estimator.last_diagnostics
+        self.counts['postures' if diagnostics['valid']
+                    else f'rejected {diagnostics["status"]}'] += 1
+
+    def send(self, index, ranges):
+        """Send cycle ``index``: decide the frames due by its stamp, then read its lines."""
+        stamp = 1.0 + index / RATE
+        for frame in self.assembler.poll(stamp):
+            self.decide(frame)
+        for _, line in cycle_lines(self.config, ranges, self.protocol, index):
+            self.counts['lines'] += 1
+            records = self.decoder.decode(line)
+            if records:
+                for frame in self.assembler.add_line(records, stamp, None, self.whole):
+                    self.decide(frame)
+
+    def flush(self):
+        """Decide the frames the assembler still holds."""
+        for frame in self.assembler.poll(math.inf):
+            self.decide(frame)
+
+    def fields(self, frames):
+        """Return the counts of ``frames`` cycles sent, from ``lines`` to ``frames_lost``."""
+        counts = self.counts
+        rejected = {key.split(' ', 1)[1]: value for key, value in sorted(counts.items())
+                    if key.startswith('rejected ')}
+        return {'lines': counts['lines'], 'frames_assembled': counts['frames_assembled'],
+                'decisions': counts['decisions'], 'postures': counts['postures'],
+                'rejected': rejected, 'errors': counts['errors'],
+                'first_error': self.first_error, 'frames_lost': frames - counts['decisions']}
+
+
 def soak_in_process(frames, method='chain', seed=0, protocol='json', progress=None):
     """
     Push ``frames`` ranging cycles through decoder, assembler and estimator in this process.
@@ -125,68 +214,28 @@ def soak_in_process(frames, method='chain', seed=0, protocol='json', progress=No
     trajectory = working_cycle(model, CHUNK_SECONDS, RATE, rng=np.random.default_rng(seed))
     joints = trajectory.joints
     noise = RangeNoise(sigma=0.1, dropout=0.02)
-    decoder = LineDecoder(protocol)
-    whole = decoder.format.whole_tag
-    assembler = FrameAssembler(config, frame_period=1.0 / RATE)
-    estimator = PostureEstimator(model, method, sigma=0.1)
-    counts = Counter()
-    first_error = []
-
-    def decide(frame):
-        counts['frames_assembled'] += 1
-        try:
-            estimator.update(frame.ranges, tag_ranges=frame.tag_ranges, stamp=frame.stamp)
-        except Exception:  # noqa: BLE001 - a soak counts what escapes, it does not stop
-            counts['errors'] += 1
-            if not first_error:
-                first_error.append(traceback.format_exc())
-            return
-        counts['decisions'] += 1
-        diagnostics = estimator.last_diagnostics
-        counts['postures' if diagnostics['valid'] else f'rejected {diagnostics["status"]}'] += 1
-
-    warm_at = max(1, int(round(frames * WARMUP)))
+    pipeline = _Pipeline(config, model, method, protocol)
+    memory = _Memory(frames)
     step = max(1, frames // 100)
-    rss_start = rss_warm = rss_mb()
-    peak = rss_start or 0.0
     start = time.perf_counter()
     for i in range(frames):
-        stamp = 1.0 + i / RATE
         ranges, _ = noise.apply(model.ranges(joints[_cycle_index(i, len(joints))]), rng)
-        for frame in assembler.poll(stamp):
-            decide(frame)
-        for _, line in cycle_lines(config, ranges, protocol, i):
-            counts['lines'] += 1
-            records = decoder.decode(line)
-            if records:
-                for frame in assembler.add_line(records, stamp, None, whole):
-                    decide(frame)
+        pipeline.send(i, ranges)
         done = i + 1
-        if done == warm_at:
-            rss_warm = rss_mb()
+        memory.after(done)
         if done % step == 0:
-            peak = max(peak, rss_mb() or 0.0)
+            memory.sample()
         if progress is not None and done % max(1, frames // 10) == 0:
             progress(f'soak in-process: {done}/{frames} frames, '
                      f'{done / (time.perf_counter() - start):.0f} frames/s, '
                      f'RSS {rss_mb():.1f} MB')
-    for frame in assembler.poll(math.inf):
-        decide(frame)
+    pipeline.flush()
     seconds = time.perf_counter() - start
-    rss_end = rss_mb()
-    rejected = {key.split(' ', 1)[1]: value for key, value in sorted(counts.items())
-                if key.startswith('rejected ')}
-    return {'method': method, 'protocol': protocol, 'frames': frames,
-            'lines': counts['lines'], 'frames_assembled': counts['frames_assembled'],
-            'decisions': counts['decisions'], 'postures': counts['postures'],
-            'rejected': rejected, 'errors': counts['errors'],
-            'first_error': first_error[0] if first_error else None,
-            'frames_lost': frames - counts['decisions'],
-            'seconds': seconds, 'frames_per_s': frames / seconds,
-            'rss_start_mb': rss_start, 'rss_warm_mb': rss_warm, 'rss_end_mb': rss_end,
-            'rss_peak_mb': max(peak, rss_end or 0.0),
-            'rss_growth_pct': _growth(rss_warm, rss_end),
-            'decoder': dict(decoder.counts), 'assembler_dropped': dict(assembler.dropped)}
+    memory.finish()
+    return {'method': method, 'protocol': protocol, 'frames': frames, **pipeline.fields(frames),
+            'seconds': seconds, 'frames_per_s': frames / seconds, **memory.fields(),
+            'decoder': dict(pipeline.decoder.counts),
+            'assembler_dropped': dict(pipeline.assembler.dropped)}
 
 
 def _diagnostic_values(message):
@@ -195,6 +244,145 @@ def _diagnostic_values(message):
         if status.name.startswith('posture_estimator'):
             return {item.key: item.value for item in status.values}
     return None
+
+
+class _Listener:
+    """
+    This process's node: the postures it receives, the estimator's latest diagnostics.
+
+    Made, it has imported ROS (the in-process soak runs without); :meth:`start` starts it.
+    """
+
+    def __init__(self):
+        from epp_ros import contract
+        from epp_ros.nodes.common import qos, RANGES_INPUT_QOS
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import PoseArray
+        import rclpy
+
+        self.rclpy, self.contract, self._qos = rclpy, contract, qos
+        self._types, self._keep_all = (PoseArray, DiagnosticArray), RANGES_INPUT_QOS
+        self.node = None
+        self.postures, self.latest = [], {}
+
+    def start(self):
+        """Initialise rclpy and subscribe to the postures and the diagnostics."""
+        poses, diagnostics = self._types
+        self.rclpy.init()
+        self.node = self.rclpy.create_node('epp_bench_soak')
+        self.node.create_subscription(
+            poses, self.contract.POSTURE.name,
+            lambda message: self.postures.append(time.perf_counter()),
+            self._keep_all)                 # keep all: count every one
+        self.node.create_subscription(diagnostics, self.contract.DIAGNOSTICS.name,
+                                      self._on_diagnostics, self._qos(self.contract.DIAGNOSTICS))
+
+    def _on_diagnostics(self, message):
+        values = _diagnostic_values(message)
+        if values is not None:
+            self.latest.clear()
+            self.latest.update(values)
+
+    def spin(self, timeout):
+        """Handle what has come, waiting up to ``timeout`` seconds."""
+        self.rclpy.spin_once(self.node, timeout_sec=timeout)
+
+    def spin_for(self, seconds):
+        """Handle what comes for ``seconds``."""
+        until = time.monotonic() + seconds
+        while time.monotonic() < until:
+            self.spin(0.05)
+
+    def received(self):
+        """Return the frames the estimator reports received."""
+        return int(self.latest.get('frames received', 0))
+
+    def wait_for(self, estimator):
+        """Wait until the estimator subscribes and publishes, then let discovery settle."""
+        ranges, posture = self.contract.RANGES.absolute, self.contract.POSTURE.absolute
+        deadline = time.monotonic() + 30.0
+        while (self.node.count_subscribers(ranges) < 1
+               or self.node.count_publishers(posture) < 1):
+            self.spin(0.05)
+            if time.monotonic() > deadline or estimator.poll() is not None:
+                raise RuntimeError('posture_estimator did not come up')
+        for _ in range(20):
+            self.spin(0.05)
+
+    def counts(self):
+        """Return the estimator's frames received, published, unsolved, errors, malformed."""
+        return {key: int(self.latest.get(f'frames {key}', 0))
+                for key in ('received', 'published', 'unsolved', 'errors', 'malformed')}
+
+    def close(self):
+        """Destroy the node and shut rclpy down."""
+        self.node.destroy_node()
+        self.rclpy.try_shutdown()
+
+
+def _start_estimator(config_path, method, log):
+    """Start a posture_estimator process with the pump description, its output into ``log``."""
+    return subprocess.Popen(
+        [sys.executable, '-m', 'epp_ros.nodes.estimator', '--ros-args', '--params-file',
+         str(config_path), '-p', f'method:={method}', '-p', 'publish_markers:=false',
+         '--log-level', 'warn'], stdout=log, stderr=subprocess.STDOUT)
+
+
+def _start_player(bag, topic):
+    """Start ``epp_bag play --fast`` of one topic of a bag."""
+    return subprocess.Popen(
+        [sys.executable, '-m', 'epp_ros.tools.bag', 'play', str(bag), '--fast',
+         '--topics', topic], stdout=subprocess.DEVNULL)
+
+
+def _follow(listener, player, memory, written, timeout, progress):
+    """
+    Spin while the player plays, reading the estimator's memory as it goes.
+
+    Stops when the node has received all ``written`` frames and the player is done, when the
+    player is done and nothing has come for :data:`QUIET` seconds, or after ``timeout``.
+    """
+    started = time.monotonic()
+    deadline = started + timeout
+    next_sample, next_report = started + 1.0, started + 30.0
+    last_received, last_change = 0, started
+    while time.monotonic() < deadline:
+        listener.spin(0.01)
+        now = time.monotonic()
+        memory.after(len(listener.postures))
+        if now > next_sample:
+            memory.sample()
+            next_sample = now + 1.0
+        if progress and now > next_report:
+            progress(f'soak live: {len(listener.postures)}/{written} postures received')
+            next_report = now + 30.0
+        if listener.received() != last_received:
+            last_received, last_change = listener.received(), now
+        if player.poll() is not None and (listener.received() >= written
+                                          or now - last_change > QUIET):
+            break                   # all in, or the player done and nothing more
+
+
+def _stop(player, listener, estimator):
+    """Stop the player (if still playing), this process's node and the estimator."""
+    if player is not None and player.poll() is None:
+        player.send_signal(signal.SIGINT)
+        player.wait(10)
+    listener.close()
+    estimator.send_signal(signal.SIGINT)
+    try:
+        estimator.wait(10)
+    except subprocess.TimeoutExpired:
+        estimator.kill()
+        estimator.wait()
+
+
+def _tail(log, size=2000):
+    """Return the last ``size`` characters of an open log file, and close it."""
+    log.seek(0)
+    text = log.read()[-size:]
+    log.close()
+    return text
 
 
 def soak_live(frames, method='chain', seed=0, progress=None, timeout=None):
@@ -212,12 +400,9 @@ def soak_live(frames, method='chain', seed=0, progress=None, timeout=None):
         and ``complete`` (False when ``timeout`` ran out).
 
     """
-    from epp_ros import bags, contract
-    from epp_ros.nodes.common import qos, RANGES_INPUT_QOS
-    from diagnostic_msgs.msg import DiagnosticArray
-    from geometry_msgs.msg import PoseArray
-    import rclpy
+    from epp_ros import bags
 
+    listener = _Listener()
     config_path = default_config_path()
     config = load_pump_config(config_path)
     timeout = timeout if timeout is not None else 120.0 + frames / 50.0
@@ -229,93 +414,28 @@ def soak_live(frames, method='chain', seed=0, progress=None, timeout=None):
                                   seed=seed)[bags.RANGES]
         log = open(Path(folder) / 'estimator.log', 'w+')
         os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 100)
-        estimator = subprocess.Popen(
-            [sys.executable, '-m', 'epp_ros.nodes.estimator', '--ros-args', '--params-file',
-             str(config_path), '-p', f'method:={method}', '-p', 'publish_markers:=false',
-             '--log-level', 'warn'], stdout=log, stderr=subprocess.STDOUT)
-        rclpy.init()
-        node = rclpy.create_node('epp_bench_soak')
-        postures, latest = [], {}
-        node.create_subscription(PoseArray, contract.POSTURE.name,
-                                 lambda message: postures.append(time.perf_counter()),
-                                 RANGES_INPUT_QOS)      # keep all: count every one
-
-        def on_diagnostics(message):
-            values = _diagnostic_values(message)
-            if values is not None:
-                latest.clear()
-                latest.update(values)
-        node.create_subscription(DiagnosticArray, contract.DIAGNOSTICS.name, on_diagnostics,
-                                 qos(contract.DIAGNOSTICS))
+        estimator = _start_estimator(config_path, method, log)
+        listener.start()
         player = None
         try:
-            deadline = time.monotonic() + 30.0
-            while (node.count_subscribers(contract.RANGES.absolute) < 1
-                   or node.count_publishers(contract.POSTURE.absolute) < 1):
-                rclpy.spin_once(node, timeout_sec=0.05)
-                if time.monotonic() > deadline or estimator.poll() is not None:
-                    raise RuntimeError('posture_estimator did not come up')
-            for _ in range(20):                             # let discovery settle
-                rclpy.spin_once(node, timeout_sec=0.05)
-            rss_start = rss_warm = rss_mb(estimator.pid)
-            peak = rss_start or 0.0
-            warm_at = max(1, int(round(frames * WARMUP)))
-            player = subprocess.Popen(
-                [sys.executable, '-m', 'epp_ros.tools.bag', 'play', str(bag), '--fast',
-                 '--topics', contract.RANGES.absolute], stdout=subprocess.DEVNULL)
-            started = time.monotonic()
-            deadline = started + timeout
-            warm_taken, next_sample, next_report = False, started + 1.0, started + 30.0
-            last_received, last_change = 0, started
-
-            def received():
-                return int(latest.get('frames received', 0))
-            while time.monotonic() < deadline:
-                rclpy.spin_once(node, timeout_sec=0.01)
-                now = time.monotonic()
-                if not warm_taken and len(postures) >= warm_at:
-                    rss_warm, warm_taken = rss_mb(estimator.pid), True
-                if now > next_sample:
-                    peak = max(peak, rss_mb(estimator.pid) or 0.0)
-                    next_sample = now + 1.0
-                if progress and now > next_report:
-                    progress(f'soak live: {len(postures)}/{written} postures received')
-                    next_report = now + 30.0
-                if received() != last_received:
-                    last_received, last_change = received(), now
-                if player.poll() is not None and (received() >= written
-                                                  or now - last_change > QUIET):
-                    break                   # all in, or the player done and nothing more
-            rss_end = rss_mb(estimator.pid)
-            complete = received() >= written
-            settle = time.monotonic() + 2.0                   # late postures and a report
-            while time.monotonic() < settle:
-                rclpy.spin_once(node, timeout_sec=0.05)
+            listener.wait_for(estimator)
+            memory = _Memory(frames, estimator.pid)
+            player = _start_player(bag, listener.contract.RANGES.absolute)
+            _follow(listener, player, memory, written, timeout, progress)
+            memory.finish()
+            complete = listener.received() >= written
+            listener.spin_for(2.0)                          # late postures and a report
         finally:
-            if player is not None and player.poll() is None:
-                player.send_signal(signal.SIGINT)
-                player.wait(10)
-            node.destroy_node()
-            rclpy.try_shutdown()
-            estimator.send_signal(signal.SIGINT)
-            try:
-                estimator.wait(10)
-            except subprocess.TimeoutExpired:
-                estimator.kill()
-                estimator.wait()
-            log.seek(0)
-            log_tail = log.read()[-2000:]
-            log.close()
-    counts = {key: int(latest.get(f'frames {key}', 0))
-              for key in ('received', 'published', 'unsolved', 'errors', 'malformed')}
+            _stop(player, listener, estimator)
+            log_tail = _tail(log)
+    counts = listener.counts()
+    postures = listener.postures
     elapsed = postures[-1] - postures[0] if len(postures) > 1 else 0.0
     return {'method': method, 'frames': written, **counts, 'postures': len(postures),
             'frames_lost': written - counts['received'], 'complete': complete,
             'seconds': elapsed,
             'frames_per_s': (len(postures) - 1) / elapsed if elapsed > 0 else 0.0,
-            'rss_start_mb': rss_start, 'rss_warm_mb': rss_warm, 'rss_end_mb': rss_end,
-            'rss_peak_mb': max(peak, rss_end or 0.0),
-            'rss_growth_pct': _growth(rss_warm, rss_end),
+            **memory.fields(),
             'estimator_log_tail': log_tail if not complete or counts['errors'] else ''}
 
 
@@ -371,50 +491,3 @@ def run(frames=1_000_000, live_frames=100_000, method='chain', seed=0, progress=
     summary['rss_ok'] = all(part['rss_growth_pct'] is not None and
                             abs(part['rss_growth_pct']) <= 100 * RSS_TOLERANCE for part in parts)
     return SoakReport(method, in_process, live, summary)
-
-
-def _mb(value):
-    return '-' if value is None else f'{value:.1f}'
-
-
-def _percent(value):
-    return '-' if value is None else f'{value:+.1f} %'
-
-
-def markdown(report):
-    """Format a :func:`run` report as a markdown table."""
-    lines = [f'### Soak: {report.method}, parser + assembler + estimator in-process, '
-             'and epp_bag play --fast through the live node', '',
-             '| part | frames | decisions (postures / rejected) | frames lost | frames/s | '
-             'RSS start [MB] | after warm-up | end | peak | end vs warm-up |',
-             '|---|---|---|---|---|---|---|---|---|---|']
-    for name, part in (('in-process', report.in_process), ('live node', report.live)):
-        if part is None:
-            continue
-        if name == 'in-process':
-            rejected = sum(part['rejected'].values())
-            decided = f'{part["decisions"]} ({part["postures"]} / {rejected})'
-        else:
-            decided = (f'{part["received"]} received ({part["published"]} / '
-                       f'{part["unsolved"]}), {part["postures"]} postures here')
-        lines.append(f'| {name} | {part["frames"]} | {decided} | {part["frames_lost"]} | '
-                     f'{part["frames_per_s"]:.0f} | {_mb(part["rss_start_mb"])} | '
-                     f'{_mb(part["rss_warm_mb"])} | {_mb(part["rss_end_mb"])} | '
-                     f'{_mb(part["rss_peak_mb"])} | {_percent(part["rss_growth_pct"])} |')
-    in_process = report.in_process
-    lines += ['', 'Frames lost: cycles sent that reached no decision (in-process), frames '
-              'played that the node did not receive (live). Rejections are decisions.']
-    if in_process['rejected']:
-        lines.append(f'In-process rejections by reason: {in_process["rejected"]}.')
-    if in_process['errors']:
-        lines += [f'{in_process["errors"]} updates raised; the first:', '```',
-                  in_process['first_error'].rstrip(), '```']
-    live = report.live
-    if live and not live['complete']:
-        lines.append("The live part did not complete in time; the node's log ends:")
-        lines += ['```', live['estimator_log_tail'].rstrip(), '```']
-    verdict = 'met' if report.summary['frames_lost'] == 0 and report.summary['rss_ok'] \
-        else 'NOT met'
-    lines.append(f'Target (nothing lost, RSS at the end within {RSS_TOLERANCE:.0%} of warm-up): '
-                 f'{verdict}.')
-    return '\n'.join(lines)
