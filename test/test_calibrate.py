@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-from epp_ros.core import calibrate, PostureEstimator
+from epp_ros.core import calibrate, PostureEstimator, SurveyResult
 from epp_ros.core.measurements import Measurements
 from epp_ros.core.simulate import (FieldEffects, FieldSimulator, StillMotion, truck_pump,
                                    WorkingMotion)
@@ -87,6 +87,79 @@ def test_turret_alone_fixed_keeps_the_first_free_anchors_bearing():
                          [0.0, 0.0, 1.0]])
     np.testing.assert_allclose(result.anchors @ rotation.T, truth, atol=1e-6)
     np.testing.assert_allclose(result.link_offsets, true_links(simulator), atol=1e-6)
+
+
+def anchor_rounds(simulator, count, seed=0):
+    """Return ``count`` rounds (K, m, m) of the simulator's anchor-anchor ranges."""
+    rng = np.random.default_rng([seed, 99])
+    return np.array([simulator.anchor_ranges(rng) for _ in range(count)])
+
+
+def test_anchor_ranges_recover_every_offset_exactly_without_noise():
+    model, simulator, ranges, _ = recording(8, 0.0, 10.0)
+    result = calibrate(model, ranges, fixed_anchors=FIXED, anchor_ranges=anchor_rounds(
+        simulator, 3))
+    assert result.converged and isinstance(result.survey, SurveyResult)
+    np.testing.assert_allclose(result.anchors, simulator.true_anchors, atol=1e-6)
+    # The gauge is fixed by data: each tag's and each anchor's offset on its own.
+    np.testing.assert_allclose(result.tag_offsets, simulator.tag_offsets, atol=1e-6)
+    np.testing.assert_allclose(result.anchor_offsets, simulator.anchor_offsets, atol=1e-6)
+    assert abs(result.tag_offsets.sum() - result.anchor_offsets.sum()) > 0.01
+    assert 'anchor-anchor ranges split the link offsets' in result.gauge
+    assert result.rms_after < 1e-6 < 0.1 < result.rms_before
+    assert result.anchor_rms_after < 1e-6
+    assert np.all(np.isfinite(result.tag_offset_std))
+    # The survey started it: nearer the truth than the configuration.
+    moved = list(OUTRIGGERS)
+    surveyed = np.linalg.norm(result.survey.anchors - simulator.true_anchors, axis=1)[moved]
+    configured = np.linalg.norm(model.anchors - simulator.true_anchors, axis=1)[moved]
+    assert surveyed.mean() < configured.mean()
+
+
+def test_turret_alone_with_anchor_ranges_keeps_the_surveyed_bearing():
+    model, simulator, ranges, _ = recording(9, 0.0, 10.0)
+    result = calibrate(model, ranges, fixed_anchors=(0,),
+                       anchor_ranges=anchor_rounds(simulator, 2))
+    assert 'surveyed bearing' in result.gauge
+    radial = model.anchors[1, :2] / np.linalg.norm(model.anchors[1, :2])
+    across = np.array([-radial[1], radial[0]])
+    assert abs((result.anchors[1, :2] - result.survey.anchors[1, :2]) @ across) < 1e-9
+    fitted = np.linalg.norm(result.anchors[:, None] - result.anchors[None], axis=-1)
+    true = np.linalg.norm(simulator.true_anchors[:, None] - simulator.true_anchors[None],
+                          axis=-1)
+    np.testing.assert_allclose(fitted, true, atol=1e-6)
+    np.testing.assert_allclose(result.tag_offsets, simulator.tag_offsets, atol=1e-6)
+
+
+def test_with_anchor_ranges_every_offset_lies_within_its_standard_deviation():
+    scores = []
+    for seed in (10, 11):
+        model, simulator, ranges, _ = recording(seed, 0.1, 20.0)
+        result = calibrate(model, ranges, fixed_anchors=FIXED, nlos_fraction=0.0,
+                           anchor_ranges=anchor_rounds(simulator, 20, seed))
+        assert result.converged and 0.8 < result.residual_scale < 1.2
+        truth = np.r_[simulator.true_anchors[list(OUTRIGGERS)].ravel(),
+                      simulator.tag_offsets, simulator.anchor_offsets]
+        fitted = np.r_[result.anchors[list(OUTRIGGERS)].ravel(), result.tag_offsets,
+                       result.anchor_offsets]
+        error = fitted - truth
+        scores.append(error / np.sqrt(np.diag(result.covariance)))
+        # Chi-square of the 23 parameters together: within 5 of its standard errors.
+        chi2 = error @ np.linalg.solve(result.covariance, error)
+        assert abs(chi2 - error.size) < 5 * np.sqrt(2 * error.size)
+        # Pinned by the anchor-anchor ranges, the anchor offsets beat the link offsets'.
+        assert result.anchor_offset_std.max() < result.link_offset_std.max()
+    scores = np.concatenate(scores)
+    assert np.abs(scores).max() < 4.0
+    assert 0.5 < np.sqrt(np.mean(scores ** 2)) < 1.6
+
+
+def test_bad_anchor_ranges_are_refused():
+    model, simulator, ranges, _ = recording(12, 0.1, 2.0)
+    with pytest.raises(ValueError, match=r'shape \(K, 6, 6\)'):
+        calibrate(model, ranges, anchor_ranges=np.zeros((3, 5, 5)))
+    with pytest.raises(ValueError, match='no finite range'):
+        calibrate(model, ranges, anchor_ranges=np.full((3, 6, 6), np.nan))
 
 
 def test_recovered_parameters_lie_within_their_standard_deviations():

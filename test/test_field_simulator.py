@@ -330,3 +330,47 @@ def test_simulate_field_stamps_and_reproducibility():
         simulator.frame(motion, 1.0)
     with pytest.raises(ValueError, match='frame_period'):
         FieldSimulator(model, frame_period=0.0)
+
+
+def test_anchor_ranges_measure_true_distances_plus_both_offsets():
+    model = truck_pump()
+    effects = FieldEffects(sigma=0.05, sigma_per_metre=0.002, anchor_offset=0.2,
+                           anchor_shift=0.3)
+    simulator = FieldSimulator(model, effects, np.random.default_rng(3))
+    rounds = np.array([simulator.anchor_ranges() for _ in range(2000)])
+    m = model.n_anchors
+    assert rounds.shape == (2000, m, m)
+    assert np.isnan(rounds[:, np.arange(m), np.arange(m)]).all()
+    anchors = simulator.true_anchors
+    distances = np.linalg.norm(anchors[:, None] - anchors[None], axis=-1)
+    offsets = simulator.anchor_offsets[:, None] + simulator.anchor_offsets
+    sigma = effects.sigma + effects.sigma_per_metre * distances
+    off = ~np.eye(m, dtype=bool)
+    errors = rounds - distances - offsets
+    np.testing.assert_array_less(np.abs(errors.mean(0))[off],
+                                 TOLERANCE_SE * sigma[off] / np.sqrt(len(rounds)))
+    np.testing.assert_allclose(errors.std(0)[off], sigma[off], rtol=0.1)
+    # Each direction is its own measurement: i -> j and j -> i are uncorrelated.
+    upper = np.triu_indices(m, 1)
+    forth, back = errors[:, upper[0], upper[1]], errors[:, upper[1], upper[0]]
+    correlation = ((forth * back).mean(0) / (forth.std(0) * back.std(0)))
+    assert np.abs(correlation).max() < TOLERANCE_SE / np.sqrt(len(rounds))
+
+
+def test_anchor_ranges_leave_the_frames_draws_alone():
+    model = truck_pump()
+    effects = field_effects('offsets,anchors_moved,nlos_persistent')
+    plain, frames = run(model, effects, 20, seed=4)
+    asking = FieldSimulator(model, effects, np.random.default_rng(4))
+    np.testing.assert_array_equal(asking.true_anchors, plain.true_anchors)
+    for index, frame in enumerate(frames):
+        asking.anchor_ranges()
+        np.testing.assert_array_equal(asking.frame(Still(model), index * 0.1).ranges,
+                                      frame.ranges)
+    # The own stream is reproducible; a given generator is used instead.
+    first = FieldSimulator(model, effects, np.random.default_rng(4)).anchor_ranges()
+    again = FieldSimulator(model, effects, np.random.default_rng(4)).anchor_ranges()
+    np.testing.assert_array_equal(first, again)
+    given = plain.anchor_ranges(np.random.default_rng(9))
+    np.testing.assert_array_equal(given, plain.anchor_ranges(np.random.default_rng(9)))
+    assert not np.array_equal(given, first, equal_nan=True)

@@ -17,6 +17,7 @@ from .calibrate import calibrate, CalibrationResult
 from .estimators import METHODS, PostureEstimator, RANGE_METHODS
 from .model import BoomModel
 from .nedm import nearest_edm
+from .survey import survey_anchors, SurveyResult
 
 __all__ = ['BoomModel', 'PostureEstimator', 'METHODS', 'RANGE_METHODS', 'nearest_edm',
-           'calibrate', 'CalibrationResult']
+           'calibrate', 'CalibrationResult', 'survey_anchors', 'SurveyResult']

@@ -31,24 +31,40 @@ Ranges are fitted under the chain estimator's NLOS mixture (``core.nlos``), by i
 reweighted least squares: the maximum-likelihood estimate when some links are blocked. A
 symmetric robust loss (Huber, soft-L1) would not do here: NLOS excesses are one-sided, so
 a symmetric loss leaves part of their mean in every estimated location parameter, and the
-range offsets are exactly location parameters.
+range offsets are exactly location parameters. The noise is the estimators' (sigma growing
+with the range, ``eta``); with ``learn_noise`` it is learned from the first joint fit's
+residuals (``core.noise_learning``) and the fit repeated under it. A mixture far from the
+data's biases the offsets too: a 10 % blocked prior on clean ranges inflates the errors'
+chi-square by about half over 60 s of recording.
+
+Each frame's angles start from chain, warm-started through the recording; after each joint
+fit chain goes through it again with the calibrated model (and solves the worst frames from
+scratch), and every frame keeps whichever fits it best: a fold taken wrongly with the
+configured model, or after a silent tag, is not kept.
 
 Gauges. The fixed anchors (``fixed_anchors``: on the truck body) define the truck frame
 together with the boom's base and slew axis. Two changes of the parameters leave every
 range the same, and are fixed by convention:
 
-- a constant added to every tag offset and taken from every anchor offset: without tag-tag
-  ranges the split is fixed by ``sum(tag_offsets) == sum(anchor_offsets)``, the split
-  nearest to zero (the likeliest when every device's offset is drawn alike). The link
-  offsets ``tag_offsets[k] + anchor_offsets[j]`` do not depend on it: they are what the
-  ranges determine. Tag-tag ranges measure ``tag_offsets[k] + tag_offsets[l]`` and fix
-  the split themselves.
+- a constant added to every tag offset and taken from every anchor offset: the tag-anchor
+  ranges alone determine only the link offsets ``tag_offsets[k] + anchor_offsets[j]``.
+  Anchor-anchor ranges (``anchor_ranges``) measure ``anchor_offsets[i] +
+  anchor_offsets[j]``, tag-tag ranges ``tag_offsets[k] + tag_offsets[l]``: either fixes
+  the split by data, and every offset is then determined on its own. Without them the
+  split is fixed by ``sum(tag_offsets) == sum(anchor_offsets)``, the split nearest to zero
+  (the likeliest when every device's offset is drawn alike).
 - when every fixed anchor is on the slew axis (the turret's pivot alone), a rotation of
-  the free anchors about the axis, with every frame's slew: the first free anchor off the
-  axis then keeps its configured bearing (it defines the truck's x direction).
+  the free anchors about the axis, with every frame's slew (no range sees it, anchor-anchor
+  ranges neither): the first free anchor off the axis then keeps its starting bearing (it
+  defines the truck's x direction): the configured one, or the survey's.
+
+Anchor self-survey. With anchor-anchor ranges, :func:`core.survey.survey_anchors` first
+locates the free anchors and fits the anchor offsets from them alone (the configured
+positions resolving what they cannot see); that is the start of the joint fit, in which the
+anchor-anchor ranges are residuals too (robust, under the same NLOS mixture), so that the
+recording refines the survey and the survey pins what the boom's motion leaves loose.
 """
-from dataclasses import dataclass, field
-import operator
+from dataclasses import dataclass, field, replace
 import time
 
 import numpy as np
@@ -57,18 +73,22 @@ from .chain import angles_from_joints, ChainMethod, SearchExhausted
 from .measurements import Measurements, Residuals
 from .model import ANCHOR_SEPARATION
 from .nlos import NlosMixture
+from .noise_learning import NoiseLearner, RangeNoiseEstimate
+from .survey import (anchor_range_rounds, ANCHOR_TOLERANCE, AnchorPairs, fixed_indices, irls,
+                     OFFSET_TOLERANCE, survey_anchors)
 
-__all__ = ['CalibrationResult', 'calibrate']
+__all__ = ['CalibrationResult', 'calibrate', 'ANCHOR_TOLERANCE', 'OFFSET_TOLERANCE']
 
-#: Metres: calibrated anchors less certain than this (std along their worst direction)
-#: are reported as poorly determined; the issue's target accuracy.
-ANCHOR_TOLERANCE = 0.05
-
-#: Metres: link offsets less certain than this are reported as poorly determined.
-OFFSET_TOLERANCE = 0.03
+#: Robust cost per range (in units of sigma squared) above which, and above three times the
+#: median frame's, a frame of the joint fit is solved again from scratch (a wrong fold).
+LOST_FRAME_COST = 1.0
 
 #: Frames of the subsample each starting hypothesis is fitted on.
 SELECTION_FRAMES = 150
+
+#: Most Levenberg–Marquardt iterations of a hypothesis's fit: enough to rank them (the
+#: best one's fit goes on over the whole recording).
+SELECTION_ITERATIONS = 30
 
 #: Condition number (of the shared parameters' information, normalised to unit diagonal)
 #: above which a recording is reported as poorly exciting, whatever its length.
@@ -111,6 +131,14 @@ class CalibrationResult:
     nlos: np.ndarray = None         #: (N, p, m) posterior NLOS probability of each link
     covariance: np.ndarray = None   #: of (free anchors' xyz, tag offsets, anchor offsets)
     seconds: float = 0.0            #: computation time
+    #: the anchor self-survey that started the fit (``core.survey.SurveyResult``), None
+    #: without anchor-anchor ranges
+    survey: object = None
+    #: metres, RMS of the anchor-anchor ranges' residuals calibrated (NaN without them)
+    anchor_rms_after: float = float('nan')
+    #: the tag-anchor range noise fitted under (``core.noise_learning.RangeNoiseEstimate``):
+    #: as given, or learned (``learn_noise``)
+    range_noise: object = None
 
     @property
     def success(self):
@@ -143,34 +171,40 @@ def _angles(values, shape):
     return array
 
 
-def _fixed_indices(fixed_anchors, m):
-    try:
-        fixed = tuple(operator.index(j) for j in fixed_anchors)
-    except TypeError:
-        raise ValueError(f'fixed_anchors must be anchor indices, got {fixed_anchors!r}') \
-            from None
-    if any(not 0 <= j < m for j in fixed) or len(set(fixed)) != len(fixed):
-        raise ValueError(f'fixed_anchors must be distinct indices in 0-{m - 1}, got '
-                         f'{list(fixed)}')
-    return tuple(sorted(fixed))
-
-
 class _Problem:
     """
     The joint least squares: its parameters, residuals, Jacobian blocks and loss.
 
     Shared parameters ``x = x0 + basis @ q``: the free anchors' coordinates, then the tag
-    offsets, then the anchor offsets; ``basis`` leaves out the gauge directions.
+    offsets, then the anchor offsets; ``basis`` leaves out the gauge directions. The frames'
+    rows are tag-anchor then tag-tag ranges; the anchor-anchor ranges (``pairs``, None
+    without them) depend on the shared parameters only.
     """
 
-    def __init__(self, model, ranges, tag_ranges, fixed, sigma, tag_sigma, mixture):
+    def __init__(self, model, ranges, tag_ranges, fixed, settings, pairs=None, survey=None):
         self.model = model
         p, m = model.n_sections, model.n_anchors
         self.p, self.m = p, m
         self.free = np.array([j for j in range(m) if j not in fixed], dtype=int)
         self.fixed = fixed
-        n_anchor = 3 * self.free.size
-        self.n_x = n_anchor + p + m
+        self.n_x = 3 * self.free.size + p + m
+        self._rows(ranges, tag_ranges)
+        self.pairs = pairs
+        self.set_noise(settings)
+        self.anchor_column = np.full(m, -1)
+        self.anchor_column[self.free] = 3 * np.arange(self.free.size)
+        self.offset_column = 3 * self.free.size + p + np.arange(m)
+        tag_tag = tag_ranges is not None and np.isfinite(tag_ranges).any()
+        self.basis, self.gauge = self._gauges(model, tag_tag, pairs is not None)
+        self.x_given = self._configured(tag_tag or pairs is not None)
+        self.x0 = self.x_given.copy()
+        if survey is not None:      # the survey starts the anchors and the anchor offsets
+            self.x0[:3 * self.free.size] = survey.anchors[self.free].ravel()
+            self.x0[self.offset_column] = survey.anchor_offsets
+
+    def _rows(self, ranges, tag_ranges):
+        """Set up the frames' rows: measured (N, rows), mask and offsets' derivatives."""
+        p, m = self.p, self.m
         self.ranges = ranges.reshape(len(ranges), p * m)
         tags = np.arange(p)
         self.link_tag = np.repeat(tags, m)
@@ -184,27 +218,51 @@ class _Problem:
             self.near = self.far = np.zeros(0, dtype=int)
         self.mask = np.isfinite(self.measured)
         self.n_links = p * m
-        self.sigma = np.r_[np.full(p * m, sigma), np.full(self.near.size, tag_sigma)]
-        self.loss = mixture.bind(self.sigma)     # called on (frames, rows)
         # d(range)/d(offsets): tag k and anchor j for a link, both tags for a tag-tag range.
-        rows = self.sigma.size
+        rows = self.measured.shape[1]
         self.offset_rows = np.zeros((rows, p + m))
         self.offset_rows[np.arange(p * m), self.link_tag] = 1.0
         self.offset_rows[np.arange(p * m), p + self.link_anchor] = 1.0
         self.offset_rows[p * m + np.arange(self.near.size), self.near] += 1.0
         self.offset_rows[p * m + np.arange(self.near.size), self.far] += 1.0
-        self.anchor_column = np.full(m, -1)
-        self.anchor_column[self.free] = 3 * np.arange(self.free.size)
-        self.x0 = np.r_[model.anchors[self.free].ravel(), model.tag_offsets,
-                        model.anchor_offsets]
-        self.basis, self.gauge = self._gauges(model, tag_ranges is not None
-                                              and np.isfinite(tag_ranges).any())
-        split = self.x0[n_anchor:n_anchor + p].sum() - self.x0[n_anchor + p:].sum()
-        if tag_ranges is None or not np.isfinite(tag_ranges).any():
-            self.x0[n_anchor:n_anchor + p] -= split / (p + m)       # onto the gauge
-            self.x0[n_anchor + p:] += split / (p + m)
 
-    def _gauges(self, model, tag_tag):
+    def set_noise(self, settings):
+        """
+        Fit the ranges under the noise of ``settings`` from now on.
+
+        A tag-anchor range r has sigma ``sqrt(sigma^2 + (eta r)^2)`` (r as measured), a
+        tag-tag range ``tag_sigma``; all under the NLOS mixture.
+        """
+        links = np.hypot(settings.sigma, settings.eta * np.nan_to_num(
+            self.measured[:, :self.n_links]))
+        self.sigma = np.hstack([links, np.full((len(self.measured), self.near.size),
+                                               settings.tag_sigma)])      # (N, rows)
+        self.mixture = NlosMixture(settings.nlos_fraction, settings.nlos_gamma)
+        self._losses = {}
+        if self.pairs is not None:
+            self.pairs.bind(self.mixture)
+
+    def loss(self, frames):
+        """Return the NLOS loss bound to the sigmas of ``frames`` (cached: fits reuse them)."""
+        key = frames.tobytes()
+        if key not in self._losses:
+            if len(self._losses) > 8:
+                self._losses.clear()
+            self._losses[key] = self.mixture.bind(self.sigma[frames])
+        return self._losses[key]
+
+    def _configured(self, split_measured):
+        """Return the configured model's x; on the offsets' gauge unless data fix it."""
+        p, m, n_anchor = self.p, self.m, 3 * self.free.size
+        x = np.r_[self.model.anchors[self.free].ravel(), self.model.tag_offsets,
+                  self.model.anchor_offsets]
+        if not split_measured:
+            split = x[n_anchor:n_anchor + p].sum() - x[n_anchor + p:].sum()
+            x[n_anchor:n_anchor + p] -= split / (p + m)
+            x[n_anchor + p:] += split / (p + m)
+        return x
+
+    def _gauges(self, model, tag_tag, anchor_anchor):
         """Return the basis (n_x, n_q) of the shared parameters' changes, and its story."""
         p, m = self.p, self.m
         blocks, story = [], []
@@ -213,7 +271,8 @@ class _Problem:
         if not any(axis_distance[j] > ANCHOR_SEPARATION for j in self.fixed):
             off_axis = [j for j in self.free if axis_distance[j] > ANCHOR_SEPARATION]
             pinned = off_axis[0]
-            story.append(f'anchor {pinned} keeps its configured bearing about the slew axis '
+            start = 'surveyed' if anchor_anchor else 'configured'
+            story.append(f'anchor {pinned} keeps its {start} bearing about the slew axis '
                          '(no fixed anchor off the axis defines the x direction of the truck)')
         for j in self.free:
             if j == pinned:
@@ -221,9 +280,13 @@ class _Problem:
                 blocks.append(np.c_[radial / np.linalg.norm(radial), [0.0, 0.0, 1.0]])
             else:
                 blocks.append(np.eye(3))
-        if tag_tag:
+        if tag_tag or anchor_anchor:
             blocks.append(np.eye(p + m))
-            story.append('the tag-tag ranges split the link offsets between tags and anchors')
+            which = ' and '.join(name for name, given in (('tag-tag', tag_tag),
+                                                          ('anchor-anchor', anchor_anchor))
+                                 if given)
+            story.append(f'the {which} ranges split the link offsets between tags and '
+                         'anchors: every offset is determined by data')
         else:
             split = np.r_[np.ones(p), -np.ones(m)] / np.sqrt(p + m)
             # Orthonormal basis of the offsets with sum(tag) == sum(anchor).
@@ -269,8 +332,8 @@ class _Problem:
         offsets = self.offset_rows @ np.r_[tag_offsets, anchor_offsets]
         measured = self.measured[frames]
         mask = self.mask[frames]
-        scaled = np.where(mask, (distances + offsets - np.nan_to_num(measured)) / self.sigma,
-                          0.0)
+        sigma = self.sigma[frames]
+        scaled = np.where(mask, (distances + offsets - np.nan_to_num(measured)) / sigma, 0.0)
         if not jacobian:
             return scaled, None, None
         units = vectors / np.maximum(distances, 1e-12)[..., None]
@@ -287,38 +350,59 @@ class _Problem:
             column = self.anchor_column[self.link_anchor[link]]
             shared[:, link, column:column + 3] = -units[:, link]
         shared[:, :, 3 * self.free.size:] = self.offset_rows
-        weight = mask / self.sigma
+        weight = mask / sigma
         return (scaled, angle * weight[..., None],
                 (shared * weight[..., None]) @ self.basis)
 
-    def robust(self, scaled, mask):
+    def robust(self, scaled, mask, frames):
         """
         Return the NLOS-mixture cost (n,), its slope, IRLS weights and NLOS probabilities.
 
         Ranges follow the chain's mixture on their excess ``-scaled``; the weights are the
         chain's (``ChainMethod.loss``).
         """
-        cost, excess_slope, nlos = self.loss(-scaled)
-        cost, slope = np.where(mask, cost, 0.0), np.where(mask, -excess_slope, 0.0)
-        weights = np.ones_like(scaled)
-        large = np.abs(scaled) > 1.0
-        weights[large] = np.clip(slope[large] / scaled[large], 1e-3, 1.0)
-        return cost.sum(axis=1), slope, np.where(mask, weights, 0.0), np.where(mask, nlos, 0.0)
+        cost, slope, weights, nlos = irls(self.loss(frames), scaled, mask)
+        return cost.sum(axis=1), slope, weights, nlos
+
+    def anchor_terms(self, q):
+        """
+        Return the anchor-anchor ranges' cost, gradient (n_q,), information and parts.
+
+        Zeros (and None parts) without them; see ``AnchorPairs.terms``.
+        """
+        if self.pairs is None:
+            size = self.basis.shape[1]
+            return 0.0, np.zeros(size), np.zeros((size, size)), None
+        anchors, _, anchor_offsets = self.unpack(self.x0 + self.basis @ q)
+        return self.pairs.terms(anchors, anchor_offsets, self.anchor_column,
+                                self.offset_column, self.basis)
 
 
-def _normal_blocks(angle, shared, slope, weights):
-    """Return the block-arrow normal equations: U (n, a, a), W (n, a, q), V, g_a, g_q."""
+def _normal_blocks(angle, shared, slope, weights, pair_gradient=0.0, pair_information=0.0):
+    """
+    Return the block-arrow normal equations: U (n, a, a), W (n, a, q), V, g_a, g_q.
+
+    The anchor-anchor ranges' gradient and information (shared parameters only) add to
+    ``g_q`` and ``V``.
+    """
     weighted = angle * weights[..., None]
     blocks = np.einsum('nla,nlb->nab', weighted, angle)
     coupling = np.einsum('nla,nlq->naq', weighted, shared)
     shared_block = np.einsum('nlq,nlr->qr', shared * weights[..., None], shared)
-    return (blocks, coupling, shared_block, np.einsum('nla,nl->na', angle, slope),
-            np.einsum('nlq,nl->q', shared, slope))
+    return (blocks, coupling, shared_block + pair_information,
+            np.einsum('nla,nl->na', angle, slope),
+            np.einsum('nlq,nl->q', shared, slope) + pair_gradient)
 
 
-def _schur(blocks, coupling, shared_block):
-    """Return the shared parameters' information with the angles eliminated, and U^-1."""
-    inverse = np.linalg.inv(blocks)
+def _schur(blocks, coupling, shared_block, pseudo=False):
+    """
+    Return the shared parameters' information with the angles eliminated, and U^-1.
+
+    ``pseudo``: U's pseudo-inverse, for a frame whose angles the ranges do not all
+    determine (a silent tag, few links); exact, as such angle changes move no range.
+    """
+    inverse = np.linalg.pinv(blocks, rcond=1e-10, hermitian=True) if pseudo \
+        else np.linalg.inv(blocks)
     reduced = shared_block - np.einsum('naq,nab,nbr->qr', coupling, inverse, coupling)
     return 0.5 * (reduced + reduced.T), inverse
 
@@ -328,7 +412,10 @@ def _step(normal, damping):
     blocks, coupling, shared_block, gradient_a, gradient_q = normal
     size = blocks.shape[1]
     diagonal = np.einsum('nii->ni', blocks)
-    damped = blocks + (damping * (diagonal + 1e-9))[:, :, None] * np.eye(size)
+    # A small ridge relative to each frame's scale holds still the angles no range sees (a
+    # silent tag's): rounding in their zero gradient would otherwise step them by radians.
+    ridge = damping * diagonal + 1e-9 * (diagonal.max(axis=1, keepdims=True) + 1.0)
+    damped = blocks + ridge[:, :, None] * np.eye(size)
     shared_damped = shared_block + damping * np.diag(np.diag(shared_block) + 1e-9)
     reduced, inverse = _schur(damped, coupling, shared_damped)
     right = gradient_q - np.einsum('naq,nab,nb->q', coupling, inverse, gradient_a)
@@ -343,8 +430,10 @@ def _least_squares(problem, psi, q, frames, max_iter, tol):
 
     def state(psi, q):
         scaled, angle, shared = problem.evaluate(psi, problem.x0 + problem.basis @ q, frames)
-        cost, slope, weights, _ = problem.robust(scaled, mask)
-        return float(cost.sum()), (angle, shared, slope, weights)
+        cost, slope, weights, _ = problem.robust(scaled, mask, frames)
+        pair_cost, pair_gradient, pair_information, _ = problem.anchor_terms(q)
+        return (float(cost.sum()) + pair_cost,
+                (angle, shared, slope, weights, pair_gradient, pair_information))
 
     cost, parts = state(psi, q)
     damping, iterations, converged = 1e-6, 0, False
@@ -453,9 +542,9 @@ def _select(problem, chain, model, ranges, tag_ranges, usable, hypotheses, max_i
             continue
         frames, psi = subsample[solved], psi[solved]
         if number == 0:
-            rms_before = _range_rms(problem, psi, problem.x0, frames)
+            rms_before = _range_rms(problem, psi, problem.x_given, frames)
         psi, q, cost, _, _ = _least_squares(problem, psi, np.zeros(problem.basis.shape[1]),
-                                            frames, max_iter, tol)
+                                            frames, min(max_iter, SELECTION_ITERATIONS), tol)
         score = cost / problem.mask[frames].sum()
         if best is None or score < best[0]:
             best = (score, psi[0], q)
@@ -468,13 +557,15 @@ def _range_rms(problem, psi, x, frames):
     """Return the RMS of measured less predicted tag-anchor ranges of ``frames``, metres."""
     scaled = problem.evaluate(psi, x, frames, jacobian=False)[0][:, :problem.n_links]
     mask = problem.mask[frames, :problem.n_links]
-    return float(np.sqrt(np.mean((scaled[mask] * problem.sigma[0]) ** 2))) if mask.any() \
+    metres = scaled * problem.sigma[frames][:, :problem.n_links]
+    return float(np.sqrt(np.mean(metres[mask] ** 2))) if mask.any() \
         else float('nan')
 
 
 def _covariance(information, scale):
     """Return ``scale^2 information^-1`` (inf along null directions) and the condition."""
-    diagonal = np.sqrt(np.maximum(np.diag(information), 1e-300))
+    diagonal = np.diag(information)
+    diagonal = np.where(diagonal > 0, np.sqrt(np.abs(diagonal)), 1.0)
     normalised = information / np.outer(diagonal, diagonal)
     values, vectors = np.linalg.eigh(normalised)
     condition = float(values[-1] / values[0]) if values[0] > 0 else float('inf')
@@ -543,16 +634,227 @@ def _link_std(problem, covariance):
     return np.sqrt(np.where(np.isnan(variance), np.inf, np.maximum(variance, 0.0)))
 
 
-def _chain(model, sigma, tag_sigma, nlos_fraction, nlos_gamma):
-    """Return the chain estimator that starts the frames' angles."""
-    return ChainMethod(model, sigma=sigma, tag_sigma=tag_sigma, nlos_fraction=nlos_fraction,
-                       nlos_gamma=nlos_gamma)
+@dataclass(frozen=True)
+class _Settings:
+    """What every stage of :func:`calibrate` needs to know besides the data: the noise."""
+
+    sigma: float
+    eta: float
+    tag_sigma: float
+    nlos_fraction: float
+    nlos_gamma: float
+    max_iter: int
+    tol: float
+
+    def chain(self, model):
+        """Return the chain estimator that starts (or restarts) the frames' angles."""
+        return ChainMethod(model, sigma=self.sigma, eta=self.eta, tag_sigma=self.tag_sigma,
+                           nlos_fraction=self.nlos_fraction, nlos_gamma=self.nlos_gamma)
+
+    def noise(self):
+        """Return the tag-anchor range noise as a ``RangeNoiseEstimate``."""
+        return RangeNoiseEstimate(self.sigma, self.eta, self.nlos_fraction, self.nlos_gamma)
 
 
-def calibrate(model, ranges, *, tag_ranges=None, fixed_anchors=(0,), sigma=0.1,
-              tag_sigma=None, nlos_fraction=0.1, nlos_gamma=1.0, start=None, max_iter=100,
-              tol=1e-10, refits=2, hypotheses=4, anchor_tolerance=ANCHOR_TOLERANCE,
-              offset_tolerance=OFFSET_TOLERANCE):
+def _learned_noise(problem, psi, q, frames, settings):
+    """
+    Return ``settings`` with the range noise learned from the joint fit's residuals.
+
+    ``core.noise_learning.NoiseLearner`` (EM under the NLOS mixture, sigma growing with
+    the range) over every frame's tag-anchor residuals at once; the settings as they were
+    with too few residuals.
+    """
+    n = problem.n_links
+    x = problem.x0 + problem.basis @ q
+    scaled = problem.evaluate(psi, x, frames, jacobian=False)[0][:, :n]
+    mask = problem.mask[frames][:, :n]
+    excess = np.where(mask, -scaled * problem.sigma[frames][:, :n], np.nan)
+    measured = problem.measured[frames][:, :n]
+    dof = problem.p + 1
+    counts = mask.sum(axis=1)
+    links = int(counts[counts > dof].sum())
+    if links == 0:
+        return settings
+    # Settled, hence fitted, exactly when the last frame is in.
+    learner = NoiseLearner(settings.noise(), window=frames.size, every=frames.size + 1,
+                           settle_links=links)
+    for row in range(frames.size):
+        learner.observe(excess[row], measured[row], dof)
+    if not learner.settled:
+        return settings
+    learned = learner.estimate
+    return replace(settings, sigma=learned.sigma, eta=learned.eta,
+                   nlos_fraction=learned.nlos_fraction, nlos_gamma=learned.nlos_gamma)
+
+
+def _survey(model, anchor_ranges, fixed, anchor_sigma, settings, prior_sigma):
+    """Return the anchor-anchor ranges' terms and the survey, (None, None) without them."""
+    if anchor_ranges is None:
+        return None, None
+    rounds = anchor_range_rounds(anchor_ranges, model.n_anchors)
+    survey = survey_anchors(model, rounds, fixed_anchors=fixed, sigma=anchor_sigma,
+                            prior_sigma=prior_sigma, nlos_fraction=settings.nlos_fraction,
+                            nlos_gamma=settings.nlos_gamma)
+    mixture = NlosMixture(settings.nlos_fraction, settings.nlos_gamma)
+    return AnchorPairs(rounds, anchor_sigma, mixture), survey
+
+
+def _start(problem, data, start, settings, hypotheses):
+    """
+    Return every frame's starting angles (N, p + 1) (NaN: unused), q and the RMS before.
+
+    Without ``start``: chain from the best of the first frame's ``hypotheses`` (fitted on a
+    subsample with the configured model), then through the recording warm-started.
+    """
+    ranges, tag_ranges = data
+    count, p, m = ranges.shape
+    model = problem.model
+    q = np.zeros(problem.basis.shape[1])
+    enough = problem.mask[:, :p * m].sum(axis=1) >= p + 1
+    if start is not None:
+        psi_all = _angles(start, (count, p + 1))
+        frames = np.flatnonzero(np.all(np.isfinite(psi_all), axis=1) & enough)
+        rms = _range_rms(problem, psi_all[frames], problem.x_given, frames) \
+            if frames.size else float('nan')
+        return psi_all, q, rms
+    chain = settings.chain(model)
+    usable, starts = np.flatnonzero(enough), []
+    for frame in usable[:10]:       # the first frame chain can solve
+        starts = _hypotheses(chain, model, ranges, tag_ranges, frame, hypotheses)
+        if starts:
+            usable = usable[usable >= frame]
+            break
+    first, q, rms_before = _select(problem, chain, model, ranges, tag_ranges, usable,
+                                   starts, settings.max_iter, settings.tol)
+    started = problem.calibrated(q)
+    psi_all = np.full((count, p + 1), np.nan)
+    psi_all[usable] = _propagate(settings.chain(started), started, ranges, tag_ranges,
+                                 usable, first)
+    return psi_all, q, rms_before
+
+
+def _frame_costs(problem, psi, q, frames):
+    """Return each frame's robust cost (n,) at ``psi`` (n, p + 1) and ``q``."""
+    scaled = problem.evaluate(psi, problem.x0 + problem.basis @ q, frames, jacobian=False)[0]
+    return problem.robust(scaled, problem.mask[frames], frames)[0]
+
+
+def _lost_frames(problem, psi, q, frames):
+    """
+    Return the indices of the frames the joint fit leaves far off, likely at a wrong fold.
+
+    The NLOS loss grows only linearly far out, so a wrong fold costs a few times the
+    typical frame per link, not orders of magnitude.
+    """
+    cost = _frame_costs(problem, psi, q, frames)
+    per_link = cost / np.maximum(problem.mask[frames].sum(axis=1), 1)
+    return np.flatnonzero(per_link > max(LOST_FRAME_COST, 3 * np.median(per_link)))
+
+
+def _restarted(problem, data, psi, q, frames, settings, lost):
+    """
+    Return the angles (n, p + 1) with the frames chain now fits better, and how many.
+
+    Chain with the calibrated model solves the lost frames from scratch and goes through
+    the whole recording again warm-started (a fold taken wrongly at the start, or after
+    a silent tag, is kept by the warm start until the model is right); each frame keeps
+    the lowest cost of the three.
+    """
+    ranges, tag_ranges = data
+    calibrated = problem.calibrated(q)
+    chain = settings.chain(calibrated)
+    cold = psi.copy()
+    for index in lost:
+        solved = _solve(chain, calibrated, ranges, tag_ranges, frames[index], None, False)
+        if solved is not None:
+            cold[index] = np.r_[solved[1]['slew'], solved[1]['pitches']]
+    warm = _propagate(chain, calibrated, ranges, tag_ranges, frames, psi[0])
+    warm = np.where(np.isfinite(warm), warm, psi)
+    costs = np.stack([_frame_costs(problem, candidate, q, frames)
+                      for candidate in (psi, cold, warm)])
+    best = np.argmin(costs - 1e-9 * np.abs(costs[0]), axis=0)     # ties: keep the fit's
+    chosen = np.choose(best[:, None], (psi, cold, warm))
+    return chosen, int(np.count_nonzero(best))
+
+
+def _joint_fit(problem, data, psi, q, frames, settings, refits):
+    """
+    Return the joint fit's angles, q, iterations and convergence.
+
+    After each fit, chain with the calibrated model restarts the frames
+    (:func:`_restarted`: a chain start at a wrong fold) and, while that fits any better,
+    the fit is repeated, at most ``refits`` times.
+    """
+    total = 0
+    for round_ in range(refits + 1):
+        psi, q, _, iterations, converged = _least_squares(problem, psi, q, frames,
+                                                          settings.max_iter, settings.tol)
+        total += iterations
+        if round_ == refits:
+            break
+        lost = _lost_frames(problem, psi, q, frames)
+        psi, changed = _restarted(problem, data, psi, q, frames, settings, lost)
+        if changed == 0:
+            break
+    return psi, q, total, converged
+
+
+def _uncertainty(problem, psi, q, frames):
+    """
+    Return the covariance of x, the condition, residual scale and the NLOS probabilities.
+
+    The information of the shared parameters with the angles eliminated (plus the
+    anchor-anchor ranges'), scaled by the residual variance; inf along what it misses.
+    """
+    p = problem.p
+    x = problem.x0 + problem.basis @ q
+    scaled, angle, shared = problem.evaluate(psi, x, frames)
+    _, slope, weights, nlos_links = problem.robust(scaled, problem.mask[frames], frames)
+    blocks, coupling, shared_block, _, _ = _normal_blocks(angle, shared, slope, weights)
+    _, _, pair_information, pair_parts = problem.anchor_terms(q)
+    information = _schur(blocks, coupling, shared_block, pseudo=True)[0] + pair_information
+    squares, count = np.sum(weights * scaled ** 2), float(weights.sum())
+    if pair_parts is not None:
+        squares += np.sum(pair_parts[1] * pair_parts[0] ** 2)
+        count += float(pair_parts[1].sum())
+    dof = max(count - frames.size * (p + 1) - q.size, 1.0)
+    residual_scale = float(np.sqrt(squares / dof))
+    covariance_q, condition = _covariance(information, residual_scale)
+    with np.errstate(invalid='ignore'):
+        covariance = problem.basis @ np.nan_to_num(covariance_q, posinf=0.0) @ problem.basis.T
+    undetermined = problem.basis[:, np.isinf(np.diag(covariance_q))].any(axis=1)
+    covariance[undetermined, :] = np.inf
+    covariance[:, undetermined] = np.inf
+    return covariance, condition, residual_scale, nlos_links
+
+
+def _anchor_rms(problem, q):
+    """Return the RMS of measured less fitted anchor-anchor ranges, metres (NaN: none)."""
+    if problem.pairs is None:
+        return float('nan')
+    anchors, _, anchor_offsets = problem.unpack(problem.x0 + problem.basis @ q)
+    scaled = problem.pairs.residuals(anchors, anchor_offsets, problem.anchor_column,
+                                     problem.offset_column, problem.n_x)[0]
+    return float(np.sqrt(np.mean(scaled[problem.pairs.mask] ** 2))) * problem.pairs.sigma
+
+
+def _status(wandered, converged, poorly, advice, max_iter, frames, rms_before, rms_after):
+    """Return the status and the message of the verdict."""
+    if not converged and not wandered:
+        return 'not_converged', (f'the joint fit did not converge in {max_iter} iterations: '
+                                 'the result is not to be used')
+    if poorly:
+        return 'poorly_excited', ('the recording does not determine everything: '
+                                  + '; '.join(advice))
+    return 'ok', (f'calibrated from {frames.size} frames: range RMS {rms_before:.3g} m -> '
+                  f'{rms_after:.3g} m')
+
+
+def calibrate(model, ranges, *, tag_ranges=None, anchor_ranges=None, fixed_anchors=(0,),
+              sigma=0.1, eta=0.0, tag_sigma=None, anchor_sigma=None, prior_sigma=0.5,
+              nlos_fraction=0.1, nlos_gamma=1.0, learn_noise=False, start=None,
+              max_iter=100, tol=1e-10, refits=2, hypotheses=4,
+              anchor_tolerance=ANCHOR_TOLERANCE, offset_tolerance=OFFSET_TOLERANCE):
     """
     Calibrate the free anchors' positions and the device range offsets from a recording.
 
@@ -568,16 +870,32 @@ def calibrate(model, ranges, *, tag_ranges=None, fixed_anchors=(0,), sigma=0.1,
     tag_ranges : array_like, shape (N, p, p), optional
         Tag-tag ranges, metres, NaN where missing; they also split the link offsets
         between tags and anchors (the gauge, see the module's description).
+    anchor_ranges : array_like, shape (K, m, m), optional
+        K >= 1 rounds of anchor-anchor ranges, metres (``[k, i, j]``: anchor i's range to
+        anchor j, ``||a_i - a_j|| + o_i + o_j``), NaN where missing, taken at any time of
+        the recording (the anchors do not move). They survey the free anchors and the
+        anchor offsets before the joint fit (:func:`core.survey.survey_anchors`, the
+        result's ``survey``), enter the joint fit as residuals, and fix the split of the
+        link offsets between tags and anchors by data.
     fixed_anchors : sequence of int
         Anchors on the truck body (turret, cab) whose configured positions, with the
         boom's base and slew axis, define the truck frame; the others are fitted.
-    sigma : float
-        Range standard deviation, metres; ``tag_sigma`` (None: ``sigma``) the tag-tag one.
-    tag_sigma : float, optional
-        Tag-tag range standard deviation, metres.
+    sigma, eta : float
+        Range noise: a tag-anchor range r has standard deviation ``sqrt(sigma^2 + (eta
+        r)^2)`` metres (``eta=0``: sigma throughout), as the estimators' noise model.
+    tag_sigma, anchor_sigma : float, optional
+        Tag-tag and anchor-anchor range standard deviations, metres; None: ``sigma``.
+    prior_sigma : float
+        Metres per axis: how far the survey lets a free anchor be from its configured
+        position where the anchor-anchor ranges do not see it (see ``survey_anchors``).
     nlos_fraction, nlos_gamma : float
         The NLOS mixture (prior blocked fraction, mean excess in metres) the ranges are
         fitted under, as the chain estimator's; ``nlos_fraction=0``: plain least squares.
+    learn_noise : bool
+        After the joint fit, learn the tag-anchor range noise (``sigma``, ``eta`` and the
+        NLOS mixture) from its residuals (``core.noise_learning``) and fit again under it:
+        for a site whose noise is not known (it grows with distance, links stay blocked).
+        The result's ``range_noise`` is what the fit used.
     start : array_like, shape (N, p + 1), optional
         Each frame's starting angles (slew, pitches), radians, NaN rows skipped; default:
         chain fits of each frame, warm-started from the previous one, from the best of
@@ -586,14 +904,14 @@ def calibrate(model, ranges, *, tag_ranges=None, fixed_anchors=(0,), sigma=0.1,
         Levenberg–Marquardt iterations per solve.
     tol : float
         Stop when no parameter moves more than this (radians or metres).
-    hypotheses : int
-        Most postures of the first frame tried as the recording's start: with the
-        configuration off, a wrong fold can fit a frame best (and chain then follows it);
-        each is fitted on a subsample, and the best fit starts the whole recording.
     refits : int
         Rounds in which frames the joint fit leaves far off (a chain start at a wrong
         fold) are solved again by chain with the calibrated model, and the joint fit
         repeated.
+    hypotheses : int
+        Most postures of the first frame tried as the recording's start: with the
+        configuration off, a wrong fold can fit a frame best (and chain then follows it);
+        each is fitted on a subsample, and the best fit starts the whole recording.
     anchor_tolerance, offset_tolerance : float
         Metres: anchors (std along their worst direction) and link offsets (std) less
         certain than these are reported as poorly determined.
@@ -601,11 +919,13 @@ def calibrate(model, ranges, *, tag_ranges=None, fixed_anchors=(0,), sigma=0.1,
     Returns
     -------
     CalibrationResult
+        ``rms_before`` is the configured model's, also with a survey.
 
     Raises
     ------
     ValueError
-        On a wrong shape, bad fixed anchors, or a recording without a usable frame.
+        On a wrong shape, bad fixed anchors, a recording without a usable frame, or
+        anchor-anchor ranges the survey refuses.
 
     """
     began = time.perf_counter()
@@ -615,77 +935,44 @@ def calibrate(model, ranges, *, tag_ranges=None, fixed_anchors=(0,), sigma=0.1,
     if tag_ranges is not None:
         tag_ranges = _finite_ranges(tag_ranges, (count, p, p), 'tag_ranges')
         tag_ranges[:, np.arange(p), np.arange(p)] = np.nan
-    fixed = _fixed_indices(fixed_anchors, m)
+    fixed = fixed_indices(fixed_anchors, m)
     tag_sigma = sigma if tag_sigma is None else tag_sigma
-    chain = _chain(model, sigma, tag_sigma, nlos_fraction, nlos_gamma)
-    mixture = NlosMixture(float(nlos_fraction), float(nlos_gamma))
-    problem = _Problem(model, ranges, tag_ranges, fixed, float(sigma), float(tag_sigma),
-                       mixture)
-    q = np.zeros(problem.basis.shape[1])
+    anchor_sigma = sigma if anchor_sigma is None else anchor_sigma
+    settings = _Settings(float(sigma), float(eta), float(tag_sigma), float(nlos_fraction),
+                         float(nlos_gamma), max_iter, tol)
+    pairs, survey = _survey(model, anchor_ranges, fixed, float(anchor_sigma), settings,
+                            prior_sigma)
+    problem = _Problem(model, ranges, tag_ranges, fixed, settings, pairs, survey)
+    data = (ranges, tag_ranges)
+    psi_all, q, rms_before = _start(problem, data, start, settings, hypotheses)
     enough = problem.mask[:, :p * m].sum(axis=1) >= p + 1
-    if start is None:
-        usable, starts = np.flatnonzero(enough), []
-        for frame in usable[:10]:       # the first frame chain can solve
-            starts = _hypotheses(chain, model, ranges, tag_ranges, frame, hypotheses)
-            if starts:
-                usable = usable[usable >= frame]
-                break
-        first, q, rms_before = _select(problem, chain, model, ranges, tag_ranges, usable,
-                                       starts, max_iter, tol)
-        started = problem.calibrated(q)
-        psi_all = np.full((count, p + 1), np.nan)
-        psi_all[usable] = _propagate(_chain(started, sigma, tag_sigma, nlos_fraction,
-                                            nlos_gamma), started, ranges, tag_ranges, usable,
-                                     first)
-    else:
-        psi_all = _angles(start, (count, p + 1))
     frames = np.flatnonzero(np.all(np.isfinite(psi_all), axis=1) & enough)
     if frames.size == 0:
         raise ValueError('no frame of the recording could be solved: nothing to calibrate')
-    if start is not None:
-        rms_before = _range_rms(problem, psi_all[frames], problem.x0, frames)
-    psi = psi_all[frames]
-    total = 0
-    for round_ in range(refits + 1):
-        psi, q, _, iterations, converged = _least_squares(problem, psi, q, frames, max_iter,
-                                                          tol)
-        total += iterations
-        if round_ == refits:
-            break
-        x = problem.x0 + problem.basis @ q
-        scaled = problem.evaluate(psi, x, frames, jacobian=False)[0]
-        cost = problem.robust(scaled, problem.mask[frames])[0]
-        per_link = cost / np.maximum(problem.mask[frames].sum(axis=1), 1)
-        lost = np.flatnonzero(per_link > max(12.5, 5 * np.median(per_link)))
-        if lost.size == 0:
-            break
-        calibrated = problem.calibrated(q)
-        refit = _chain(calibrated, sigma, tag_sigma, nlos_fraction, nlos_gamma)
-        for index in lost:
-            solved = _solve(refit, calibrated, ranges, tag_ranges, frames[index], None, False)
-            if solved is not None:
-                psi[index] = np.r_[solved[1]['slew'], solved[1]['pitches']]
-    x = problem.x0 + problem.basis @ q
-    anchors, tag_offsets, anchor_offsets = problem.unpack(x)
-    scaled, angle, shared = problem.evaluate(psi, x, frames)
-    mask = problem.mask[frames]
-    _, slope, weights, nlos_links = problem.robust(scaled, mask)
-    blocks, coupling, shared_block, _, _ = _normal_blocks(angle, shared, slope, weights)
-    information = _schur(blocks + 1e-12 * np.eye(p + 1), coupling, shared_block)[0]
-    dof = max(float(weights.sum()) - frames.size * (p + 1) - q.size, 1.0)
-    residual_scale = float(np.sqrt(np.sum(weights * scaled ** 2) / dof))
-    covariance_q, condition = _covariance(information, residual_scale)
-    with np.errstate(invalid='ignore'):
-        covariance = problem.basis @ np.nan_to_num(covariance_q, posinf=0.0) @ problem.basis.T
-    undetermined = problem.basis[:, np.isinf(np.diag(covariance_q))].any(axis=1)
-    covariance[undetermined, :] = np.inf
-    covariance[:, undetermined] = np.inf
+    psi, q, iterations, converged = _joint_fit(problem, data, psi_all[frames], q, frames,
+                                               settings, refits)
+    if learn_noise:
+        settings = _learned_noise(problem, psi, q, frames, settings)
+        problem.set_noise(settings)
+        psi, q, more, converged = _joint_fit(problem, data, psi, q, frames, settings, refits)
+        iterations += more
+    return _result(problem, psi, q, frames, count, survey, {
+        'rms_before': rms_before, 'iterations': iterations, 'converged': converged,
+        'began': began, 'max_iter': max_iter, 'anchor_tolerance': anchor_tolerance,
+        'offset_tolerance': offset_tolerance, 'noise': settings.noise()})
+
+
+def _result(problem, psi, q, frames, count, survey, facts):
+    """Return the :class:`CalibrationResult` of the joint fit's solution."""
+    p, m, model = problem.p, problem.m, problem.model
+    anchors, tag_offsets, anchor_offsets = problem.unpack(problem.x0 + problem.basis @ q)
+    covariance, condition, residual_scale, nlos_links = _uncertainty(problem, psi, q, frames)
     std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     n_anchor = 3 * problem.free.size
     anchor_std = np.zeros((m, 3))
     anchor_std[problem.free] = std[:n_anchor].reshape(-1, 3)
-    poorly, advice = _verdict(problem, covariance, condition, anchor_tolerance,
-                              offset_tolerance)
+    poorly, advice = _verdict(problem, covariance, condition, facts['anchor_tolerance'],
+                              facts['offset_tolerance'])
     wandered = False
     try:
         calibrated = model.with_calibration(anchors, anchor_offsets, tag_offsets)
@@ -694,21 +981,9 @@ def calibrate(model, ranges, *, tag_ranges=None, fixed_anchors=(0,), sigma=0.1,
         poorly = poorly + ['the recording']
         advice = advice + [f'the fit wandered to values no pump has ({exc}); record the '
                            'boom slewing and luffing every section']
-    rms_after = _range_rms(problem, psi, x, frames)
-    if wandered:
-        status = 'poorly_excited'
-        message = 'the recording does not determine everything: ' + '; '.join(advice)
-    elif not converged:
-        status = 'not_converged'
-        message = (f'the joint fit did not converge in {max_iter} iterations: the result is '
-                   'not to be used')
-    elif poorly:
-        status = 'poorly_excited'
-        message = 'the recording does not determine everything: ' + '; '.join(advice)
-    else:
-        status = 'ok'
-        message = (f'calibrated from {frames.size} frames: range RMS {rms_before:.3g} m -> '
-                   f'{rms_after:.3g} m')
+    rms_after = _range_rms(problem, psi, problem.x0 + problem.basis @ q, frames)
+    status, message = _status(wandered, facts['converged'], poorly, advice,
+                              facts['max_iter'], frames, facts['rms_before'], rms_after)
     postures = np.full((count, p + 1), np.nan)
     postures[frames] = psi
     nlos = np.zeros((count, p, m))
@@ -720,8 +995,9 @@ def calibrate(model, ranges, *, tag_ranges=None, fixed_anchors=(0,), sigma=0.1,
         anchor_offsets=anchor_offsets, tag_offsets=tag_offsets,
         link_offsets=tag_offsets[:, None] + anchor_offsets[None, :], anchor_std=anchor_std,
         anchor_offset_std=std[n_anchor + p:], tag_offset_std=std[n_anchor:n_anchor + p],
-        link_offset_std=_link_std(problem, covariance), rms_before=rms_before,
+        link_offset_std=_link_std(problem, covariance), rms_before=facts['rms_before'],
         rms_after=rms_after, residual_scale=residual_scale, condition=condition,
-        poorly_determined=poorly, gauge=problem.gauge, converged=converged,
-        iterations=total, frames_used=used, postures=postures, nlos=nlos,
-        covariance=covariance, seconds=time.perf_counter() - began)
+        poorly_determined=poorly, gauge=problem.gauge, converged=facts['converged'],
+        iterations=facts['iterations'], frames_used=used, postures=postures, nlos=nlos,
+        covariance=covariance, seconds=time.perf_counter() - facts['began'], survey=survey,
+        anchor_rms_after=_anchor_rms(problem, q), range_noise=facts['noise'])

@@ -760,7 +760,8 @@ class FieldSimulator:
 
     The per-run constants are drawn at construction, in this order: the anchor shifts,
     the tag offsets, the anchor offsets, the inclinometer biases (constant parts,
-    amplitudes, phases), then the first states of the NLOS and silence chains.
+    amplitudes, phases), then the first states of the NLOS and silence chains; last a child
+    generator is spawned for :meth:`anchor_ranges`, so that its draws leave the frames'.
 
     Parameters
     ----------
@@ -809,6 +810,8 @@ class FieldSimulator:
         self._nlos = rng.random((p, m)) < effects.nlos_fraction
         self._silent = rng.random(p) < effects.dropout_fraction
         self._stamp = None
+        # Last, so that every draw above and every frame's draws stay as they were.
+        self._anchor_rng = _child_generator(rng)
 
     def _moving_anchors(self, indices):
         m = self.model.n_anchors
@@ -819,6 +822,36 @@ class FieldSimulator:
             raise ValueError(f'FieldEffects.moving_anchors: the model has anchors 0-{m - 1}, '
                              f'got {list(indices)}')
         return indices
+
+    def anchor_ranges(self, rng=None):
+        """
+        Return one round of anchor-anchor ranges, as the anchors measure them.
+
+        Anchor i's range to anchor j is the distance between their TRUE positions plus
+        ``anchor_offsets[i] + anchor_offsets[j]`` plus noise of the tag ranges' sigma
+        (``sigma + sigma_per_metre d``), drawn for each direction independently, clipped
+        at zero.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator, optional
+            Draws the noise; without one, a stream of the simulator's own, apart from the
+            frames' draws so that asking for anchor ranges leaves the frames as they were.
+
+        Returns
+        -------
+        ndarray, shape (m, m)
+            Metres; row i: anchor i's ranges; NaN on the diagonal.
+
+        """
+        rng = self._anchor_rng if rng is None else rng
+        anchors, effects = self.true_anchors, self.effects
+        distances = np.linalg.norm(anchors[:, None] - anchors[None], axis=-1)
+        sigma = effects.sigma + effects.sigma_per_metre * distances
+        ranges = np.maximum(distances + self.anchor_offsets[:, None] + self.anchor_offsets
+                            + sigma * rng.standard_normal(distances.shape), 0.0)
+        np.fill_diagonal(ranges, np.nan)
+        return ranges
 
     def inclinometer_bias(self, stamp):
         """Return each inclinometer's bias at ``stamp`` seconds: shape (p,), radians."""
@@ -903,6 +936,15 @@ class FieldSimulator:
         if effects.slew_encoder:
             slew = slew_true + float(rng.uniform(-effects.slew_error, effects.slew_error))
         return pitches, slew
+
+
+def _child_generator(rng):
+    """Return a generator independent of ``rng`` that leaves its draws as they were."""
+    try:
+        return rng.spawn(1)[0]
+    except (AttributeError, TypeError, ValueError):
+        # A bit generator without a seed sequence: a jump far ahead instead.
+        return np.random.Generator(rng.bit_generator.jumped())
 
 
 def simulate_field(model, motion, duration, effects=FieldEffects(), rng=None,
