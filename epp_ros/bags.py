@@ -20,7 +20,9 @@ topic), so that ``ros2 bag play``/``record`` on a full ROS install read and writ
 Topics: ``/uwb/ranges`` (``sensor_msgs/JointState`` as uwb_driver publishes it; ``effort``
 the ranges' ages where known, see ``contract``), ``/arm_posture/ground_truth`` and
 ``/arm_posture`` (``geometry_msgs/PoseArray``), and optionally ``/uwb/raw``
-(``std_msgs/String``, the devices' lines).
+(``std_msgs/String``, the devices' lines) and ``/uwb/anchor_ranges``
+(``sensor_msgs/JointState``, rounds of anchor-anchor ranges, see ``contract``;
+:func:`read_anchor_ranges`).
 """
 from array import array
 import contextlib
@@ -30,22 +32,23 @@ import time
 
 from epp_ros import contract
 from epp_ros.core import PostureEstimator
-from epp_ros.core.frame_policy import ADMIT, CLOCK_JUMP, FramePolicy
 from epp_ros.core.metrics import frame_rmse, joint_errors, pooled_rmse
 from epp_ros.core.simulate import RangeNoise, working_cycle
-from epp_ros.uwb.emulation import cycle_lines
+from epp_ros.pipeline import RangePipeline
+from epp_ros.uwb.emulation import anchor_lines, cycle_lines
 import numpy as np
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 from rosbags.interfaces import QosTime
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import get_typestore, Stores
 
-__all__ = ['BagError', 'RANGES', 'TRUTH', 'POSTURE', 'RAW', 'TYPES', 'synthesize', 'info',
-           'write_frames', 'evaluate', 'check', 'Damage', 'qos_profile', 'read_all',
-           'write_raw']
+__all__ = ['BagError', 'RANGES', 'TRUTH', 'POSTURE', 'RAW', 'ANCHOR_RANGES', 'TYPES',
+           'synthesize', 'info', 'write_frames', 'evaluate', 'check', 'Damage', 'qos_profile',
+           'read_all', 'write_raw', 'read_anchor_ranges']
 
-_TOPICS = (contract.RANGES, contract.TRUTH, contract.POSTURE, contract.RAW)
-RANGES, TRUTH, POSTURE, RAW = (topic.absolute for topic in _TOPICS)
+_TOPICS = (contract.RANGES, contract.TRUTH, contract.POSTURE, contract.RAW,
+           contract.ANCHOR_RANGES)
+RANGES, TRUTH, POSTURE, RAW, ANCHOR_RANGES = (topic.absolute for topic in _TOPICS)
 TYPES = {topic.absolute: topic.type for topic in _TOPICS}
 STORAGES = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
@@ -84,6 +87,17 @@ def _ranges_message(stamp_ns, frame_id, names, ranges, ages=None):
     return TYPESTORE.types[TYPES[RANGES]](
         header=_header(stamp_ns, frame_id), name=list(names),
         position=np.asarray(ranges, dtype=np.float64).ravel(), velocity=empty, effort=effort)
+
+
+def _anchor_ranges_message(stamp_ns, config, ranges):
+    """Return a ``uwb/anchor_ranges`` message of one round (m, m), its finite entries."""
+    rows, columns = np.nonzero(np.isfinite(ranges))
+    empty = np.zeros(0, dtype=np.float64)
+    return TYPESTORE.types[TYPES[ANCHOR_RANGES]](
+        header=_header(stamp_ns, config.frame_id),
+        name=contract.anchor_range_names(config.anchor_names, rows, columns),
+        position=np.asarray(ranges[rows, columns], dtype=np.float64), velocity=empty,
+        effort=empty)
 
 
 def _posture_message(stamp_ns, frame_id, base, joints):
@@ -146,7 +160,7 @@ def synthesize(path, config, duration=60.0, rate=10.0, sigma=0.1, nlos=0.0, drop
     return write_cycles(path, config, cycles, storage, raw_protocol)
 
 
-def write_cycles(path, config, cycles, storage='mcap', raw_protocol=None):
+def write_cycles(path, config, cycles, storage='mcap', raw_protocol=None, anchor_rounds=None):
     """
     Write simulated cycles: ``/uwb/ranges`` and ``/arm_posture/ground_truth``, same stamp.
 
@@ -163,6 +177,10 @@ def write_cycles(path, config, cycles, storage='mcap', raw_protocol=None):
         ``'mcap'`` or ``'sqlite3'``.
     raw_protocol : str, optional
         Also write the devices' lines of that format on ``/uwb/raw``.
+    anchor_rounds : callable, optional
+        ``cycle index -> list of (m, m) ndarray``: rounds of anchor-anchor ranges (metres,
+        NaN where not measured) written on ``/uwb/anchor_ranges`` at the cycle's stamp,
+        before its ranges (on ``/uwb/raw`` too, as far as the format carries them).
 
     Returns
     -------
@@ -174,10 +192,11 @@ def write_cycles(path, config, cycles, storage='mcap', raw_protocol=None):
     counts = {}
     with _BagWriter(path, storage) as bag:
         for cycle, (stamp, ranges, joints, ages) in enumerate(cycles):
-            messages = [(RANGES, _ranges_message(stamp, config.frame_id, config.link_names,
-                                                 ranges, ages)),
-                        (TRUTH, _posture_message(stamp, config.frame_id,
-                                                 model.pivot_of(joints), joints))]
+            messages = _anchor_messages(config, stamp, cycle, anchor_rounds, raw_protocol)
+            messages += [(RANGES, _ranges_message(stamp, config.frame_id, config.link_names,
+                                                  ranges, ages)),
+                         (TRUTH, _posture_message(stamp, config.frame_id,
+                                                  model.pivot_of(joints), joints))]
             if raw_protocol:
                 messages += [(RAW, TYPESTORE.types[TYPES[RAW]](data=line))
                              for _, line in cycle_lines(config, ranges, raw_protocol, cycle)]
@@ -185,6 +204,17 @@ def write_cycles(path, config, cycles, storage='mcap', raw_protocol=None):
                 bag.write(topic, stamp, _serialize(message))
                 counts[topic] = counts.get(topic, 0) + 1
     return counts
+
+
+def _anchor_messages(config, stamp, cycle, anchor_rounds, raw_protocol):
+    """Return the (topic, message) pairs of a cycle's anchor-anchor rounds (none without)."""
+    messages = []
+    for ranges in ([] if anchor_rounds is None else anchor_rounds(cycle)):
+        messages.append((ANCHOR_RANGES, _anchor_ranges_message(stamp, config, ranges)))
+        if raw_protocol:
+            messages += [(RAW, TYPESTORE.types[TYPES[RAW]](data=line))
+                         for _, line in anchor_lines(config, ranges, raw_protocol, cycle)]
+    return messages
 
 
 def write_frames(path, config, frames, storage='mcap', ages=None):
@@ -331,17 +361,22 @@ def evaluate(path, config, method='cepp', out=None, salvage=False, **options):
         writer = _BagWriter(out, _storage_of(bag)) if out is not None else None
         with writer or contextlib.nullcontext():
             for connection, t_ns, raw, message in _decoded(bag, salvage):
-                if writer is not None:
-                    writer.write(connection.topic, t_ns, bytes(raw), connection.msgtype,
-                                 _offered_qos(connection))
-                if connection.topic == RANGES:
-                    posture = run.frame(message)
-                    if posture is not None and writer is not None:
-                        writer.write(POSTURE, posture[0], _serialize(posture[1]))
-                elif connection.topic == TRUTH:
-                    run.truth(message)
+                _evaluate_message(run, writer, connection, t_ns, raw, message)
     return dict(run.report(), method=method,
                 damage=None if damage.intact else damage.describe())
+
+
+def _evaluate_message(run, writer, connection, t_ns, raw, message):
+    """Take one message of the bag: copy it (and a posture it gives) to ``writer``, if any."""
+    if writer is not None:
+        writer.write(connection.topic, t_ns, bytes(raw), connection.msgtype,
+                     _offered_qos(connection))
+    if connection.topic == RANGES:
+        posture = run.frame(message)
+        if posture is not None and writer is not None:
+            writer.write(POSTURE, posture[0], _serialize(posture[1]))
+    elif connection.topic == TRUTH:
+        run.truth(message)
 
 
 class _Evaluation:
@@ -353,12 +388,10 @@ class _Evaluation:
     """
 
     def __init__(self, model, estimator, config, window_ns=10 ** 10):
-        self.model, self.estimator, self.config = model, estimator, config
+        self.model, self.config = model, config
+        self.pipeline = RangePipeline(config, estimator)    # the node's steps and counts
         self.window_ns = window_ns
-        self.policy = FramePolicy()                 # the node's stamp rules
         self.pending = {'truth': {}, 'estimate': {}}
-        self.frames = self.solved = 0
-        self.rejected, self.ignored = {}, {}
         self.published = array('q')
         self.scored_stamps, self.scored_rmse = array('q'), array('d')
         self.squared = np.zeros(model.n_sections)
@@ -367,35 +400,19 @@ class _Evaluation:
 
     def frame(self, message):
         """Solve one ``/uwb/ranges`` message; return (stamp_ns, PoseArray) if published."""
-        self.frames += 1
         stamp = _stamp_ns(message)
-        try:
-            links = self.config.link_frame(list(message.name), message.position,
-                                           message.effort)
-        except ValueError as exc:
-            raise BagError(f'a /uwb/ranges message is malformed: {exc}') from None
-        decision = self.policy.admit(stamp * 1e-9)
-        if decision not in (ADMIT, CLOCK_JUMP):
-            _count(self.ignored, decision)
-            return None
-        if decision == CLOCK_JUMP:
-            self.estimator.reset()
         start = time.perf_counter()
-        joints = self.estimator.update(links.ranges, tag_ranges=links.tag_ranges,
-                                       stamp=stamp * 1e-9,
-                                       range_stamps=links.range_stamps(stamp * 1e-9))
+        step = self.pipeline.step(stamp * 1e-9, list(message.name), message.position,
+                                  message.effort)
         self.elapsed += time.perf_counter() - start
-        diagnostics = self.estimator.last_diagnostics
-        if not diagnostics['valid']:        # the node's publishing policy: the estimator's
-            _count(self.rejected, diagnostics['status'])
+        if step.joints is None:
             return None
-        self.solved += 1
         self.published.append(stamp)
-        error = float(np.max(diagnostics['arm_length_error']))
+        error = float(np.max(step.diagnostics['arm_length_error']))
         self.max_length_error = np.fmax(self.max_length_error, error)
-        self._match('estimate', stamp, joints)
+        self._match('estimate', stamp, step.joints)
         return stamp, _posture_message(stamp, self.config.frame_id,
-                                       self.model.pivot_of(joints), joints)
+                                       self.model.pivot_of(step.joints), step.joints)
 
     def truth(self, message):
         """Take one ``/arm_posture/ground_truth`` message."""
@@ -421,12 +438,14 @@ class _Evaluation:
     def report(self):
         """Return the evaluation as :func:`evaluate` does."""
         scored = len(self.scored_rmse)
-        return {'frames': self.frames, 'solved': self.solved, 'rejected': self.rejected,
-                'ignored': self.ignored, 'published_stamps_ns': list(self.published),
+        counts = self.pipeline.counts
+        return {'frames': counts['received'], 'solved': counts['published'],
+                'rejected': self.pipeline.rejected(), 'ignored': self.pipeline.ignored(),
+                'published_stamps_ns': list(self.published),
                 'rmse_m': pooled_rmse(np.asarray(self.scored_rmse)),
                 'joint_rmse_m': np.sqrt(self.squared / scored).tolist() if scored else [],
                 'max_arm_length_error_m': float(self.max_length_error),
-                'ms_per_frame': 1e3 * self.elapsed / max(self.frames, 1),
+                'ms_per_frame': 1e3 * self.elapsed / max(counts['received'], 1),
                 'stamps_ns': list(self.scored_stamps),
                 'frame_rmse_m': list(self.scored_rmse)}
 
@@ -548,6 +567,55 @@ def read_all(path, salvage=False, topics=None):
             raise BagError(f'{path}: damaged: {damage.describe()} (--salvage uses what could '
                            'be read)')
         return messages, damage
+
+
+def read_anchor_ranges(path, config, salvage=False):
+    """
+    Read a bag's ``/uwb/anchor_ranges``: every round of anchor-anchor ranges.
+
+    Parameters
+    ----------
+    path : path
+        The bag.
+    config : epp_ros.config.PumpConfig
+        The pump: the anchors' names.
+    salvage : bool
+        Use what can be read of a damaged topic instead of refusing it.
+
+    Returns
+    -------
+    ndarray, shape (K, m, m)
+        One round per message, in time order: row i anchor i's ranges, metres, NaN where
+        not measured. K = 0 when the bag has no ``/uwb/anchor_ranges`` (older bags).
+
+    Raises
+    ------
+    BagError
+        On a bag that cannot be read, another message type on the topic, a malformed
+        message, or labels of which none names two configured anchors.
+
+    """
+    m = len(config.anchor_names)
+    topics = {entry['topic']: entry['type'] for entry in info(path)['topics']}
+    if ANCHOR_RANGES not in topics:
+        return np.full((0, m, m), np.nan)
+    if topics[ANCHOR_RANGES] != TYPES[ANCHOR_RANGES]:
+        raise BagError(f'{path}: {ANCHOR_RANGES} holds {topics[ANCHOR_RANGES]}, expected '
+                       f'{TYPES[ANCHOR_RANGES]}')
+    messages, _ = read_all(path, salvage=salvage, topics=[ANCHOR_RANGES])
+    rounds, unknown = np.full((len(messages), m, m), np.nan), 0
+    for index, (_, msgtype, _, raw, _) in enumerate(messages):
+        message = TYPESTORE.deserialize_cdr(raw, msgtype)
+        try:
+            rounds[index], missed = contract.anchor_range_matrix(
+                config.anchor_names, list(message.name), message.position)
+        except ValueError as exc:
+            raise BagError(f'{path}: a {ANCHOR_RANGES} message is malformed: {exc}') from None
+        unknown += missed
+    if unknown and not np.isfinite(rounds).any():
+        raise BagError(f'{path}: no {ANCHOR_RANGES} label names two anchors of the config '
+                       '(recorded with another pump.yaml? see --config)')
+    return rounds
 
 
 def check(path):

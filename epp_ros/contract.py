@@ -28,6 +28,13 @@ bag tools rosbags ones (``bags.py``), and decoding works on either kind of messa
   messages are used and JointState has no per-entry stamp, hence ``effort``. An empty
   ``effort`` (older bags, other publishers) means every range was measured at the stamp;
   ``velocity`` stays empty.
+- ``uwb/anchor_ranges`` (``sensor_msgs/JointState``): anchor-anchor ranges, as the anchors
+  measure them to survey themselves (TREK1000 ``ma`` lines, DWM1001 anchors ranging each
+  other): ``name[i] = "<anchor>:<anchor>"``, the measuring anchor first (the pump's anchor
+  names, :func:`anchor_range_names`), ``position[i]`` the range in metres; only ranges
+  reported are listed, each message one round (one device line, or one simulated round);
+  stamped with the receive time; ``velocity`` and ``effort`` stay empty. Read with
+  :func:`anchor_range_matrix`.
 - ``arm_posture`` and ``arm_posture/ground_truth`` (``geometry_msgs/PoseArray``): the base
   pivot, then joints 1..p, each pose's x-axis along its section (:func:`posture_poses`).
 - ``arm_posture/markers`` (``visualization_msgs/MarkerArray``), ``boom_angles``
@@ -44,7 +51,8 @@ import numpy as np
 
 __all__ = ['Topic', 'RANGES', 'RANGES_INPUT', 'ANGLES', 'POSTURE', 'MARKERS', 'TRUTH',
            'DIAGNOSTICS', 'RAW', 'posture_poses', 'points_of', 'joints_of', 'stamp_parts',
-           'stamp_seconds', 'range_ages', 'ages_of']
+           'stamp_seconds', 'range_ages', 'ages_of', 'ANCHOR_RANGES', 'anchor_range_names',
+           'anchor_range_matrix']
 
 
 @dataclass(frozen=True)
@@ -68,6 +76,8 @@ RANGES = Topic('uwb/ranges', 'sensor_msgs/msg/JointState', depth=100)
 #: The estimator's subscription: keep all, so DDS never overwrites a frame the node has not
 #: taken (a slow node shows as latency, a fast replay is flow-controlled, nothing is lost).
 RANGES_INPUT = replace(RANGES, depth=None)
+#: Reliable and deep, as ``uwb/ranges``: a start-up burst of rounds loses nothing.
+ANCHOR_RANGES = Topic('uwb/anchor_ranges', 'sensor_msgs/msg/JointState', depth=100)
 ANGLES = Topic('boom_angles', 'sensor_msgs/msg/JointState', depth=None)
 POSTURE = Topic('arm_posture', 'geometry_msgs/msg/PoseArray')
 MARKERS = Topic('arm_posture/markers', 'visualization_msgs/msg/MarkerArray')
@@ -174,3 +184,64 @@ def ages_of(effort, count):
     ages = np.asarray(effort, dtype=float)
     with np.errstate(invalid='ignore'):
         return np.where(np.isfinite(ages) & (ages >= 0), ages, np.nan)
+
+
+def anchor_range_names(anchor_names, rows, columns):
+    """
+    Return the labels of ``uwb/anchor_ranges`` entries: ``"<anchor>:<anchor>"``.
+
+    Parameters
+    ----------
+    anchor_names : sequence of str
+        The pump's anchor names, by index.
+    rows, columns : sequence of int
+        Each entry's measuring anchor and the anchor it ranged to (indices).
+
+    Returns
+    -------
+    list of str
+        The measuring anchor's name first.
+
+    """
+    return [f'{anchor_names[i]}:{anchor_names[j]}' for i, j in zip(rows, columns)]
+
+
+def anchor_range_matrix(anchor_names, names, values):
+    """
+    Arrange a ``uwb/anchor_ranges`` message into a matrix of anchor-anchor ranges.
+
+    Parameters
+    ----------
+    anchor_names : sequence of str
+        The pump's anchor names (m).
+    names : sequence of str
+        The message's ``name``: ``"<anchor>:<anchor>"``, measuring anchor first.
+    values : sequence of float
+        The message's ``position``, metres.
+
+    Returns
+    -------
+    ranges : ndarray, shape (m, m)
+        Row i: anchor i's ranges, metres; NaN where not reported (always on the diagonal).
+    unknown : int
+        Labels that name no pair of two different configured anchors (ignored).
+
+    Raises
+    ------
+    ValueError
+        When ``names`` and ``values`` differ in length.
+
+    """
+    if len(names) != len(values):
+        raise ValueError(f'{len(names)} names but {len(values)} ranges')
+    index = {name: j for j, name in enumerate(anchor_names)}
+    ranges = np.full((len(anchor_names), len(anchor_names)), np.nan)
+    unknown = 0
+    for name, value in zip(names, values):
+        first, _, second = str(name).partition(':')
+        i, j = index.get(first), index.get(second)
+        if i is None or j is None or i == j:
+            unknown += 1
+        else:
+            ranges[i, j] = value
+    return ranges, unknown

@@ -25,7 +25,7 @@ imports: the node passes a message's fields, the bag tools a rosbags message's.
 from collections import Counter
 from typing import NamedTuple, Optional
 
-from epp_ros.core.frame_policy import ADMIT, CLOCK_JUMP, FramePolicy
+from epp_ros.core.frame_policy import ADMIT, CLOCK_JUMP, FramePolicy, MALFORMED, OUT_OF_ORDER
 import numpy as np
 
 __all__ = ['RangePipeline', 'Step', 'REJECTED']
@@ -120,6 +120,11 @@ class RangePipeline:
             return False
         self.counts['published'] += 1
         return True
+
+    def ignored(self):
+        """Frames that never reached the estimator, by reason: ``{reason: count}``."""
+        return {reason: self.counts[reason] for reason in (OUT_OF_ORDER, MALFORMED)
+                if self.counts[reason]}
 
     def rejected(self):
         """Frames the estimator refused, by its status: ``{status: count}``."""

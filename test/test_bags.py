@@ -250,3 +250,92 @@ def test_ages_must_come_one_per_frame(tmp_path):
     frames, ages = frames_with_ages(3)
     with pytest.raises(ValueError):
         bags.write_frames(tmp_path / 'short', CONFIG, frames, ages=ages[:2])
+
+
+def test_synth_writes_anchor_ranges_that_the_reader_returns(tmp_path):
+    from epp_ros.core.simulate import field_effects, FieldSimulator, make_motion
+    from epp_ros.uwb.emulation import SURVEY_BURST
+    bag = tmp_path / 'surveyed'
+    result = epp_bag('synth', bag, '--field', 'offsets,anchors_moved', '--duration', '3',
+                     '--seed', '2', '--start', '1000', '--anchor-ranges')
+    assert result.returncode == 0, result.stderr
+    counts = {t['topic']: t['count'] for t in bags.info(bag)['topics']}
+    assert counts == {bags.ANCHOR_RANGES: SURVEY_BURST + 2, bags.RANGES: 30, bags.TRUTH: 30}
+    # The same simulator as synth's (the motion drawn first): its rounds, in order.
+    model = CONFIG.model()
+    rng = np.random.default_rng(2)
+    make_motion('working', model, 3.0, rng)
+    simulator = FieldSimulator(model, field_effects('offsets,anchors_moved'), rng, 0.1)
+    expected = np.array([simulator.anchor_ranges() for _ in range(SURVEY_BURST + 2)])
+    rounds = bags.read_anchor_ranges(bag, CONFIG)
+    assert rounds.shape == (SURVEY_BURST + 2, 6, 6)
+    np.testing.assert_array_equal(rounds, expected)
+    assert np.isnan(rounds[:, range(6), range(6)]).all() and np.isfinite(rounds).sum() == 12 * 30
+    # At the stamps of cycles 0 (the burst), 10 and 20, labelled measuring anchor first.
+    stored = decoded(bag, bags.ANCHOR_RANGES)
+    assert [m.header.stamp.sec * 10 ** 9 + m.header.stamp.nanosec for m in stored] == \
+        [1000 * 10 ** 9] * SURVEY_BURST + [1001 * 10 ** 9, 1002 * 10 ** 9]
+    assert stored[0].name[:2] == ['turret:outrigger_fl', 'turret:outrigger_fr']
+    assert len(stored[0].name) == 30 and stored[0].header.frame_id == CONFIG.frame_id
+    # The tag ranges are drawn as without --anchor-ranges.
+    plain = tmp_path / 'plain'
+    assert epp_bag('synth', plain, '--field', 'offsets,anchors_moved', '--duration', '3',
+                   '--seed', '2', '--start', '1000').returncode == 0
+    for a, b in zip(decoded(bag, bags.RANGES), decoded(plain, bags.RANGES)):
+        np.testing.assert_array_equal(a.position, b.position)
+
+
+def test_anchor_ranges_reader_leaves_missing_pairs_nan_and_older_bags_empty(tmp_path):
+    model = CONFIG.model()
+    joints = model.forward_kinematics(0.3, np.radians([55.0, 30.0, 0.0, -20.0, -45.0]))
+    first = np.full((6, 6), np.nan)
+    first[0, 1], first[4, 2] = 5.5, 7.25
+    second = np.full((6, 6), np.nan)
+    second[5, 0] = 5.0
+
+    def rounds(cycle):
+        return [first, second] if cycle == 1 else []
+
+    cycles = [(10 ** 12 + k * 10 ** 8, model.ranges(joints), joints, None) for k in range(3)]
+    bag = tmp_path / 'partial'
+    counts = bags.write_cycles(bag, CONFIG, cycles, anchor_rounds=rounds)
+    assert counts[bags.ANCHOR_RANGES] == 2
+    read = bags.read_anchor_ranges(bag, CONFIG)
+    np.testing.assert_array_equal(read, [first, second])
+    assert [list(m.name) for m in decoded(bag, bags.ANCHOR_RANGES)] == \
+        [['turret:outrigger_fl', 'outrigger_rr:outrigger_fr'], ['cab:turret']]
+    older = tmp_path / 'older'
+    bags.synthesize(older, CONFIG, duration=1.0)
+    assert bags.read_anchor_ranges(older, CONFIG).shape == (0, 6, 6)
+
+
+def anchor_message(names, values):
+    message = bags.TYPESTORE.types['sensor_msgs/msg/JointState'](
+        header=bags._header(10 ** 12, 'pump_base'), name=names,
+        position=np.array(values, dtype=np.float64), velocity=np.zeros(0),
+        effort=np.zeros(0))
+    return bags._serialize(message)
+
+
+@pytest.mark.parametrize('msgtype, raw, says', [
+    ('sensor_msgs/msg/JointState', anchor_message(['a:b', 'c:d'], [1.0, 2.0]),
+     'no /uwb/anchor_ranges label names two anchors'),
+    ('sensor_msgs/msg/JointState', anchor_message(['turret:cab'], [1.0, 2.0]),
+     'malformed: 1 names but 2 ranges'),
+    ('std_msgs/msg/String', bags._serialize(
+        bags.TYPESTORE.types['std_msgs/msg/String'](data='ma 0e')),
+     'holds std_msgs/msg/String, expected sensor_msgs/msg/JointState'),
+])
+def test_unusable_anchor_ranges_give_one_line(msgtype, raw, says, tmp_path):
+    bag = tmp_path / 'bad'
+    bags.write_raw(bag, [(bags.ANCHOR_RANGES, msgtype, 10 ** 12, raw, None)])
+    with pytest.raises(bags.BagError, match=says):
+        bags.read_anchor_ranges(bag, CONFIG)
+
+
+def test_record_takes_anchor_ranges_by_default():
+    from epp_ros.tools import bag as bag_tool
+    assert bags.ANCHOR_RANGES == '/uwb/anchor_ranges'
+    assert bags.ANCHOR_RANGES in bag_tool.DEFAULT_RECORD
+    assert bags.TYPES[bags.ANCHOR_RANGES] == 'sensor_msgs/msg/JointState'
+    assert bags.TOPIC_QOS[bags.ANCHOR_RANGES].depth == 100

@@ -213,7 +213,7 @@ def test_update_pump_yaml_keeps_the_file_and_replaces_the_values(tmp_path):
 
 
 def test_calibration_bench_runs_small():
-    report = calibration_bench.run(seconds=10.0, seeds=1, seed=0)
+    report = calibration_bench.run(seconds=10.0, seeds=1, seed=0, cases=('both',))
     assert report['suite'] == 'calibration' and len(report['rows']) == 1
     row = report['rows'][0]
     for key in ('anchor_m', 'link_offset_m', 'seconds', 'rms_before_m', 'rms_after_m',
@@ -222,3 +222,107 @@ def test_calibration_bench_runs_small():
         assert math.isfinite(row[key]) and row[key] >= 0, key
     assert row['status'] in ('ok', 'poorly_excited', 'not_converged')
     assert 'chain calibrated' in calibration_bench.markdown(report)
+
+
+def test_a_bag_without_anchor_ranges_says_so_and_calibrates_as_before(calibrated):
+    result, _, _ = calibrated
+    assert 'Anchor self-survey: none (no /uwb/anchor_ranges in the bag)' in result.stdout
+    assert json.loads(result.stdout.strip().splitlines()[-1])['survey_rounds'] == 0
+
+
+SURVEY_FIELD = 'offsets,anchors_moved,sigma_low'
+SURVEY_SECONDS = 20.0
+
+
+@pytest.fixture(scope='module')
+def surveyed_bag(tmp_path_factory):
+    """Write 20 s of a working cycle with anchor-anchor ranges (a start-up burst, then 1 Hz)."""
+    path = tmp_path_factory.mktemp('bags') / 'surveyed'
+    assert bag_tool.main(['synth', str(path), '--field', SURVEY_FIELD, '--duration',
+                          str(SURVEY_SECONDS), '--start', '1000', '--seed', '0',
+                          '--anchor-ranges']) == 0
+    return path
+
+
+def true_anchors(seconds, seed):
+    """Where synth's field simulator put the anchors (the motion is drawn first, as synth)."""
+    from epp_ros.core.simulate import field_effects, make_motion
+    model = CONFIG.model()
+    rng = np.random.default_rng(seed)
+    make_motion('working', model, seconds, rng)
+    return FieldSimulator(model, field_effects(SURVEY_FIELD), rng, 0.1).true_anchors
+
+
+def turned_to(truth, anchors, base):
+    """
+    Return ``truth`` turned about the slew axis (vertical, through ``base``) onto ``anchors``.
+
+    With the turret the only fixed anchor, a turn of every free anchor about the slew axis
+    changes no range (calibrate's gauge): only the anchors' places relative to each other
+    and to the axis can be compared with the truth. The turn is the least-squares one.
+    """
+    truth_xy, anchors_xy = truth[:, :2] - base[:2], anchors[:, :2] - base[:2]
+    angle = np.arctan2(np.sum(truth_xy[:, 0] * anchors_xy[:, 1]
+                              - truth_xy[:, 1] * anchors_xy[:, 0]),
+                       np.sum(truth_xy * anchors_xy))
+    turn = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    turned = truth.copy()
+    turned[:, :2] = truth_xy @ turn.T + base[:2]
+    return turned
+
+
+def calibrate_json(bag, out, *extra):
+    """Run epp_calibrate in-process; return its exit status, its JSON result and its lines."""
+    import contextlib
+    import io
+    stdout = io.StringIO()
+    with contextlib.redirect_stdout(stdout):
+        status = tool.main([str(bag), '--config', str(PUMP_YAML), '--out', str(out),
+                            '--fixed-anchors', 'turret', '--json', *extra])
+    lines = stdout.getvalue().strip().splitlines()
+    return status, json.loads(lines[-1]), lines
+
+
+def test_anchor_ranges_self_survey_the_anchors(surveyed_bag, tmp_path):
+    from epp_ros.uwb.emulation import SURVEY_BURST
+    rounds = SURVEY_BURST + int(SURVEY_SECONDS) - 1
+    surveyed = calibrate_json(surveyed_bag, tmp_path / 'surveyed.yaml')
+    # 20 s hardly determine every link offset without the survey (see the --force test):
+    # written with --force, to compare.
+    ignored = calibrate_json(surveyed_bag, tmp_path / 'ignored.yaml', '--no-survey', '--force')
+    assert surveyed[0] == 0 and surveyed[1]['status'] == 'ok', surveyed[2][-3:]
+    assert surveyed[1]['survey_rounds'] == rounds and ignored[1]['survey_rounds'] == 0
+    assert f'Anchor self-survey: yes, {rounds} rounds of /uwb/anchor_ranges (30 anchor ' \
+        f'pairs, {rounds * 30} ranges)' in surveyed[2]
+    assert 'Anchor self-survey: off (--no-survey: /uwb/anchor_ranges ignored)' in ignored[2]
+    truth, base = true_anchors(SURVEY_SECONDS, 0), CONFIG.model().base
+    errors, stds = {}, {}
+    for label, (_, printed, _) in (('surveyed', surveyed), ('ignored', ignored)):
+        written = load_pump_config(tmp_path / f'{label}.yaml').model().anchors
+        errors[label] = np.linalg.norm(written - turned_to(truth, written, base), axis=1)[1:]
+        stds[label] = np.array([np.linalg.norm(printed['anchors'][name]['std'])
+                                for name in CONFIG.anchor_names[1:]])
+    # Each surveyed anchor where its reported uncertainty says: within 4 times the norm of
+    # its per-axis std (a 3-D error beyond that has a chance of about 1e-3), 1 mm for the
+    # turn and rounding.
+    assert (errors['surveyed'] <= 4 * stds['surveyed'] + 1e-3).all(), (errors, stds)
+    # The survey adds information: every anchor is more certain, and closer to the truth
+    # than without, up to twice the survey's own reported uncertainty (RMS over anchors).
+    assert (stds['surveyed'] < stds['ignored']).all(), stds
+    assert np.sqrt(np.mean(errors['surveyed'] ** 2)) <= np.sqrt(np.mean(
+        errors['ignored'] ** 2)) + 2 * np.sqrt(np.mean(stds['surveyed'] ** 2)), (errors, stds)
+
+
+def test_unreadable_anchor_ranges_give_one_line(tmp_path):
+    source = parked_bag(tmp_path / 'parked', 12.0)
+    wrong = bags.TYPESTORE.types['std_msgs/msg/String'](data='ma 0e')
+    bag = tmp_path / 'retyped'
+    bags.write_raw(bag, bags.read_all(source)[0] + [
+        (bags.ANCHOR_RANGES, 'std_msgs/msg/String', 10 ** 12,
+         bags.TYPESTORE.serialize_cdr(wrong, 'std_msgs/msg/String'), None)])
+    result = subprocess.run([sys.executable, '-m', 'epp_ros.tools.calibrate', str(bag),
+                             '--config', str(PUMP_YAML)], capture_output=True, text=True,
+                            timeout=120)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert 'holds std_msgs/msg/String, expected sensor_msgs/msg/JointState' in lines[0]

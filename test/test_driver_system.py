@@ -301,3 +301,47 @@ def test_a_wifi_tag_that_connects_to_us_is_read_without_newlines(listener, proce
     finally:
         tag.close()
     assert driver.poll() is None
+
+
+def test_trek_anchor_ranges_reach_uwb_anchor_ranges(listener, processes, tmp_path):
+    """``ma`` lines -> uwb_driver -> ``uwb/anchor_ranges``, beside unchanged ``uwb/ranges``."""
+    from epp_ros import contract
+    from epp_ros.nodes.common import qos
+    from sensor_msgs.msg import JointState
+    received = []
+    subscription = listener.create_subscription(JointState, contract.ANCHOR_RANGES.name,
+                                                received.append, qos(contract.ANCHOR_RANGES))
+    try:
+        config_path = trek_config(tmp_path)
+        config = load_pump_config(config_path)
+        _, announced = start_emulator(processes, 'trek', ['--pty'], config_path)
+        params = params_with_sources(tmp_path, config_path, announced, 'trek')
+        since = len(listener.ranges)
+        driver = processes([script('uwb_driver'), '--ros-args', '--params-file', str(params)])
+        # One round a second after the start-up burst (which may pass before the driver opens
+        # the port): wait for a few, however slow the machine.
+        assert listener.spin_until(lambda: len(received) >= 3, 60), \
+            driver.stderr.read() if driver.poll() is not None else 'no anchor ranges'
+
+        def published():
+            return max((int(kv.value) for status in listener.statuses('uwb_driver')
+                        for kv in status.values if kv.key == 'anchor-anchor ranges published'),
+                       default=0)
+
+        assert listener.spin_until(lambda: published() >= 3, 30)
+    finally:
+        listener.destroy_subscription(subscription)
+    model = config.model()
+    distances = np.linalg.norm(model.anchors[:, None] - model.anchors[None], axis=-1)
+    for message in received:
+        # A0 prints A0-A1, A0-A2 and A1-A2, the measuring anchor first.
+        assert list(message.name) == ['a0:a1', 'a0:a2', 'a1:a2']
+        np.testing.assert_allclose(message.position,
+                                   [distances[0, 1], distances[0, 2], distances[1, 2]],
+                                   atol=5e-4 + 1e-9)
+        assert message.header.frame_id == config.frame_id
+        assert abs(to_seconds(message.header.stamp) - time.time()) < 30
+        assert len(message.velocity) == len(message.effort) == 0
+    stamps = [to_seconds(message.header.stamp) for message in received]
+    assert stamps == sorted(stamps)
+    check_ranges_against_truth(listener, config, since + 2, 1.5e-3)

@@ -272,3 +272,96 @@ def test_emulator_runs_with_field_effects_and_joystick():
                              '--duration', '1'], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
     assert result.stdout.startswith('PTY ')
+
+
+def test_anchor_rounds_come_in_a_burst_at_start_up_then_once_a_second():
+    from epp_ros.uwb.emulation import anchor_rounds, SURVEY_BURST
+    assert [anchor_rounds(cycle, 10.0) for cycle in range(31)] == \
+        [SURVEY_BURST] + ([0] * 9 + [1]) * 3
+    assert [anchor_rounds(cycle, 1.0) for cycle in range(3)] == [SURVEY_BURST, 1, 1]
+    assert [anchor_rounds(cycle, 0.2) for cycle in range(3)] == [SURVEY_BURST, 1, 1]
+
+
+def test_anchor_lines_decode_to_the_pairs_the_format_carries():
+    from epp_ros.uwb.emulation import anchor_lines, reports_anchor_ranges
+    config = trek_config()
+    ranges = np.arange(16, dtype=float).reshape(4, 4) + 3.0
+    np.fill_diagonal(ranges, np.nan)
+    ranges[1, 2] = np.nan                                   # not measured this round
+    lines = anchor_lines(config, ranges, 'trek', sequence=4)
+    assert [channel for channel, _ in lines] == [0] and lines[0][1].startswith('ma ')
+    assembler = FrameAssembler(config)
+    assembler.add_line(LineDecoder('trek').decode(lines[0][1]), 2.0, None, True)
+    anchor_round = assembler.take_anchor_ranges()
+    assert (anchor_round.rows, anchor_round.columns) == ([0, 0], [1, 2])
+    np.testing.assert_allclose(anchor_round.ranges, [ranges[0, 1], ranges[0, 2]], atol=5e-4)
+    assert reports_anchor_ranges('trek') and not reports_anchor_ranges('haoru')
+    for protocol in ('json', 'haoru', 'les'):
+        assert anchor_lines(config_for(protocol), np.ones((6, 6)), protocol) == []
+
+
+def test_emulator_anchor_ranges_come_from_the_field_simulator():
+    from epp_ros.core.simulate import FieldSimulator
+    from epp_ros.nodes import emulator
+    model = trek_config().model()
+    args = emulator.parse_args(['--pty', '--field', 'offsets,anchors_moved', '--seed', '5'])
+    measure = emulator.range_source(args, model, np.random.default_rng(5))
+    simulator = FieldSimulator(model, emulator.effects_of(args), np.random.default_rng(5))
+    for _ in range(3):
+        np.testing.assert_array_equal(measure.anchor_ranges(), simulator.anchor_ranges())
+    # Without --field: the configured anchors, with the noise options' sigma.
+    args = emulator.parse_args(['--pty', '--sigma', '0'])
+    measure = emulator.range_source(args, model, np.random.default_rng(0))
+    distances = np.linalg.norm(model.anchors[:, None] - model.anchors[None], axis=-1)
+    np.fill_diagonal(distances, np.nan)
+    np.testing.assert_allclose(measure.anchor_ranges(), distances, rtol=1e-12)
+
+
+def read_pty_lines(path, enough, timeout=60.0):
+    """Read lines from a pty until ``enough(lines)`` or ``timeout`` seconds; return them."""
+    import time
+    reader = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    data, deadline = b'', time.monotonic() + timeout
+    try:
+        while time.monotonic() < deadline:
+            try:
+                data += os.read(reader, 65536)
+            except BlockingIOError:
+                time.sleep(0.05)
+            lines = data.decode(errors='replace').splitlines()
+            if enough(lines):
+                break
+    finally:
+        os.close(reader)
+    return [line for line in data.decode(errors='replace').splitlines() if line]
+
+
+def test_trek_emulator_prints_a_survey_burst_before_the_boom_moves(tmp_path):
+    import yaml
+    from epp_ros.config import default_config_path
+    document = yaml.safe_load(default_config_path().read_text())
+    document['/**']['ros__parameters'].update(
+        anchor_names=['a0', 'a1', 'a2', 'a3'], anchor_ids=['0', '1', '2', '3'],
+        anchor_positions=[0.0, 0.0, 3.5, 2.6, 3.4, 0.4, 2.6, -3.4, 0.4, -4.2, 3.0, 0.6])
+    config = tmp_path / 'trek.yaml'
+    config.write_text(yaml.safe_dump(document))
+    emulator = subprocess.Popen([console_script('uwb_emulator'), '--protocol', 'trek', '--pty',
+                                 '--sigma', '0', '--config', str(config)],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        announced = emulator.stdout.readline().split()
+        assert announced[:1] == ['PTY'], emulator.stderr.read()
+        lines = read_pty_lines(announced[1], lambda lines: sum(
+            line.startswith('ma ') for line in lines[:-1]) > 11)
+    finally:
+        emulator.terminate()
+        emulator.communicate(timeout=30)
+    kinds = [line.split()[0] for line in lines]
+    from epp_ros.uwb.emulation import SURVEY_BURST
+    assert kinds[:SURVEY_BURST] == ['ma'] * SURVEY_BURST and kinds[SURVEY_BURST] != 'ma'
+    # Then one round a second: after 10 more cycles of 5 tags' mr and mc lines each.
+    later = [index for index, kind in enumerate(kinds) if kind == 'ma'][SURVEY_BURST:]
+    assert later[:2] == [SURVEY_BURST + 100, SURVEY_BURST + 201]
+    model = load_pump_config(config).model()
+    distance = np.linalg.norm(model.anchors[0] - model.anchors[1])
+    assert int(lines[0].split()[3], 16) == round(1000 * distance)

@@ -330,3 +330,32 @@ def test_parsers_return_none_for_non_text(value):
 def test_emitters_refuse_what_the_firmware_cannot_print(call):
     with pytest.raises(ValueError):
         call()
+
+
+@settings(max_examples=60, deadline=None)
+@given(name=st.sampled_from([n for n, f in FORMATS.items() if f.emit_anchors]),
+       ranges=st.dictionaries(st.tuples(st.integers(0, 3), st.integers(0, 3)).filter(
+           lambda pair: pair[0] != pair[1]).map(lambda pair: tuple(map(str, pair))), METRES),
+       sequence=st.integers(0, 2 ** 20))
+def test_anchor_range_emitters_are_read_back_by_their_parser(name, ranges, sequence):
+    line_format = FORMATS[name]
+    got = {}
+    for line in line_format.emit_anchors(ranges, Cycle(sequence, {}, -80.0)):
+        result = line_format.parse(line)
+        assert result is not None and result.errors == 0
+        assert {record.kind for record in result.records} == {'anchor'}
+        got.update({(record.tag, record.anchor): record.range_m for record in result.records})
+    # Every pair read back was given; the TREK1000 carries A0-A1, A0-A2 and A1-A2 only.
+    assert set(got) <= set(ranges)
+    if name == 'trek':
+        assert set(got) == set(ranges) & {('0', '1'), ('0', '2'), ('1', '2')}
+    for pair, value in got.items():
+        assert abs(value - ranges[pair]) <= 5e-4 + 1e-9
+
+
+def test_only_the_trek1000_prints_anchor_ranges():
+    assert [name for name, f in FORMATS.items() if f.emit_anchors] == ['trek']
+    line = FORMATS['trek'].emit_anchors({('0', '1'): 5.285, ('0', '2'): 5.285,
+                                         ('1', '2'): 6.8, ('2', '3'): 9.0}, Cycle(3))
+    assert line == ['ma 0e 00000000 000014a5 000014a5 00001a90 0003 03 00000000 a0:0']
+    assert FORMATS['trek'].emit_anchors({('2', '3'): 9.0}, Cycle()) == []

@@ -204,3 +204,59 @@ def test_a_raised_stamp_keeps_the_receive_times_so_ages_stay_true():
     _, _, ages = second.labelled(CONFIG)
     np.testing.assert_allclose(ages, second.stamp - 100.0)
     assert min(ages) > 0
+
+
+def test_anchor_ranges_are_kept_apart_and_labelled_measuring_anchor_first():
+    from epp_ros import contract
+    assembler = FrameAssembler(CONFIG)
+    line = [RangeRecord(ANCHORS[1], 5.25, tag=ANCHORS[0], kind='anchor'),
+            RangeRecord(ANCHORS[2], 6.5, tag=ANCHORS[0], kind='anchor'),
+            RangeRecord(ANCHORS[2], 7.75, tag=ANCHORS[1], kind='anchor')]
+    assert assembler.add_line(line, 3.0, whole=True) == []
+    assert assembler.poll(9.0) == [] and assembler.frames == 0       # no cycle opened
+    anchor_round = assembler.take_anchor_ranges()
+    assert assembler.take_anchor_ranges() is None                      # handed over once
+    assert anchor_round.stamp == 3.0 and assembler.anchor_ranges == 3 and not assembler.dropped
+    names, ranges = anchor_round.labelled(CONFIG)
+    assert names == ['turret:outrigger_fl', 'turret:outrigger_fr', 'outrigger_fl:outrigger_fr']
+    assert ranges == [5.25, 6.5, 7.75]
+    matrix, unknown = contract.anchor_range_matrix(CONFIG.anchor_names, names, ranges)
+    assert unknown == 0 and matrix.shape == (6, 6) and np.isfinite(matrix).sum() == 3
+    assert (matrix[0, 1], matrix[0, 2], matrix[1, 2]) == (5.25, 6.5, 7.75)
+
+
+def test_anchor_ranges_do_not_disturb_the_cycles():
+    assembler = FrameAssembler(CONFIG)
+    frames = []
+    for tag in TAGS:
+        assembler.add(RangeRecord(ANCHORS[3], 4.0, tag=ANCHORS[2], kind='anchor'), 1.0)
+        frames += assembler.add_line([RangeRecord(a, 5.0, tag=tag) for a in ANCHORS], 1.0,
+                                     whole=True)
+    assert len(frames) == 1 and np.isfinite(frames[0].ranges).all()
+    assert len(assembler.take_anchor_ranges().ranges) == len(TAGS)
+
+
+@pytest.mark.parametrize('record, reason', [
+    (RangeRecord('FFFF', 5.0, tag=ANCHORS[0], kind='anchor'), 'unknown_anchor'),
+    (RangeRecord(ANCHORS[1], 5.0, tag='FFFF', kind='anchor'), 'unknown_anchor'),
+    (RangeRecord(ANCHORS[1], 0.01, tag=ANCHORS[0], kind='anchor'), 'implausible'),
+    (RangeRecord(ANCHORS[1], 250.0, tag=ANCHORS[0], kind='anchor'), 'implausible'),
+    (RangeRecord(ANCHORS[1], 5.0, tag=ANCHORS[1], kind='anchor'), 'implausible'),
+    (RangeRecord(None, 5.0, tag=ANCHORS[1], kind='anchor'), 'anchor_range'),
+])
+def test_unusable_anchor_ranges_are_dropped_and_counted(record, reason):
+    assembler = FrameAssembler(CONFIG)
+    assert assembler.add(record, 1.0) == []
+    assert assembler.dropped == {reason: 1} and assembler.anchor_ranges == 0
+    assert assembler.take_anchor_ranges() is None
+
+
+def test_anchor_range_labels_that_name_no_pair_are_counted():
+    from epp_ros import contract
+    names = ['turret:cab', 'cab:turret', 'cab:cab', 'turret:boom', 'turret', 'a:b:c']
+    matrix, unknown = contract.anchor_range_matrix(CONFIG.anchor_names, names,
+                                                   [1.0, 2.0, 3.0, 4.0, 5.0, 6.0])
+    assert unknown == 4 and (matrix[0, 5], matrix[5, 0]) == (1.0, 2.0)
+    assert np.isfinite(matrix).sum() == 2
+    with pytest.raises(ValueError, match='2 names but 1 ranges'):
+        contract.anchor_range_matrix(CONFIG.anchor_names, names[:2], [1.0])

@@ -22,8 +22,11 @@ cycle, then ``"<tag>:<tag>"`` for each tag-tag range reported this cycle (a reco
 anchor id is another configured tag's), ``header.stamp`` the receive time of the newest
 range, ``effort[i]`` how long before the stamp range i was received (s, NaN where missing),
 ``velocity`` empty (``epp_ros.contract``). It never publishes on ``joint_states``.
-Diagnostics at 1 Hz on ``/diagnostics``. Stamps, frame timing and ages are read from the
-node's clock, so ``use_sim_time`` (with ``/clock``) is followed.
+Anchor-anchor ranges (TREK1000 ``ma`` lines) go to ``uwb/anchor_ranges``, one message per
+line: ``name[i] = "<anchor>:<anchor>"`` (measuring anchor first), ``position[i]`` metres,
+stamped with the line's receive time; implausible ones and unknown anchors are dropped and
+counted. Diagnostics at 1 Hz on ``/diagnostics``. Stamps, frame timing and ages are read
+from the node's clock, so ``use_sim_time`` (with ``/clock``) is followed.
 """
 import functools
 import sys
@@ -32,8 +35,8 @@ import threading
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from epp_ros import contract
 from epp_ros.config import ConfigError, listen_address, normalise_device_id, PROTOCOLS, Source
-from epp_ros.nodes.common import (declare, declare_pump_parameters, RANGES_QOS, run_node,
-                                  StartupError, to_time)
+from epp_ros.nodes.common import (declare, declare_pump_parameters, qos, RANGES_QOS,
+                                  run_node, StartupError, to_time)
 from epp_ros.uwb.decoder import LineDecoder
 from epp_ros.uwb.formats import fits_slots, FORMATS
 from epp_ros.uwb.frames import FrameAssembler
@@ -71,6 +74,8 @@ class UwbDriver(Node):
         except ValueError as exc:
             raise StartupError(f'frame_period, min_range, max_range: {exc}') from None
         self.publisher = self.create_publisher(JointState, contract.RANGES.name, RANGES_QOS)
+        self.anchor_publisher = self.create_publisher(JointState, contract.ANCHOR_RANGES.name,
+                                                      qos(contract.ANCHOR_RANGES))
         self.diagnostics = self.create_publisher(DiagnosticArray, contract.DIAGNOSTICS.name,
                                                  contract.DIAGNOSTICS.depth)
         self.link_names = self.config.link_names
@@ -136,6 +141,7 @@ class UwbDriver(Node):
                 for frame in self.assembler.add_line(records, received, source.tag, whole,
                                                      source.anchor):
                     self._publish(frame)
+                self._publish_anchor_ranges(self.assembler.take_anchor_ranges())
         return on_line
 
     def _close_stale_frames(self):
@@ -151,6 +157,16 @@ class UwbDriver(Node):
         self.publisher.publish(message)
         self._last_frame = self._now()
 
+    def _publish_anchor_ranges(self, anchor_round):
+        """Publish one line's anchor-anchor ranges on ``uwb/anchor_ranges`` (None: none)."""
+        if anchor_round is None:
+            return
+        message = JointState()
+        message.header.stamp = to_time(anchor_round.stamp)
+        message.header.frame_id = self.config.frame_id
+        message.name, message.position = anchor_round.labelled(self.config)
+        self.anchor_publisher.publish(message)
+
     def _publish_diagnostics(self):
         now = self._now()
         array = DiagnosticArray()
@@ -159,6 +175,7 @@ class UwbDriver(Node):
         with self._lock:
             dropped = dict(self.assembler.dropped)
             frames = self.assembler.frames
+            anchor_ranges = self.assembler.anchor_ranges
         for source, decoder, reader in self.readers:
             status = DiagnosticStatus(name=f'uwb_driver: {source.port}',
                                       hardware_id=source.port)
@@ -196,8 +213,9 @@ class UwbDriver(Node):
                 'dropped unknown device': dropped.get('unknown_tag', 0)
                 + dropped.get('unknown_anchor', 0),
                 'dropped without tag': dropped.get('no_tag', 0),
-                'dropped without anchor': dropped.get('no_anchor', 0),
-                'anchor-anchor ranges': dropped.get('anchor_range', 0),
+                'dropped without anchor': dropped.get('no_anchor', 0)
+                + dropped.get('anchor_range', 0),
+                'anchor-anchor ranges published': anchor_ranges,
                 'raw ranges (corrected ones used)': dropped.get('raw_range', 0),
                 'overlong lines': reader.overlong,
                 'reconnects': reader.counts['reconnects'],

@@ -31,6 +31,12 @@ The ranges carry ``--sigma``/``--nlos``/``--drop`` noise, drawn anew each cycle.
 or ``--motion joystick`` they come from :class:`epp_ros.core.simulate.FieldSimulator`
 instead: the presets' effects, or, without ``--field``, the same noise as above. ``--field``
 replaces the noise options, so giving both is refused.
+
+Formats whose devices report anchor-anchor ranges (TREK1000: ``ma`` lines of anchor A0)
+also print them, from the field simulator (``FieldSimulator.anchor_ranges``: the true,
+possibly displaced anchors, their offsets and the range noise; the configured anchors and
+the noise options without ``--field``): a burst of ``SURVEY_BURST`` rounds before the first
+ranging cycle, then one round a second (:func:`epp_ros.uwb.emulation.anchor_rounds`).
 """
 import sys
 
@@ -42,7 +48,8 @@ from epp_ros.core.simulate import (field_effects, FieldEffects, FieldSimulator, 
                                    Motion, RangeNoise, working_cycle)
 from epp_ros.nodes.common import posture_message, POSTURE_QOS, run_node
 from epp_ros.nodes.stopping import shutdown_on_signals
-from epp_ros.uwb.emulation import channel_devices, corrupt, cycle_lines, PtyOutput, TcpOutput
+from epp_ros.uwb.emulation import (anchor_lines, anchor_rounds, channel_devices, corrupt,
+                                   cycle_lines, PtyOutput, reports_anchor_ranges, TcpOutput)
 from epp_ros.uwb.formats import fits_slots, FORMATS
 from geometry_msgs.msg import PoseArray
 import numpy as np
@@ -110,12 +117,40 @@ class ForthAndBack(Motion):
         return self.motion.angles(self.span - np.abs(np.mod(times, 2 * self.span) - self.span))
 
 
+class Measurements:
+    """
+    What the emulated devices measure: each cycle's tag-anchor ranges, anchor-anchor rounds.
+
+    Parameters
+    ----------
+    measure : callable
+        ``cycle -> (ranges (p, m), joints (p, 3))``, metres.
+    simulator : FieldSimulator
+        Draws the anchor-anchor rounds, from a stream of its own (the cycles' draws stay).
+
+    """
+
+    def __init__(self, measure, simulator):
+        self.measure, self.simulator = measure, simulator
+
+    def __call__(self, cycle):
+        """Return the ranges (p, m) and the true joints (p, 3) of ``cycle``, metres."""
+        return self.measure(cycle)
+
+    def anchor_ranges(self):
+        """Return one round of anchor-anchor ranges (m, m), metres, NaN on the diagonal."""
+        return self.simulator.anchor_ranges()
+
+
 def range_source(args, model, rng):
     """
-    Return the emulated devices' measurements: ``cycle -> (ranges (p, m), joints (p, 3))``.
+    Return the emulated devices' :class:`Measurements`: ``cycle -> (ranges, joints)``.
 
     Cycle n is at ``n / args.rate`` seconds; ``joints`` is the true posture then, metres.
     ``rng`` draws the noise; the motion has its own generator seeded with ``args.seed``.
+    Without a field simulator for the ranges (no ``--field``, working motion) the
+    anchor-anchor rounds come from a field simulator of the configured anchors with the
+    noise options, seeded with ``args.seed``.
     """
     if args.field is None and args.motion == 'working':
         trajectory = working_cycle(model, PLAYBACK_S, args.rate,
@@ -128,7 +163,8 @@ def range_source(args, model, rng):
             index = cycle % (2 * count - 2)
             joints = trajectory.joints[index if index < count else 2 * count - 2 - index]
             return noise.apply(model.ranges(joints), rng)[0], joints
-        return measure
+        return Measurements(measure, FieldSimulator(model, effects_of(args),
+                                                    np.random.default_rng(args.seed)))
     motion = ForthAndBack(make_motion(args.motion, model, PLAYBACK_S,
                                       np.random.default_rng(args.seed)), PLAYBACK_S)
     simulator = FieldSimulator(model, effects_of(args), rng, frame_period=1.0 / args.rate)
@@ -136,7 +172,7 @@ def range_source(args, model, rng):
     def measure(cycle):
         frame = simulator.frame(motion, cycle / args.rate)
         return frame.ranges, frame.joints
-    return measure
+    return Measurements(measure, simulator)
 
 
 def effects_of(args):
@@ -186,6 +222,7 @@ class UwbEmulator(Node):
         self.model = config.model()
         self.rng = np.random.default_rng(args.seed)
         self.measure = range_source(args, self.model, self.rng)
+        self.reports_anchor_ranges = reports_anchor_ranges(args.protocol)
         self.truth = (self.create_publisher(PoseArray, contract.TRUTH.name, POSTURE_QOS)
                       if args.truth else None)
         self.cycle = 0
@@ -203,7 +240,8 @@ class UwbEmulator(Node):
         ranges, joints = self.measure(self.cycle)
         stamp = now.to_msg()
         ending = '' if self.args.no_newline else '\r\n'
-        for channel, line in cycle_lines(self.config, ranges, self.args.protocol, self.cycle):
+        for channel, line in self._anchor_lines() + cycle_lines(
+                self.config, ranges, self.args.protocol, self.cycle):
             data = (line + ending).encode()
             if self.rng.random() < self.args.garbage:
                 data = corrupt(line, self.rng) + ending.encode()
@@ -212,6 +250,16 @@ class UwbEmulator(Node):
             self.truth.publish(posture_message(self.model.pivot_of(joints), joints, stamp,
                                                self.config.frame_id))
         self.cycle += 1
+
+    def _anchor_lines(self):
+        """Return this cycle's anchor-anchor lines (the start-up burst, then one a second)."""
+        if not self.reports_anchor_ranges:
+            return []
+        lines = []
+        for _ in range(anchor_rounds(self.cycle, self.args.rate)):
+            lines += anchor_lines(self.config, self.measure.anchor_ranges(),
+                                  self.args.protocol, self.cycle)
+        return lines
 
     def close(self):
         """Close the outputs, each once (``main`` closes what is left)."""

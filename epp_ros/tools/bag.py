@@ -17,7 +17,7 @@ epp_bag: synthesise, record, replay, evaluate and describe rosbag2 files.
 
     epp_bag synth OUT [--storage mcap|sqlite3] [--duration S] [--sigma M] [--nlos F]
                       [--drop F] [--field NAMES] [--motion working|joystick] [--seed N]
-                      [--config FILE] [--raw PROTOCOL] [--start S]
+                      [--config FILE] [--raw PROTOCOL] [--start S] [--anchor-ranges]
     epp_bag record OUT [--topics T ...] [--duration S] [--storage ...]
     epp_bag play BAG [--rate R] [--loop] [--fast] [--topics T ...] [--clock [HZ]]
     epp_bag eval BAG [--method M] [--config FILE] [--out BAG] [--plot FILE.png] [--json]
@@ -30,7 +30,12 @@ synth draws each cycle's ranges with ``--sigma``/``--nlos``/``--drop`` noise; wi
 ``--field NAMES`` (comma-separated presets of ``epp_ros.core.simulate.FIELD_EFFECTS``) or
 ``--motion joystick`` from ``epp_ros.core.simulate.FieldSimulator`` instead, with the
 presets' effects or, without ``--field``, the same noise. ``--field`` replaces the noise
-options: giving both is refused.
+options: giving both is refused. ``--anchor-ranges`` (field simulator too) also writes
+``/uwb/anchor_ranges``: rounds of every anchor's ranges to every other
+(``FieldSimulator.anchor_ranges``: the true, possibly displaced anchors, their offsets, the
+range noise), a burst at start-up and one round a second, as the emulator prints them
+(``epp_ros.uwb.emulation.anchor_rounds``); with ``--raw`` their lines too, where the format
+has them. ``record`` records ``/uwb/anchor_ranges`` by default.
 """
 import argparse
 import importlib
@@ -44,10 +49,12 @@ from epp_ros.arguments import add_field_options, integer, number, Parser, settle
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core import RANGE_METHODS
 from epp_ros.core.simulate import field_effects, FieldEffects, FieldSimulator, make_motion
+from epp_ros.uwb.emulation import anchor_rounds
 from epp_ros.uwb.formats import FORMATS
 import numpy as np
 
-DEFAULT_RECORD = [bags.RANGES, bags.POSTURE, bags.TRUTH, contract.DIAGNOSTICS.absolute]
+DEFAULT_RECORD = [bags.RANGES, bags.ANCHOR_RANGES, bags.POSTURE, bags.TRUTH,
+                  contract.DIAGNOSTICS.absolute]
 CLOCK_HZ = 40.0         # /clock rate of `play --clock`, as ros2 bag play's default
 #: synth's noise options' defaults (None when parsed: --field refuses them when given).
 NOISE_DEFAULTS = {'sigma': 0.1, 'nlos': 0.0, 'drop': 0.0}
@@ -78,6 +85,10 @@ def parse_args(argv):
     synth.add_argument('--start', type=number(0, 1e10, low_open=True), metavar='S',
                        help='time of the first message, seconds since the epoch (default: '
                             'now); e.g. 1000 for a bag that is plainly simulated time')
+    synth.add_argument('--anchor-ranges', action='store_true',
+                       help='also write /uwb/anchor_ranges from the field simulator: a '
+                            'start-up burst, then one round a second (for the anchor '
+                            'self-survey of epp_calibrate)')
     record = commands.add_parser('record', help='record topics until Ctrl-C or --duration')
     record.add_argument('out')
     record.add_argument('--topics', nargs='+', default=DEFAULT_RECORD)
@@ -121,7 +132,7 @@ def parse_args(argv):
 def run_synth(args):
     config = load_pump_config(args.config)
     start_ns = time.time_ns() if args.start is None else int(round(args.start * 1e9))
-    if args.field or args.motion != 'working':
+    if args.field or args.motion != 'working' or args.anchor_ranges:
         counts = synthesize_field(args, config, start_ns)
     else:
         counts = bags.synthesize(args.out, config, args.duration, args.rate, args.sigma,
@@ -146,7 +157,10 @@ def synthesize_field(args, config, start_ns):
     One generator seeded with ``--seed`` draws the motion (a working cycle the same as
     ``bags.synthesize``'s), then the field. Every cycle gives ``/uwb/ranges``, with each
     range's measurement time (TDMA slots) as its age, and the true posture at its stamp on
-    ``/arm_posture/ground_truth`` (and, with ``--raw``, the devices' lines on ``/uwb/raw``).
+    ``/arm_posture/ground_truth`` (and, with ``--raw``, the devices' lines on ``/uwb/raw``);
+    with ``--anchor-ranges`` the cycles of :func:`epp_ros.uwb.emulation.anchor_rounds` are
+    preceded by rounds of anchor-anchor ranges on ``/uwb/anchor_ranges``, drawn from the
+    simulator's own stream (the cycles' draws stay as they are without them).
 
     Returns
     -------
@@ -167,7 +181,11 @@ def synthesize_field(args, config, start_ns):
             yield (start_ns + int(round(frame.stamp * 1e9)), frame.ranges, frame.joints,
                    np.where(np.isfinite(frame.ranges), ages, np.nan))
 
-    return bags.write_cycles(args.out, config, cycles(), args.storage, args.raw)
+    def rounds(cycle):
+        return [simulator.anchor_ranges() for _ in range(anchor_rounds(cycle, args.rate))]
+
+    return bags.write_cycles(args.out, config, cycles(), args.storage, args.raw,
+                             rounds if args.anchor_ranges else None)
 
 
 def run_info(args):

@@ -16,7 +16,7 @@
 epp_calibrate: anchor positions and device range offsets from a recorded bag.
 
     epp_calibrate BAG [--config pump.yaml] [--out calibrated.yaml] [--fixed-anchors NAMES]
-                      [--plot FILE.png] [--json] [--force] [--salvage]
+                      [--plot FILE.png] [--json] [--force] [--salvage] [--no-survey]
 
 Reads the bag's /uwb/ranges (as uwb_driver publishes them) recorded while the boom slews
 and luffs, fits the free anchors' positions and every tag's and anchor's range offset
@@ -26,6 +26,12 @@ and everything else kept, for the nodes to start from (--params-file). The fixed
 (--fixed-anchors, names or device ids, comma-separated) are those on the truck body
 (turret, cab): their configured positions define the truck frame; default: the first
 anchor. The range noise model is the config's range_sigma, nlos_fraction and nlos_gamma.
+
+When the bag also holds /uwb/anchor_ranges (anchors ranging each other: TREK1000 ma lines,
+recorded by epp_bag record, written by epp_bag synth --anchor-ranges), every round of them
+goes into the fit too, so that the free anchors are self-surveyed and the recording refines
+them; the table says how many rounds were used. --no-survey ignores them. A bag without
+them is calibrated from /uwb/ranges alone.
 
 A recording that does not determine every parameter (too short, a parked boom, too little
 slewing or luffing) gets its verdict, what to move, and exit status 2, and nothing is
@@ -74,6 +80,8 @@ def parse_args(argv):
                              'parameter (risky: see the verdict)')
     parser.add_argument('--salvage', action='store_true',
                         help='use what can be read of a damaged bag (default: refuse it)')
+    parser.add_argument('--no-survey', action='store_true',
+                        help="ignore the bag's /uwb/anchor_ranges (no anchor self-survey)")
     return parser.parse_args(argv)
 
 
@@ -222,6 +230,48 @@ def read_ranges(path, config, salvage=False, progress=None):
             None if damage.intact else damage.describe())
 
 
+def read_survey(path, config, salvage=False, ignore=False):
+    """
+    Return a bag's rounds of anchor-anchor ranges for the self-survey, and a line about them.
+
+    Parameters
+    ----------
+    path : path
+        The bag.
+    config : epp_ros.config.PumpConfig
+        The pump: the anchors' names.
+    salvage : bool
+        Use what can be read of a damaged ``/uwb/anchor_ranges``.
+    ignore : bool
+        ``--no-survey``: do not read them.
+
+    Returns
+    -------
+    rounds : ndarray, shape (K, m, m), or None
+        Metres, NaN where not measured; None without any range (nothing to survey with).
+    line : str
+        ``Anchor self-survey: ...`` for the table.
+
+    Raises
+    ------
+    epp_ros.bags.BagError
+        On a ``/uwb/anchor_ranges`` that cannot be read.
+
+    """
+    import numpy as np
+
+    from epp_ros import bags
+    if ignore:
+        return None, f'Anchor self-survey: off (--no-survey: {bags.ANCHOR_RANGES} ignored)'
+    rounds = bags.read_anchor_ranges(path, config, salvage)
+    rounds = rounds[np.isfinite(rounds).any(axis=(1, 2))]
+    if not len(rounds):
+        return None, f'Anchor self-survey: none (no {bags.ANCHOR_RANGES} in the bag)'
+    pairs = int(np.isfinite(rounds).any(axis=0).sum())
+    return rounds, (f'Anchor self-survey: yes, {len(rounds)} rounds of {bags.ANCHOR_RANGES} '
+                    f'({pairs} anchor pairs, {int(np.isfinite(rounds).sum())} ranges)')
+
+
 class Progress:
     """Throttled progress lines on stderr, on a terminal only."""
 
@@ -256,7 +306,7 @@ def _vector(values, std=None):
     return f'({cells}) +- ({", ".join(f"{s:.3f}" for s in std)})'
 
 
-def report_lines(config, before, result, fixed):
+def report_lines(config, before, result, fixed, survey=None):
     """
     Return the table of what changed, as lines.
 
@@ -270,6 +320,8 @@ def report_lines(config, before, result, fixed):
         What calibrate found.
     fixed : tuple of int
         The fixed anchors.
+    survey : str, optional
+        The line saying whether the anchors were self-surveyed (:func:`read_survey`).
 
     """
     import numpy as np
@@ -282,6 +334,8 @@ def report_lines(config, before, result, fixed):
         std = None if j in fixed else result.anchor_std[j]
         lines.append(f'  {label:<{width}} {_vector(before.anchors[j])} -> '
                      f'{_vector(result.anchors[j], std)}  {moved:.3f}')
+    if survey:
+        lines.append(survey)
     lines.append('Range offsets [m]: configured -> calibrated +- std')
     for kind, labels, old, new, std in (
             ('anchor', names, before.anchor_offsets, result.anchor_offsets,
@@ -306,10 +360,11 @@ def report_lines(config, before, result, fixed):
     return lines
 
 
-def result_json(config, before, result, fixed, written):
+def result_json(config, before, result, fixed, written, survey_rounds=0):
     """Return the calibration as a JSON-ready dict (names -> values, metres)."""
     return {
         'status': result.status, 'message': result.message, 'written': written,
+        'survey_rounds': int(survey_rounds),
         'fixed_anchors': [config.anchor_names[j] for j in fixed],
         'anchors': {name: {'before': before.anchors[j].tolist(),
                            'after': result.anchors[j].tolist(),
@@ -438,6 +493,7 @@ def run(args, out=None):
     ranges, tag_ranges, _, damage = read_ranges(args.bag, config, args.salvage, progress)
     if damage:
         print(f'epp_calibrate: salvaged {args.bag}: {damage}', file=sys.stderr)
+    survey, survey_line = read_survey(args.bag, config, args.salvage, args.no_survey)
     p = len(config.tag_names)
     usable = int(np.sum(np.isfinite(ranges).sum(axis=(1, 2)) >= p + 1))
     if usable < MIN_FRAMES:
@@ -449,16 +505,19 @@ def run(args, out=None):
           f'{p} tags, {len(config.anchor_names)} anchors; {note}', file=out)
     progress.say(f'calibrating {usable} frames ...')
     has_tag_ranges = bool(np.isfinite(tag_ranges).any())
+    # Passed only when there are some: a bag without them calibrates as it always did.
+    surveyed = {} if survey is None else {'anchor_ranges': survey}
     try:
         result = calibrate(before, ranges, tag_ranges=tag_ranges if has_tag_ranges else None,
-                           fixed_anchors=fixed, **settings)
+                           fixed_anchors=fixed, **surveyed, **settings)
     except ValueError as exc:
         text = str(exc).splitlines()[0]
         text = text if len(text) <= 120 else text[:117] + '...'
+        hint = '' if survey is None else ' (or try --no-survey)'
         raise CalibrationError(f'{args.bag}: cannot calibrate ({text}): the recording hardly '
                                'determines the parameters; record the boom slewing and '
-                               'luffing through its range; nothing written') from None
-    for line in report_lines(config, before, result, fixed):
+                               f'luffing through its range{hint}; nothing written') from None
+    for line in report_lines(config, before, result, fixed, survey_line):
         print(line, file=out)
     written = None
     if args.out is not None and (result.success or args.force):
@@ -483,7 +542,8 @@ def run(args, out=None):
         plot(args.plot, config, before, result, ranges, fixed)
         print(f'plotted {args.plot}', file=out)
     if args.json:
-        print(json.dumps(result_json(config, before, result, fixed, written)), file=out)
+        print(json.dumps(result_json(config, before, result, fixed, written,
+                                     0 if survey is None else len(survey))), file=out)
     if not result.success:
         print(f'epp_calibrate: {args.bag}: {result.status}: {result.message}',
               file=sys.stderr)

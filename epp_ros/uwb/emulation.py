@@ -21,6 +21,11 @@ put every tag on one channel; formats that do not need one channel per tag, as o
 rig where each tag has its own serial port or WiFi bridge; formats that name no device at
 all need one channel per tag-anchor pair. A channel is a pseudo-terminal
 (:class:`PtyOutput`) or a TCP server like the ESP8266 bridge (:class:`TcpOutput`).
+
+Formats that report anchor-anchor ranges (``LineFormat.emit_anchors``: TREK1000 ``ma``
+lines) also print rounds of them, on the first channel (the gateway anchor's): a burst of
+:data:`SURVEY_BURST` rounds at start-up, before the boom moves, then one about every
+second (:func:`anchor_rounds`, :func:`anchor_lines`).
 """
 from collections import Counter
 import os
@@ -34,7 +39,8 @@ from epp_ros.uwb.formats.trek import RAW_BIAS
 import numpy as np
 
 __all__ = ['TAG_NAMING', 'channel_count', 'channel_devices', 'cycle_lines', 'corrupt',
-           'PtyOutput', 'TcpOutput']
+           'PtyOutput', 'TcpOutput', 'SURVEY_BURST', 'ANCHOR_ROUND_PERIOD', 'anchor_rounds',
+           'anchor_lines', 'reports_anchor_ranges']
 
 #: Range bias of the emulated TREK1000 raw (``mr``) lines, metres.
 TREK_RAW_BIAS = RAW_BIAS
@@ -114,6 +120,76 @@ def cycle_lines(config, ranges, protocol, sequence=0, rx_power=-80.0):
         channel = 0 if line_format.names_tag else row
         lines += [(channel, line) for line in line_format.emit(tag, measured, cycle)]
     return lines
+
+
+#: Rounds of anchor-anchor ranges at start-up, before the first ranging cycle's lines.
+SURVEY_BURST = 10
+#: Seconds between rounds of anchor-anchor ranges after the start-up burst.
+ANCHOR_ROUND_PERIOD = 1.0
+
+
+def anchor_rounds(cycle, rate):
+    """
+    Return how many rounds of anchor-anchor ranges come with ranging cycle ``cycle``.
+
+    Parameters
+    ----------
+    cycle : int
+        Ranging cycle number, from 0.
+    rate : float
+        Ranging cycles per second.
+
+    Returns
+    -------
+    int
+        :data:`SURVEY_BURST` with cycle 0, then 1 about every :data:`ANCHOR_ROUND_PERIOD`
+        seconds, else 0.
+
+    """
+    if cycle == 0:
+        return SURVEY_BURST
+    return int(cycle % max(1, round(rate * ANCHOR_ROUND_PERIOD)) == 0)
+
+
+def reports_anchor_ranges(protocol):
+    """Whether a protocol's devices print anchor-anchor ranges."""
+    return _format(protocol).emit_anchors is not None
+
+
+def anchor_lines(config, ranges, protocol, sequence=0):
+    """
+    Device lines of one round of anchor-anchor ranges.
+
+    Parameters
+    ----------
+    config : epp_ros.config.PumpConfig
+        The pump: anchor ids and positions.
+    ranges : ndarray, shape (m, m)
+        Metres, row the measuring anchor; NaN pairs are not reported.
+    protocol : str
+        A name in :data:`epp_ros.uwb.formats.FORMATS`.
+    sequence : int
+        Cycle number (some formats carry it).
+
+    Returns
+    -------
+    list of (channel, line)
+        On channel 0; none for a format without anchor-anchor ranges.
+
+    Raises
+    ------
+    ValueError
+        For an unknown protocol, or ids or ranges the format cannot carry.
+
+    """
+    line_format = _format(protocol)
+    if line_format.emit_anchors is None:
+        return []
+    ids = config.anchor_ids
+    rows, columns = np.nonzero(np.isfinite(ranges))
+    measured = {(ids[i], ids[j]): float(ranges[i, j]) for i, j in zip(rows, columns)}
+    cycle = Cycle(sequence, dict(zip(ids, config.anchor_positions)))
+    return [(0, line) for line in line_format.emit_anchors(measured, cycle)]
 
 
 def corrupt(line, rng):

@@ -24,6 +24,11 @@ missing pairs, so the cycle closes as soon as every tag has reported. A pair (or
 tag) that reports again before its cycle closed starts the next cycle (the devices have
 moved on), so no range that arrived whole is lost. Unused ranges are counted by reason.
 Each range keeps its receive time, which ``uwb/ranges`` carries as its age (``contract``).
+
+Anchor-anchor ranges (records of kind 'anchor', e.g. TREK1000 ``ma`` lines) take no part in
+the cycles: those of known, different anchors and plausible are kept apart until
+:meth:`FrameAssembler.take_anchor_ranges` hands them over as one :class:`AnchorRound`, what
+``uwb/anchor_ranges`` carries.
 """
 from collections import Counter
 from dataclasses import dataclass
@@ -32,7 +37,7 @@ import math
 from epp_ros import contract
 import numpy as np
 
-__all__ = ['Frame', 'FrameAssembler']
+__all__ = ['Frame', 'FrameAssembler', 'AnchorRound']
 
 
 @dataclass
@@ -81,6 +86,40 @@ class Frame:
         return names, ranges.tolist(), contract.range_ages(self.stamp, received).tolist()
 
 
+@dataclass
+class AnchorRound:
+    """Anchor-anchor ranges received together (one device line)."""
+
+    #: receive time of the newest range, seconds
+    stamp: float
+    #: each range's measuring anchor (index)
+    rows: list
+    #: each range's responding anchor (index)
+    columns: list
+    #: metres
+    ranges: list
+
+    def labelled(self, config):
+        """
+        Return the round as ``uwb/anchor_ranges`` carries it (``epp_ros.contract``).
+
+        Parameters
+        ----------
+        config : epp_ros.config.PumpConfig
+            The pump: the anchors' names.
+
+        Returns
+        -------
+        names : list of str
+            ``"<anchor>:<anchor>"``, the measuring anchor first.
+        ranges : list of float
+            Metres.
+
+        """
+        return (contract.anchor_range_names(config.anchor_names, self.rows, self.columns),
+                [float(value) for value in self.ranges])
+
+
 class FrameAssembler:
     """
     Collect range records of a pump into frames.
@@ -99,10 +138,14 @@ class FrameAssembler:
         Unused records by reason: ``implausible``, ``unknown_tag``, ``unknown_anchor``,
         ``no_tag`` (a line that names no tag on a source configured without one),
         ``no_anchor`` (a line that names no anchor on a source configured without one),
-        ``anchor_range`` (anchor-anchor ranges) and ``raw_range`` (TREK1000 ranges before
-        bias correction, reported again corrected), which the estimators do not use.
+        ``anchor_range`` (anchor-anchor ranges that do not name both anchors) and
+        ``raw_range`` (TREK1000 ranges before bias correction, reported again corrected),
+        which the estimators do not use. Anchor-anchor ranges of an unknown anchor count as
+        ``unknown_anchor``, those of an anchor to itself or out of range as ``implausible``.
     frames : int
         Frames closed so far.
+    anchor_ranges : int
+        Anchor-anchor ranges kept so far (:meth:`take_anchor_ranges`).
 
     """
 
@@ -115,6 +158,8 @@ class FrameAssembler:
         self.shape = (len(config.tag_ids), len(config.anchor_ids))
         self.dropped = Counter()
         self.frames = 0
+        self.anchor_ranges = 0
+        self._anchor_entries = []       # (row, column, metres, stamp) not yet taken
         self._last_stamp = None
         self._reset()
 
@@ -147,6 +192,9 @@ class FrameAssembler:
         when the line names none. Ids compare as numbers (see ``PumpConfig.tag_index``).
         """
         closed = self.poll(stamp)
+        if record.kind == 'anchor':
+            self._add_anchor_range(record, stamp)
+            return closed
         if record.kind != 'range':
             self.dropped[f'{record.kind}_range'] += 1
             return closed
@@ -161,8 +209,7 @@ class FrameAssembler:
         if row is None or (column is None and other_tag in (None, row)):
             self.dropped['unknown_tag' if row is None else 'unknown_anchor'] += 1
             return closed
-        if not (math.isfinite(record.range_m)
-                and self.min_range <= record.range_m <= self.max_range):
+        if not self._plausible(record.range_m):
             self.dropped['implausible'] += 1
             return closed
         tag_link = column is None
@@ -179,6 +226,41 @@ class FrameAssembler:
         if not np.isnan(self._ranges).any():
             closed.append(self._close())
         return closed
+
+    def _plausible(self, metres):
+        """Whether a range is finite and within [min_range, max_range]."""
+        return math.isfinite(metres) and self.min_range <= metres <= self.max_range
+
+    def _add_anchor_range(self, record, stamp):
+        """Keep an anchor-anchor record (``tag``: the measuring anchor), or count it dropped."""
+        if record.tag is None or record.anchor is None:
+            self.dropped['anchor_range'] += 1
+            return
+        row = self.config.anchor_index(record.tag)
+        column = self.config.anchor_index(record.anchor)
+        if row is None or column is None:
+            self.dropped['unknown_anchor'] += 1
+        elif row == column or not self._plausible(record.range_m):
+            self.dropped['implausible'] += 1
+        else:
+            self._anchor_entries.append((row, column, record.range_m, stamp))
+            self.anchor_ranges += 1
+
+    def take_anchor_ranges(self):
+        """
+        Return the anchor-anchor ranges kept since the last call, and forget them.
+
+        Returns
+        -------
+        AnchorRound or None
+            None when there are none.
+
+        """
+        if not self._anchor_entries:
+            return None
+        rows, columns, ranges, stamps = (list(values) for values in zip(*self._anchor_entries))
+        self._anchor_entries = []
+        return AnchorRound(max(stamps), rows, columns, ranges)
 
     def _values(self, tag_link):
         """Return the open cycle's tag-tag (p, p) or tag-anchor (p, m) ranges."""

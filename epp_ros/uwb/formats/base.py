@@ -102,6 +102,11 @@ class LineFormat:
     recognise : callable(str) -> str or None
         For lines of the format that carry no range (positions, HTTP preambles): a label
         to count them under, else None.
+    emit_anchors : callable(ranges, cycle) -> list of str, or None
+        For formats that report anchor-anchor ranges (records of kind 'anchor'): the lines
+        the devices print for one round of them, ``ranges`` ``{(measuring anchor id,
+        responding anchor id): metres}`` (pairs the format does not carry are left out),
+        ``cycle`` a :class:`Cycle`. None: the format carries none.
 
     """
 
@@ -116,6 +121,7 @@ class LineFormat:
     anchor_slots: int | None = None
     id_base: int = 16
     recognise: Callable = field(default=lambda line: None)
+    emit_anchors: Callable | None = None
 
 
 # --- device ids -------------------------------------------------------------------------

@@ -217,7 +217,23 @@ def _emit(tag, ranges, cycle):
             format_trek(tag, fields, 'mc', cycle.sequence)]
 
 
+def _emit_anchors(ranges, cycle):
+    """
+    Return the ``ma`` line anchor A0 prints for one round of anchor-anchor ranges.
+
+    ``ranges`` maps (initiating anchor id, responding anchor id) to metres; the line carries
+    the pairs of :data:`_ANCHOR_PAIRS` (A0-A1, A0-A2, A1-A2) found there, none if none is.
+    """
+    slots = {(slot_of(first, 4), slot_of(second, 4)): value
+             for (first, second), value in ranges.items()}
+    fields = {str(field): slots[int(first), int(second)]
+              for field, (first, second) in _ANCHOR_PAIRS.items()
+              if (int(first), int(second)) in slots}
+    return [format_trek('0', fields, 'ma', cycle.sequence)] if fields else []
+
+
 FORMAT = LineFormat(
-    name='trek', parse=parse_trek, emit=_emit, whole_tag=True, anchor_slots=4, id_base=10,
+    name='trek', parse=parse_trek, emit=_emit, emit_anchors=_emit_anchors, whole_tag=True,
+    anchor_slots=4, id_base=10,
     firmware='Decawave TREK1000 / EVB1000 DecaRangeRTLS (USB virtual COM port)',
     example='mc 07 000004ec 000008ee 0000087e 00000000 6cc0 0a 00a0642b a0:0')
