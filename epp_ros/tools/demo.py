@@ -205,21 +205,21 @@ class Monitor:
         recent = sum(1 for t in self.posture_times[-int(100 * window):] if now - t <= window)
         return recent / window
 
-    def unanswered_frames(self, settle=0.5):
+    def unanswered_frames(self):
         """
         Count the range frames that got no posture.
 
-        Counted from the first posture on (before it the estimator may not have been
-        listening yet) to ``settle`` s ago.
+        Counted between the first posture (before it the estimator may not have been
+        listening yet) and the newest: the estimator takes frames in order, so a frame
+        older than the newest posture without one of its own was refused or lost, while a
+        newer one may still be on its way (a loaded machine), and is not counted.
         """
         if not self.posture_stamps:
             return len(self.frame_stamps)
         answered = set(self.posture_stamps)
-        first = min(self.posture_stamps)
-        horizon = time.time() - settle
+        first, last = min(self.posture_stamps), max(self.posture_stamps)
         return sum(1 for stamp in self.frame_stamps
-                   if first <= stamp and stamp[0] + 1e-9 * stamp[1] < horizon
-                   and stamp not in answered)
+                   if first <= stamp <= last and stamp not in answered)
 
     def summary(self, method):
         from epp_ros.core.metrics import pooled_rmse
