@@ -359,3 +359,14 @@ def test_only_the_trek1000_prints_anchor_ranges():
                                          ('1', '2'): 6.8, ('2', '3'): 9.0}, Cycle(3))
     assert line == ['ma 0e 00000000 000014a5 000014a5 00001a90 0003 03 00000000 a0:0']
     assert FORMATS['trek'].emit_anchors({('2', '3'): 9.0}, Cycle()) == []
+
+
+def test_positional_formats_refuse_anchors_beyond_their_fields():
+    from epp_ros.uwb.formats import anchor_slot_problem
+    six = ['0', '1', '2', '3', '4', '5']
+    assert 'at most 4 anchors' in anchor_slot_problem(six, ['trek'])
+    assert "['4', '5']" in anchor_slot_problem(six, ['trek'])
+    assert anchor_slot_problem(six[:4], ['trek']) is None
+    assert anchor_slot_problem(six, ['trek', 'haoru']) is None      # eight fields carry them
+    assert anchor_slot_problem(six, ['json']) is None               # names its anchors
+    assert anchor_slot_problem(six, ['auto']) is None               # not known until read

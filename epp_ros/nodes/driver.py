@@ -38,7 +38,7 @@ from epp_ros.config import ConfigError, listen_address, normalise_device_id, PRO
 from epp_ros.nodes.common import (declare, declare_pump_parameters, qos, RANGES_QOS,
                                   run_node, StartupError, to_time)
 from epp_ros.uwb.decoder import LineDecoder
-from epp_ros.uwb.formats import fits_slots, FORMATS
+from epp_ros.uwb.formats import anchor_slot_problem
 from epp_ros.uwb.frames import FrameAssembler
 from epp_ros.uwb.source import open_source
 from rclpy.node import Node
@@ -68,7 +68,9 @@ class UwbDriver(Node):
         sources = self.config.sources
         if port:
             sources = (self._single_source(port, protocol, tag, anchor),)
-        self._check_anchor_slots(sources)
+        problem = anchor_slot_problem(self.config.anchor_ids, [s.protocol for s in sources])
+        if problem:
+            raise StartupError(f'anchor_ids: {problem}')
         try:
             self.assembler = FrameAssembler(self.config, frame_period, min_range, max_range)
         except ValueError as exc:
@@ -109,19 +111,6 @@ class UwbDriver(Node):
             raise StartupError(f'port: {exc}') from None
         return Source(port, protocol, normalise_device_id(tag) or None,
                       normalise_device_id(anchor) or None)
-
-    def _check_anchor_slots(self, sources):
-        """Refuse a pump whose anchors no source's format can carry (field positions)."""
-        formats = [FORMATS.get(s.protocol) for s in sources]
-        if not formats or any(f is None or f.anchor_slots is None for f in formats):
-            return
-        slots = max(f.anchor_slots for f in formats)
-        extra = [a for a in self.config.anchor_ids if not fits_slots(a, slots)]
-        if extra:
-            names = '/'.join(sorted({f.name for f in formats}))
-            raise StartupError(
-                f'anchor_ids: the {names} format carries at most {slots} anchors per tag '
-                f'(ids 0-{slots - 1}); anchors {extra} need another source or another format')
 
     def _now(self):
         """Return the node's clock, seconds: system time, or simulated time with use_sim_time."""

@@ -28,7 +28,7 @@ from epp_ros.uwb.formats.base import (Cycle, device_number, LineFormat, ParseRes
                                       slot_of)
 
 __all__ = ['FORMATS', 'LineFormat', 'Cycle', 'ParseResult', 'RangeRecord', 'device_number',
-           'detect_format', 'recognised', 'fits_slots']
+           'detect_format', 'recognised', 'fits_slots', 'anchor_slot_problem']
 
 #: name -> LineFormat. The order breaks ties in auto-detection: older, stricter formats first.
 FORMATS = {module.FORMAT.name: module.FORMAT for module in (
@@ -56,6 +56,37 @@ def recognised(line, names=None):
         if label:
             return label
     return None
+
+
+def anchor_slot_problem(anchor_ids, protocols):
+    """
+    Say why sources of these formats cannot carry these anchors, or return None.
+
+    Positional formats (``anchor_slots``) carry an anchor by its field position, so every
+    anchor id must be one of the positions 0..slots-1 of the widest such format.
+
+    Parameters
+    ----------
+    anchor_ids : sequence of str
+        The pump's anchor ids.
+    protocols : sequence of str
+        Each source's format name (unknown names and ``auto`` are not judged).
+
+    Returns
+    -------
+    str or None
+
+    """
+    formats = [FORMATS.get(protocol) for protocol in protocols]
+    if not formats or any(f is None or f.anchor_slots is None for f in formats):
+        return None
+    slots = max(f.anchor_slots for f in formats)
+    extra = [a for a in anchor_ids if not fits_slots(a, slots)]
+    if not extra:
+        return None
+    names = '/'.join(sorted({f.name for f in formats}))
+    return (f'the {names} format carries at most {slots} anchors per tag (ids 0-{slots - 1}); '
+            f'anchors {extra} need another source or another format')
 
 
 def fits_slots(anchor, slots):
