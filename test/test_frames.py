@@ -260,3 +260,31 @@ def test_anchor_range_labels_that_name_no_pair_are_counted():
     assert np.isfinite(matrix).sum() == 2
     with pytest.raises(ValueError, match='2 names but 1 ranges'):
         contract.anchor_range_matrix(CONFIG.anchor_names, names[:2], [1.0])
+
+
+def test_whole_lines_that_name_no_tag_count_their_source_tag_reported():
+    assembler = FrameAssembler(CONFIG)
+    line = [RangeRecord(anchor, 5.0) for anchor in ANCHORS[:-1]]
+    assert assembler.add_line(line, 1.0, source_tag=TAGS[0], whole=True) == []
+    # The same tag again, though with the pair it missed: the next cycle.
+    (frame,) = assembler.add_line([RangeRecord(ANCHORS[-1], 6.0)], 1.01, source_tag=TAGS[0],
+                                  whole=True)
+    assert np.isfinite(frame.ranges[0, :-1]).all() and np.isnan(frame.ranges[0, -1])
+    assert np.isnan(frame.ranges[1:]).all()
+
+
+def test_a_whole_line_with_no_usable_range_does_not_count_its_tag_reported():
+    assembler = FrameAssembler(CONFIG)
+    assert assembler.add_line([RangeRecord(ANCHORS[0], 0.01, tag=TAGS[0])], 1.0,
+                              whole=True) == []
+    assert assembler.add_line([RangeRecord(ANCHORS[0], 5.0, tag=TAGS[0])], 1.01,
+                              whole=True) == []
+    (frame,) = assembler.poll(2.0)
+    assert frame.stamp == 1.01 and assembler.dropped == {'implausible': 1}
+
+
+def test_rx_power_of_tag_tag_ranges_is_not_entered():
+    assembler = FrameAssembler(CONFIG)
+    assembler.add(RangeRecord(TAGS[1], 7.2, tag=TAGS[0], rx_power_dbm=-80.0), 1.0)
+    (frame,) = assembler.poll(2.0)
+    assert frame.tag_ranges[0, 1] == 7.2 and np.isnan(frame.rx_power).all()

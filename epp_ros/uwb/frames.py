@@ -192,40 +192,53 @@ class FrameAssembler:
         when the line names none. Ids compare as numbers (see ``PumpConfig.tag_index``).
         """
         closed = self.poll(stamp)
-        if record.kind == 'anchor':
-            self._add_anchor_range(record, stamp)
-            return closed
         if record.kind != 'range':
-            self.dropped[f'{record.kind}_range'] += 1
+            self._add_other_kind(record, stamp)
             return closed
         tag = record.tag if record.tag is not None else source_tag
         anchor = record.anchor if record.anchor is not None else source_anchor
         if tag is None or anchor is None:
             self.dropped['no_tag' if tag is None else 'no_anchor'] += 1
-            return closed
+        else:
+            self._add_pair(record, stamp, tag, anchor, closed)
+        return closed
+
+    def _add_other_kind(self, record, stamp):
+        """Route a record that is no tag range: anchor-anchor ranges kept apart, others counted."""
+        if record.kind == 'anchor':
+            self._add_anchor_range(record, stamp)
+        else:
+            self.dropped[f'{record.kind}_range'] += 1
+
+    def _add_pair(self, record, stamp, tag, anchor, closed):
+        """Store a range of a configured pair, or count why it is unused (``dropped``)."""
         row = self.config.tag_index(tag)
         column = self.config.anchor_index(anchor)
         other_tag = self.config.tag_index(anchor) if column is None else None
         if row is None or (column is None and other_tag in (None, row)):
             self.dropped['unknown_tag' if row is None else 'unknown_anchor'] += 1
-            return closed
-        if not self._plausible(record.range_m):
+        elif not self._plausible(record.range_m):
             self.dropped['implausible'] += 1
-            return closed
-        tag_link = column is None
-        index = (row, other_tag) if tag_link else (row, column)
-        if not math.isnan(self._values(tag_link)[index]):
+        elif column is None:
+            self._store(record, stamp, True, (row, other_tag), closed)
+        else:
+            self._store(record, stamp, False, (row, column), closed)
+
+    def _store(self, record, stamp, tag_link, index, closed):
+        """Enter a range in the open cycle, closing the cycles it ends so no range is lost."""
+        values = self._values(tag_link)
+        if not math.isnan(values[index]):
             closed.append(self._close())          # the pair reports again: a new cycle
+            values = self._values(tag_link)
         if self._opened is None:
             self._opened = stamp
-        self._values(tag_link)[index] = record.range_m
+        values[index] = record.range_m
         (self._tag_received if tag_link else self._received)[index] = stamp
         if record.rx_power_dbm is not None and not tag_link:
-            self._rx_power[row, column] = record.rx_power_dbm
+            self._rx_power[index] = record.rx_power_dbm
         self._newest = stamp if self._newest is None else max(self._newest, stamp)
         if not np.isnan(self._ranges).any():
             closed.append(self._close())
-        return closed
 
     def _plausible(self, metres):
         """Whether a range is finite and within [min_range, max_range]."""
@@ -275,22 +288,30 @@ class FrameAssembler:
         the next cycle.
         """
         closed = []
-        rows = set()
-        if whole:
-            for record in records:
-                tag = record.tag if record.tag is not None else source_tag
-                row = self.config.tag_index(tag) if tag is not None else None
-                if record.kind == 'range' and row is not None:
-                    rows.add(row)
-            if rows & self._tags_done:
-                closed.append(self._close())
+        rows = self._line_rows(records, source_tag) if whole else set()
+        if not rows.isdisjoint(self._tags_done):
+            closed.append(self._close())          # a tag reports again: a new cycle
         for record in records:
             closed += self.add(record, stamp, source_tag, source_anchor)
         if rows and self._opened is not None:
-            self._tags_done |= rows
-            if len(self._tags_done) == self.shape[0]:
-                closed.append(self._close())
+            self._mark_reported(rows, closed)
         return closed
+
+    def _line_rows(self, records, source_tag):
+        """Return the rows of the tags whose ranges a whole line carries: those tags report."""
+        rows = set()
+        for record in records:
+            tag = record.tag if record.tag is not None else source_tag
+            row = self.config.tag_index(tag) if tag is not None else None
+            if record.kind == 'range' and row is not None:
+                rows.add(row)
+        return rows
+
+    def _mark_reported(self, rows, closed):
+        """Mark a whole line's tags reported: the cycle is complete once every tag has."""
+        self._tags_done |= rows
+        if len(self._tags_done) == self.shape[0]:
+            closed.append(self._close())
 
     def poll(self, now):
         """Close the open cycle if it is ``frame_period`` old; a list of 0 or 1 frame."""
