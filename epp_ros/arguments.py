@@ -127,6 +127,37 @@ def settle_noise_options(parser, args, defaults):
                 setattr(args, name, default)
 
 
+def field_effects_of(args, nlos_gamma, moving_anchors=None):
+    """
+    Return the field effects of ``--field``, or else of ``--sigma/--nlos/--drop``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``field``, and ``sigma``, ``nlos`` and ``drop`` (settled).
+    nlos_gamma : float
+        Mean NLOS excess of ``--nlos``, metres.
+    moving_anchors : tuple of int, optional
+        The anchors that may move with each set-up (``PumpConfig.moving_anchor_indices``):
+        the ones ``anchors_moved`` moves. None: every anchor but the base one.
+
+    Returns
+    -------
+    epp_ros.core.simulate.FieldEffects
+
+    """
+    from dataclasses import replace
+    from epp_ros.core.simulate import FieldEffects, field_effects
+    if args.field:
+        effects = field_effects(args.field)
+    else:   # nlos_duration 0: each link blocked anew each cycle, as RangeNoise does
+        effects = FieldEffects(sigma=args.sigma, nlos_fraction=args.nlos, nlos_duration=0.0,
+                               nlos_gamma=nlos_gamma, link_dropout=args.drop)
+    if moving_anchors is not None and effects.moving_anchors is None:
+        effects = replace(effects, moving_anchors=tuple(moving_anchors))
+    return effects
+
+
 def add_field_options(parser):
     """Add ``--field`` (presets of ``core.simulate.FIELD_EFFECTS``) and ``--motion``."""
     from epp_ros.core.simulate import FIELD_EFFECTS, MOTIONS

@@ -58,6 +58,9 @@ PUMP_PARAMETERS = {
                            '(empty: none); a range measures true + tag + anchor offset.'),
     'tag_offsets': ([], 'Constant each tag adds to its ranges, metres, as tag_names (empty: '
                         'none).'),
+    'body_anchors': ([], 'Anchors on the truck body, by name: they define the truck frame '
+                         'and calibration holds them; the others (outriggers) may move with '
+                         'each set-up (empty: the first anchor).'),
     'source_ports': ([''], 'Range sources, one each: /dev/tty..., socket://host:port (we '
                            'connect), tcp-listen://address:port (devices connect to us).'),
     'source_protocols': ([''], f'Line protocol of each source: {", ".join(FORMATS)} or '
@@ -151,6 +154,20 @@ class PumpConfig:
     pivot_offset: float = 0.0   #: metres from the slew axis to the boom pivot
     anchor_offsets: tuple = None    #: metres each anchor adds to its ranges; None: zeros
     tag_offsets: tuple = None       #: metres each tag adds to its ranges; None: zeros
+    body_anchors: tuple = None      #: names of the anchors on the truck body; None: the first
+
+    @property
+    def body_anchor_indices(self):
+        """Return the indices of the anchors on the truck body (the first when not said)."""
+        if not self.body_anchors:
+            return (0,)
+        return tuple(self.anchor_names.index(name) for name in self.body_anchors)
+
+    @property
+    def moving_anchor_indices(self):
+        """Return the indices of the anchors that may move with each set-up (off the body)."""
+        return tuple(j for j in range(len(self.anchor_names))
+                     if j not in self.body_anchor_indices)
 
     def model(self):
         """Return the :class:`BoomModel` of this pump, with its device range offsets."""
@@ -420,6 +437,7 @@ def pump_config_from_parameters(values):
     anchor_offsets = _offsets(get['anchor_offsets'], 'anchor_offsets', 'anchor_names',
                               len(anchor_names))
     tag_offsets = _offsets(get['tag_offsets'], 'tag_offsets', 'tag_names', len(tag_names))
+    body_anchors = _body_anchors(get['body_anchors'], anchor_names)
     try:
         BoomModel(arm_lengths, base, positions, pivot_offset, anchor_offsets, tag_offsets)
     except ValueError as exc:
@@ -429,7 +447,21 @@ def pump_config_from_parameters(values):
     sources = _sources(get['source_ports'], get['source_protocols'], get['source_tags'],
                        get['source_anchors'], tag_ids, anchor_ids)
     return PumpConfig(frame_id, arm_lengths, base, tag_names, tag_ids, anchor_names,
-                      anchor_ids, positions, sources, pivot_offset, anchor_offsets, tag_offsets)
+                      anchor_ids, positions, sources, pivot_offset, anchor_offsets, tag_offsets,
+                      body_anchors)
+
+
+def _body_anchors(values, anchor_names):
+    """Return the names of the anchors on the truck body (a tuple), or None when empty."""
+    names = tuple(str(value).strip() for value in values)
+    if not names:
+        return None
+    unknown = [name for name in names if name not in anchor_names]
+    if unknown:
+        raise ConfigError(f'body_anchors: {_short(unknown)} are not in anchor_names')
+    if len(set(names)) != len(names):
+        raise ConfigError(f'body_anchors: names must be distinct, got {_short(list(names))}')
+    return names
 
 
 def _sources(ports, protocols, tags, anchors, tag_ids, anchor_ids):

@@ -13,6 +13,7 @@
 # limitations under the License.
 
 """epp_bag and epp_ros.bags: round trips, live replay, and broken bags."""
+from dataclasses import replace
 import json
 import signal
 import subprocess
@@ -265,7 +266,9 @@ def test_synth_writes_anchor_ranges_that_the_reader_returns(tmp_path):
     model = CONFIG.model()
     rng = np.random.default_rng(2)
     make_motion('working', model, 3.0, rng)
-    simulator = FieldSimulator(model, field_effects('offsets,anchors_moved'), rng, 0.1)
+    effects = replace(field_effects('offsets,anchors_moved'),
+                      moving_anchors=CONFIG.moving_anchor_indices)   # the outriggers
+    simulator = FieldSimulator(model, effects, rng, 0.1)
     expected = np.array([simulator.anchor_ranges() for _ in range(SURVEY_BURST + 2)])
     rounds = bags.read_anchor_ranges(bag, CONFIG)
     assert rounds.shape == (SURVEY_BURST + 2, 6, 6)

@@ -13,6 +13,7 @@
 # limitations under the License.
 
 """epp_calibrate end to end on synthesized bags, the pump.yaml writer, the bench."""
+from dataclasses import replace
 import json
 import math
 import subprocess
@@ -183,8 +184,12 @@ def test_errors_are_one_line(tmp_path, case):
 
 def test_fixed_anchors_by_name_or_id_and_the_default_said():
     assert tool.fixed_anchor_indices(CONFIG, 'turret, 1787')[0] == (0, 5)
-    indices, note = tool.fixed_anchor_indices(CONFIG, None)
+    # A config that does not say which anchors are on the truck body: the first, said so.
+    indices, note = tool.fixed_anchor_indices(replace(CONFIG, body_anchors=None), None)
     assert indices == (0,) and 'turret' in note and '--fixed-anchors' in note
+    # The packaged one names them.
+    indices, note = tool.fixed_anchor_indices(CONFIG, None)
+    assert indices == (0, 5) and 'body_anchors' in note
 
 
 def test_update_pump_yaml_keeps_the_file_and_replaces_the_values(tmp_path):
@@ -250,7 +255,8 @@ def true_anchors(seconds, seed):
     model = CONFIG.model()
     rng = np.random.default_rng(seed)
     make_motion('working', model, seconds, rng)
-    return FieldSimulator(model, field_effects(SURVEY_FIELD), rng, 0.1).true_anchors
+    effects = replace(field_effects(SURVEY_FIELD), moving_anchors=CONFIG.moving_anchor_indices)
+    return FieldSimulator(model, effects, rng, 0.1).true_anchors
 
 
 def turned_to(truth, anchors, base):

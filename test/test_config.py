@@ -140,6 +140,8 @@ def test_device_ids_compare_case_insensitively():
     ({'tag_names': ['a', 'b', 'c', 'd', 'e f']}, 'tag_names'),
     ({'anchor_names': []}, 'anchor_names'),
     ({'anchor_names': ['turret', 'joint2', 'a', 'b', 'c', 'd']}, 'also name tags'),
+    ({'body_anchors': ['turret', 'boom']}, 'body_anchors'),
+    ({'body_anchors': ['cab', 'cab']}, 'body_anchors'),
     ({'anchor_positions': [0.0] * 17}, 'anchor_positions'),
     ({'anchor_positions': ['x'] * 18}, 'anchor_positions'),
     ({'arm_lengths': [9.0, 7.0]}, 'arm_lengths'),

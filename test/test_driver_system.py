@@ -77,7 +77,7 @@ def check_range_ages(frame, frame_period=0.1, slack=0.1):
 TREK_YAML = {
     'anchor_names': ['a0', 'a1', 'a2', 'a3'], 'anchor_ids': ['0', '1', '2', '3'],
     'anchor_positions': [0.0, 0.0, 3.5, 2.6, 3.4, 0.4, 2.6, -3.4, 0.4, -4.2, 3.0, 0.6],
-    'tag_ids': ['1', '2', '3', '4', '5'],
+    'tag_ids': ['1', '2', '3', '4', '5'], 'body_anchors': ['a0'],
 }
 
 

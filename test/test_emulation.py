@@ -34,7 +34,8 @@ def trek_config():
     import dataclasses
     return dataclasses.replace(CONFIG, anchor_ids=('0', '1', '2', '3'),
                                anchor_names=CONFIG.anchor_names[:4],
-                               anchor_positions=CONFIG.anchor_positions[:4])
+                               anchor_positions=CONFIG.anchor_positions[:4],
+                               body_anchors=CONFIG.anchor_names[:1])
 
 
 @pytest.mark.parametrize('protocol', ['json', 'lec', 'arduino', 'trek'])
@@ -149,7 +150,8 @@ def config_for(protocol):
     count = min(slots, len(CONFIG.anchor_ids))
     return dataclasses.replace(CONFIG, anchor_ids=tuple(str(i) for i in range(count)),
                                anchor_names=CONFIG.anchor_names[:count],
-                               anchor_positions=CONFIG.anchor_positions[:count])
+                               anchor_positions=CONFIG.anchor_positions[:count],
+                               body_anchors=CONFIG.anchor_names[:1])
 
 
 def every_format():
@@ -342,6 +344,7 @@ def test_trek_emulator_prints_a_survey_burst_before_the_boom_moves(tmp_path):
     document = yaml.safe_load(default_config_path().read_text())
     document['/**']['ros__parameters'].update(
         anchor_names=['a0', 'a1', 'a2', 'a3'], anchor_ids=['0', '1', '2', '3'],
+        body_anchors=['a0'],
         anchor_positions=[0.0, 0.0, 3.5, 2.6, 3.4, 0.4, 2.6, -3.4, 0.4, -4.2, 3.0, 0.6])
     config = tmp_path / 'trek.yaml'
     config.write_text(yaml.safe_dump(document))

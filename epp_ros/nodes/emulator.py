@@ -41,11 +41,11 @@ ranging cycle, then one round a second (:func:`epp_ros.uwb.emulation.anchor_roun
 import sys
 
 from epp_ros import contract
-from epp_ros.arguments import (add_field_options, host_port, integer, number, Parser,
-                               settle_noise_options)
+from epp_ros.arguments import (add_field_options, field_effects_of, host_port, integer,
+                               number, Parser, settle_noise_options)
 from epp_ros.config import ConfigError, load_pump_config
-from epp_ros.core.simulate import (field_effects, FieldEffects, FieldSimulator, make_motion,
-                                   Motion, RangeNoise, working_cycle)
+from epp_ros.core.simulate import (FieldSimulator, make_motion, Motion, RangeNoise,
+                                   working_cycle)
 from epp_ros.nodes.common import posture_message, POSTURE_QOS, run_node
 from epp_ros.nodes.stopping import shutdown_on_signals
 from epp_ros.uwb.emulation import (anchor_lines, anchor_rounds, channel_devices, corrupt,
@@ -142,7 +142,7 @@ class Measurements:
         return self.simulator.anchor_ranges()
 
 
-def range_source(args, model, rng):
+def range_source(args, model, rng, moving_anchors=None):
     """
     Return the emulated devices' :class:`Measurements`: ``cycle -> (ranges, joints)``.
 
@@ -150,7 +150,8 @@ def range_source(args, model, rng):
     ``rng`` draws the noise; the motion has its own generator seeded with ``args.seed``.
     Without a field simulator for the ranges (no ``--field``, working motion) the
     anchor-anchor rounds come from a field simulator of the configured anchors with the
-    noise options, seeded with ``args.seed``.
+    noise options, seeded with ``args.seed``. ``moving_anchors``: the anchors off the truck
+    body (``PumpConfig.moving_anchor_indices``), which ``anchors_moved`` moves.
     """
     if args.field is None and args.motion == 'working':
         trajectory = working_cycle(model, PLAYBACK_S, args.rate,
@@ -163,11 +164,12 @@ def range_source(args, model, rng):
             index = cycle % (2 * count - 2)
             joints = trajectory.joints[index if index < count else 2 * count - 2 - index]
             return noise.apply(model.ranges(joints), rng)[0], joints
-        return Measurements(measure, FieldSimulator(model, effects_of(args),
+        return Measurements(measure, FieldSimulator(model, effects_of(args, moving_anchors),
                                                     np.random.default_rng(args.seed)))
     motion = ForthAndBack(make_motion(args.motion, model, PLAYBACK_S,
                                       np.random.default_rng(args.seed)), PLAYBACK_S)
-    simulator = FieldSimulator(model, effects_of(args), rng, frame_period=1.0 / args.rate)
+    simulator = FieldSimulator(model, effects_of(args, moving_anchors), rng,
+                               frame_period=1.0 / args.rate)
 
     def measure(cycle):
         frame = simulator.frame(motion, cycle / args.rate)
@@ -175,13 +177,9 @@ def range_source(args, model, rng):
     return Measurements(measure, simulator)
 
 
-def effects_of(args):
-    """Return the field effects of ``--field``, or else of ``--sigma/--nlos/--drop``."""
-    if args.field:
-        return field_effects(args.field)
-    # nlos_duration 0: each link blocked anew each cycle, as RangeNoise does.
-    return FieldEffects(sigma=args.sigma, nlos_fraction=args.nlos, nlos_duration=0.0,
-                        nlos_gamma=NLOS_GAMMA, link_dropout=args.drop)
+def effects_of(args, moving_anchors=None):
+    """Return the field effects of ``--field`` or the noise options (``arguments``)."""
+    return field_effects_of(args, NLOS_GAMMA, moving_anchors)
 
 
 def open_outputs(args, config):
@@ -221,7 +219,7 @@ class UwbEmulator(Node):
         self.args, self.config, self.outputs = args, config, outputs
         self.model = config.model()
         self.rng = np.random.default_rng(args.seed)
-        self.measure = range_source(args, self.model, self.rng)
+        self.measure = range_source(args, self.model, self.rng, config.moving_anchor_indices)
         self.reports_anchor_ranges = reports_anchor_ranges(args.protocol)
         self.truth = (self.create_publisher(PoseArray, contract.TRUTH.name, POSTURE_QOS)
                       if args.truth else None)

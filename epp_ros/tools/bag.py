@@ -45,10 +45,11 @@ import sys
 import time
 
 from epp_ros import bags, contract
-from epp_ros.arguments import add_field_options, integer, number, Parser, settle_noise_options
+from epp_ros.arguments import (add_field_options, field_effects_of, integer, number, Parser,
+                               settle_noise_options)
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core import RANGE_METHODS
-from epp_ros.core.simulate import field_effects, FieldEffects, FieldSimulator, make_motion
+from epp_ros.core.simulate import FieldSimulator, make_motion
 from epp_ros.uwb.emulation import anchor_rounds
 from epp_ros.uwb.formats import FORMATS
 import numpy as np
@@ -141,15 +142,6 @@ def run_synth(args):
     print(f'wrote {args.out}: ' + ', '.join(f'{t} {n}' for t, n in counts.items()))
 
 
-def effects_of(args):
-    """Return the field effects of ``--field``, or else of ``--sigma/--nlos/--drop``."""
-    if args.field:
-        return field_effects(args.field)
-    # nlos_duration 0: each link blocked anew each cycle, as bags.synthesize does.
-    return FieldEffects(sigma=args.sigma, nlos_fraction=args.nlos, nlos_duration=0.0,
-                        nlos_gamma=NLOS_GAMMA, link_dropout=args.drop)
-
-
 def synthesize_field(args, config, start_ns):
     """
     Write a field simulation as a bag, with the topics and stamps of ``bags.synthesize``.
@@ -171,7 +163,8 @@ def synthesize_field(args, config, start_ns):
     model = config.model()
     rng = np.random.default_rng(args.seed)
     motion = make_motion(args.motion, model, args.duration, rng)
-    simulator = FieldSimulator(model, effects_of(args), rng, frame_period=1.0 / args.rate)
+    effects = field_effects_of(args, NLOS_GAMMA, config.moving_anchor_indices)
+    simulator = FieldSimulator(model, effects, rng, frame_period=1.0 / args.rate)
 
     def cycles():
         for cycle in range(int(round(args.duration * args.rate))):

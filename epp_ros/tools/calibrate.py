@@ -50,8 +50,6 @@ from epp_ros.arguments import Parser
 
 #: Frames (with at least p + 1 ranges) a recording needs before it is tried at all.
 MIN_FRAMES = 100
-#: The fixed anchors when the config does not say which are on the truck body.
-DEFAULT_FIXED = (0,)
 #: Seconds between progress lines on a terminal.
 PROGRESS_PERIOD = 0.5
 
@@ -94,7 +92,8 @@ def fixed_anchor_indices(config, text):
     config : epp_ros.config.PumpConfig
         The pump: its anchor names and ids.
     text : str or None
-        Comma-separated anchor names or device ids; None: :data:`DEFAULT_FIXED`.
+        Comma-separated anchor names or device ids; None: the config's ``body_anchors``
+        (the first anchor when it names none).
 
     Returns
     -------
@@ -110,10 +109,13 @@ def fixed_anchor_indices(config, text):
     """
     names = config.anchor_names
     if text is None:
-        indices = DEFAULT_FIXED
-        return indices, (f'fixed anchors: {", ".join(names[j] for j in indices)} (the first '
-                         'anchor: the config does not say which anchors are on the truck '
-                         'body; name them with --fixed-anchors, e.g. turret,cab)')
+        indices = config.body_anchor_indices
+        fixed = ', '.join(names[j] for j in indices)
+        if config.body_anchors:
+            return indices, f'fixed anchors: {fixed} (body_anchors of the config)'
+        return indices, (f'fixed anchors: {fixed} (the first anchor: the config does not say '
+                         'which anchors are on the truck body; name them in body_anchors or '
+                         'with --fixed-anchors, e.g. turret,cab)')
     indices = []
     for item in (part.strip() for part in text.split(',')):
         if item in names:
