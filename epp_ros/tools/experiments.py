@@ -436,6 +436,8 @@ class TruthPlaneCEPP:
         """Solve a frame from the cold-start guess in the true plane; return the joints."""
         base = self.model.base
         guess = cold_start_guess(self.model, ranges)
+        if guess is None:           # no tag located: a straight boom in the plane
+            guess = self.model.forward_kinematics(self.slew, np.zeros(self.model.n_sections))
         prior = from_plane(to_plane(guess, base, self.slew), base, self.slew)
         joints, info = self.solver.solve(Measurements.ranges_only(ranges), prior, warm=False)
         self.slews.append(info['slew'])
