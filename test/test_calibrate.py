@@ -24,12 +24,12 @@ FIXED = (0, 5)
 OUTRIGGERS = (1, 2, 3, 4)
 
 
-def recording(seed, sigma, seconds, motion=None):
+def recording(seed, sigma, seconds, motion=None, **others):
     """Return the model, the simulator (the truth) and the ranges (N, p, m) of a run."""
     model = truck_pump()
     rng = np.random.default_rng(seed)
     effects = FieldEffects(sigma=sigma, tag_offset=0.15, anchor_offset=0.15, anchor_shift=0.3,
-                           moving_anchors=OUTRIGGERS)
+                           moving_anchors=OUTRIGGERS, **others)
     simulator = FieldSimulator(model, effects, rng)
     motion = WorkingMotion(model, rng) if motion is None else motion
     frames = [simulator.frame(motion, 0.1 * index) for index in range(int(seconds * 10))]
@@ -217,9 +217,63 @@ def test_measurements_and_estimators_see_offset_corrected_ranges():
     ({'fixed_anchors': (0, 0)}, 'fixed_anchors'),
     ({'fixed_anchors': 'turret'}, 'fixed_anchors'),
     ({'ranges': np.full((3, 5, 6), np.nan)}, 'no frame'),
+    ({'stamps': [0.0, 0.1]}, r'stamps must have shape \(3,\)'),
+    ({'stamps': [0.0, np.nan, 0.2]}, 'stamps must be finite'),
+    ({'stamps': [0.0, 0.2, 0.1]}, 'in time order'),
+    ({'stamps': 'now'}, 'stamps must be a numeric array'),
+    ({'nlos_duration': -1.0}, 'nlos_duration'),
 ])
 def test_bad_recordings_are_refused(kwargs, message):
     model = truck_pump()
     args = {'ranges': np.full((3, 5, 6), 10.0), **kwargs}
     with pytest.raises(ValueError, match=message):
         calibrate(model, **args)
+
+
+def test_links_blocked_for_seconds_are_set_aside_and_the_errors_stay_within_the_stds():
+    """Persistent NLOS: a fifth of the links blocked, 3 s at a time; the noise learned."""
+    scores = []
+    for seed in (20, 21):
+        model, simulator, ranges, frames = recording(seed, 0.1, 30.0, nlos_fraction=0.2,
+                                                     nlos_duration=3.0)
+        stamps = np.array([frame.stamp for frame in frames])
+        result = calibrate(model, ranges, stamps=stamps, fixed_anchors=FIXED,
+                           anchor_ranges=anchor_rounds(simulator, 30, seed), learn_noise=True)
+        assert 1.0 <= result.nlos_duration <= 10.0      # seconds: the grid's nearest
+        blocked = np.array([frame.nlos for frame in frames])
+        excess = ranges - np.array([result.model.measured_ranges(frame.joints)
+                                    for frame in frames])
+        small = blocked & (excess < 0.3) & result.frames_used[:, None, None]
+        assert result.nlos[small].mean() > 0.7      # found from their blocked neighbours
+        truth = np.r_[simulator.true_anchors[list(OUTRIGGERS)].ravel(),
+                      simulator.tag_offsets, simulator.anchor_offsets]
+        fitted = np.r_[result.anchors[list(OUTRIGGERS)].ravel(), result.tag_offsets,
+                       result.anchor_offsets]
+        scores.append((fitted - truth) / np.sqrt(np.diag(result.covariance)))
+        alone = calibrate(model, ranges, stamps=stamps, fixed_anchors=FIXED,
+                          anchor_ranges=anchor_rounds(simulator, 30, seed), learn_noise=True,
+                          nlos_duration=0.0)
+        assert alone.nlos_duration == 0.0 and alone.nlos[small].mean() < 0.5
+    scores = np.concatenate(scores)
+    assert np.abs(scores).max() < 4.0
+    assert 0.5 < np.sqrt(np.mean(scores ** 2)) < 1.6
+
+
+def test_a_gap_in_the_recording_with_the_boom_parked_elsewhere_after_it():
+    model = truck_pump()
+    effects = FieldEffects(sigma=0.05, tag_offset=0.15, anchor_offset=0.15, anchor_shift=0.3,
+                           moving_anchors=OUTRIGGERS)
+    simulator = FieldSimulator(model, effects, np.random.default_rng(5))
+    working = WorkingMotion(model, np.random.default_rng(6))
+    parked = StillMotion(model, 2.5, np.radians([55.0, 30.0, 5.0, -20.0, -45.0]))
+    frames = ([simulator.frame(working, 0.1 * index) for index in range(150)]
+              + [simulator.frame(parked, 100.0 + 0.1 * index) for index in range(30)])
+    ranges = np.array([frame.ranges for frame in frames])
+    stamps = np.array([frame.stamp for frame in frames])
+    result = calibrate(model, ranges, stamps=stamps, fixed_anchors=FIXED)
+    assert result.frames_used.all()
+    fitted = np.array([result.model.forward_kinematics(psi[0], psi[1:])
+                       for psi in result.postures])
+    truth = np.array([frame.joints for frame in frames])
+    assert np.linalg.norm(fitted - truth, axis=-1).max() < 1.0
+    assert np.abs(result.anchors - simulator.true_anchors).max() < 0.1

@@ -68,7 +68,9 @@ from dataclasses import dataclass, field, replace
 import time
 
 import numpy as np
+from scipy.special import expit
 
+from .blockage import BlockageChain
 from .chain import angles_from_joints, ChainMethod, SearchExhausted
 from .measurements import Measurements, Residuals
 from .model import ANCHOR_SEPARATION
@@ -93,6 +95,10 @@ SELECTION_ITERATIONS = 30
 #: Condition number (of the shared parameters' information, normalised to unit diagonal)
 #: above which a recording is reported as poorly exciting, whatever its length.
 CONDITION_LIMIT = 1e4
+
+#: Largest change of a range's NLOS prior (from its link's other frames) below which the
+#: joint fit is not repeated for it.
+PRIOR_CHANGE = 0.05
 
 
 @dataclass
@@ -139,6 +145,9 @@ class CalibrationResult:
     #: the tag-anchor range noise fitted under (``core.noise_learning.RangeNoiseEstimate``):
     #: as given, or learned (``learn_noise``)
     range_noise: object = None
+    #: how long a blocked link stays blocked (seconds; frame periods without stamps), as
+    #: given or learned; 0: every frame judged on its own
+    nlos_duration: float = 0.0
 
     @property
     def success(self):
@@ -238,9 +247,40 @@ class _Problem:
         self.sigma = np.hstack([links, np.full((len(self.measured), self.near.size),
                                                settings.tag_sigma)])      # (N, rows)
         self.mixture = NlosMixture(settings.nlos_fraction, settings.nlos_gamma)
+        self.blocked_prior = None       # (N, rows), or the mixture's fraction throughout
+        self.blocked = None             # (N, rows) NLOS probabilities once judged
         self._losses = {}
         if self.pairs is not None:
             self.pairs.bind(self.mixture)
+
+    def located(self):
+        """
+        Return whether each frame's ranges locate every tag but the tip's on its own (N,).
+
+        With a tag between others unheard, the two sections about it have two solutions
+        (an elbow either way) that merge as the elbow straightens: such a frame says
+        little about the shared parameters and makes the joint fit crawl.
+        """
+        counts = self.mask[:, :self.n_links].reshape(-1, self.p, self.m).sum(axis=2)
+        return np.all(counts[:, :-1] >= 3, axis=1) & (counts.sum(axis=1) >= self.p + 1)
+
+    def prior(self, frames):
+        """Return each range's prior NLOS probability (n, rows) in ``frames``."""
+        if self.blocked_prior is None:
+            return np.full((frames.size, self.measured.shape[1]), self.mixture.fraction)
+        return self.blocked_prior[frames]
+
+    def set_prior(self, frames, prior):
+        """Fit the ranges of ``frames`` under their own NLOS priors (n, rows) from now on."""
+        if self.blocked_prior is None:
+            self.blocked_prior = np.full(self.measured.shape, self.mixture.fraction)
+        self.blocked_prior[frames] = prior
+        self._losses = {}
+
+    def log_likelihood_ratio(self, scaled, frames):
+        """Return log p(range | NLOS) / p(range | clear) (n, rows), 0 where not measured."""
+        ratio = self.mixture.bind(self.sigma[frames]).log_likelihood_ratio(-scaled)
+        return np.where(self.mask[frames], ratio, 0.0)
 
     def loss(self, frames):
         """Return the NLOS loss bound to the sigmas of ``frames`` (cached: fits reuse them)."""
@@ -248,7 +288,8 @@ class _Problem:
         if key not in self._losses:
             if len(self._losses) > 8:
                 self._losses.clear()
-            self._losses[key] = self.mixture.bind(self.sigma[frames])
+            prior = None if self.blocked_prior is None else self.blocked_prior[frames]
+            self._losses[key] = self.mixture.bind(self.sigma[frames], prior)
         return self._losses[key]
 
     def _configured(self, split_measured):
@@ -354,15 +395,39 @@ class _Problem:
         return (scaled, angle * weight[..., None],
                 (shared * weight[..., None]) @ self.basis)
 
-    def robust(self, scaled, mask, frames):
+    def robust(self, scaled, mask, frames, judged=True):
         """
-        Return the NLOS-mixture cost (n,), its slope, IRLS weights and NLOS probabilities.
+        Return the robust cost (n,), its slope, IRLS weights and NLOS probabilities.
 
-        Ranges follow the chain's mixture on their excess ``-scaled``; the weights are the
-        chain's (``ChainMethod.loss``).
+        Once the ranges are judged (:meth:`judge`), and with ``judged``: least squares with
+        each range weighted by its probability of being clear. Otherwise the NLOS mixture
+        on the excess ``-scaled``, with the chain's weights (``ChainMethod.loss``).
         """
+        if judged and self.blocked is not None:
+            blocked = self.blocked[frames]
+            weights = np.where(mask, 1.0 - blocked, 0.0)
+            return (0.5 * np.sum(weights * scaled ** 2, axis=1), weights * scaled, weights,
+                    np.where(mask, blocked, 0.0))
         cost, slope, weights, nlos = irls(self.loss(frames), scaled, mask)
         return cost.sum(axis=1), slope, weights, nlos
+
+    def judge(self, frames, prior, log_ratio):
+        """
+        Set the ranges of ``frames`` aside by their probability of being NLOS from now on.
+
+        ``prior``, ``log_ratio`` (n, rows): each range's NLOS prior (from its link's other
+        frames) and likelihood ratio (:meth:`log_likelihood_ratio`). Returns the largest
+        change of a range's NLOS probability.
+        """
+        with np.errstate(divide='ignore'):
+            logit = np.log(prior) - np.log1p(-prior) + log_ratio
+        blocked = np.where(self.mask[frames], expit(logit), 0.0)
+        before = np.zeros_like(blocked) if self.blocked is None else self.blocked[frames]
+        if self.blocked is None:
+            self.blocked = np.zeros(self.measured.shape)
+        self.blocked[frames] = blocked
+        self.set_prior(frames, prior)
+        return float(np.max(np.abs(blocked - before), initial=0.0))
 
     def anchor_terms(self, q):
         """
@@ -460,10 +525,9 @@ def _least_squares(problem, psi, q, frames, max_iter, tol):
     return psi, q, cost, iterations, converged
 
 
-def _solve(chain, model, ranges, tag_ranges, frame, prior, warm):
+def _solve(chain, model, data, frame, prior, warm):
     """Return chain's (joints, info) of one frame of the recording, None when unsolved."""
-    measurements, _ = Measurements.clean(
-        model, ranges[frame], None if tag_ranges is None else tag_ranges[frame])
+    measurements, _ = data.measurements(model, frame)
     if not chain.enough_information(measurements):
         return None
     for _ in range(6):          # an exhausted search goes on where it stopped
@@ -474,35 +538,36 @@ def _solve(chain, model, ranges, tag_ranges, frame, prior, warm):
     return None
 
 
-def _propagate(chain, model, ranges, tag_ranges, frames, first):
+def _propagate(chain, model, data, frames, first):
     """
     Return the angles (n, p + 1) of ``frames`` by chain, each warm from the last.
 
-    ``first`` (p + 1,): the first frame's starting angles; NaN rows: unsolved.
+    ``first`` (p + 1,): the first frame's starting angles; NaN rows: unsolved. Across a
+    gap in time too: chain searches when its warm start fits badly, and a cold start with
+    a model still off can take a wrong fold that fits it better.
     """
     psi = np.full((frames.size, model.n_sections + 1), np.nan)
     previous = model.forward_kinematics(first[0], first[1:])
     for index, frame in enumerate(frames):
-        solved = _solve(chain, model, ranges, tag_ranges, frame, previous, True)
+        solved = _solve(chain, model, data, frame, previous, True)
         if solved is not None:
             previous = solved[0]
             psi[index] = np.r_[solved[1]['slew'], solved[1]['pitches']]
     return psi
 
 
-def _hypotheses(chain, model, ranges, tag_ranges, frame, most):
+def _hypotheses(chain, model, data, frame, most):
     """
     Return distinct postures (p + 1,) that fit the frame about as well, best first.
 
     A configuration that is off can make a wrong fold fit a frame best, and the warm
     start then follows it through the recording: each of these starts one recording.
     """
-    solved = _solve(chain, model, ranges, tag_ranges, frame, None, False)
+    solved = _solve(chain, model, data, frame, None, False)
     if solved is None:
         return []
     joints, info = solved
-    measurements, _ = Measurements.clean(
-        model, ranges[frame], None if tag_ranges is None else tag_ranges[frame])
+    measurements, _ = data.measurements(model, frame)
     residuals = Residuals(model, measurements, chain.noise)
     fits = [(chain.cost(np.r_[info['slew'], info['pitches']], residuals), joints)]
     for other in info['alternatives']:
@@ -518,7 +583,7 @@ def _hypotheses(chain, model, ranges, tag_ranges, frame, most):
     return [np.r_[angles_from_joints(model, candidate)] for _, candidate in kept]
 
 
-def _select(problem, chain, model, ranges, tag_ranges, usable, hypotheses, max_iter, tol):
+def _select(problem, chain, model, data, usable, hypotheses, max_iter, tol):
     """
     Fit every hypothesis on a subsample of the recording; return the best fit's parts.
 
@@ -536,7 +601,7 @@ def _select(problem, chain, model, ranges, tag_ranges, usable, hypotheses, max_i
     subsample = usable[::stride]
     best, rms_before = None, float('nan')
     for number, hypothesis in enumerate(hypotheses):
-        psi = _propagate(chain, model, ranges, tag_ranges, subsample, hypothesis)
+        psi = _propagate(chain, model, data, subsample, hypothesis)
         solved = np.all(np.isfinite(psi), axis=1)
         if not solved.any():
             continue
@@ -635,6 +700,43 @@ def _link_std(problem, covariance):
 
 
 @dataclass(frozen=True)
+class _Recording:
+    """The frames' ranges, and when they were taken."""
+
+    ranges: np.ndarray          #: (N, p, m) metres
+    tag_ranges: np.ndarray      #: (N, p, p) metres, or None
+    times: np.ndarray           #: (N,) the stamps, or the frames' numbers without them
+
+    @classmethod
+    def of(cls, ranges, tag_ranges, stamps):
+        """Return the recording, its frames one period apart without ``stamps``."""
+        times = np.arange(len(ranges), dtype=float) if stamps is None else stamps
+        return cls(ranges, tag_ranges, times)
+
+    def measurements(self, model, frame):
+        """Return ``Measurements.clean`` of a frame."""
+        return Measurements.clean(model, self.ranges[frame],
+                                  None if self.tag_ranges is None else self.tag_ranges[frame])
+
+
+def _stamps(values, count):
+    """Return the stamps as floats (count,), None for None; in time order or ValueError."""
+    if values is None:
+        return None
+    try:
+        stamps = np.array(values, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'stamps must be a numeric array of shape ({count},)') from exc
+    if stamps.shape != (count,):
+        raise ValueError(f'stamps must have shape ({count},), got {stamps.shape}')
+    if not np.all(np.isfinite(stamps)):
+        raise ValueError('stamps must be finite')
+    if np.any(np.diff(stamps) < 0):
+        raise ValueError('stamps must be in time order: sort the frames by their stamps')
+    return stamps
+
+
+@dataclass(frozen=True)
 class _Settings:
     """What every stage of :func:`calibrate` needs to know besides the data: the noise."""
 
@@ -645,6 +747,7 @@ class _Settings:
     nlos_gamma: float
     max_iter: int
     tol: float
+    nlos_duration: float = None     #: in the stamps' unit; None: learned
 
     def chain(self, model):
         """Return the chain estimator that starts (or restarts) the frames' angles."""
@@ -706,8 +809,7 @@ def _start(problem, data, start, settings, hypotheses):
     Without ``start``: chain from the best of the first frame's ``hypotheses`` (fitted on a
     subsample with the configured model), then through the recording warm-started.
     """
-    ranges, tag_ranges = data
-    count, p, m = ranges.shape
+    count, p, m = data.ranges.shape
     model = problem.model
     q = np.zeros(problem.basis.shape[1])
     enough = problem.mask[:, :p * m].sum(axis=1) >= p + 1
@@ -720,23 +822,22 @@ def _start(problem, data, start, settings, hypotheses):
     chain = settings.chain(model)
     usable, starts = np.flatnonzero(enough), []
     for frame in usable[:10]:       # the first frame chain can solve
-        starts = _hypotheses(chain, model, ranges, tag_ranges, frame, hypotheses)
+        starts = _hypotheses(chain, model, data, frame, hypotheses)
         if starts:
             usable = usable[usable >= frame]
             break
-    first, q, rms_before = _select(problem, chain, model, ranges, tag_ranges, usable,
-                                   starts, settings.max_iter, settings.tol)
+    first, q, rms_before = _select(problem, chain, model, data, usable, starts,
+                                   settings.max_iter, settings.tol)
     started = problem.calibrated(q)
     psi_all = np.full((count, p + 1), np.nan)
-    psi_all[usable] = _propagate(settings.chain(started), started, ranges, tag_ranges,
-                                 usable, first)
+    psi_all[usable] = _propagate(settings.chain(started), started, data, usable, first)
     return psi_all, q, rms_before
 
 
 def _frame_costs(problem, psi, q, frames):
     """Return each frame's robust cost (n,) at ``psi`` (n, p + 1) and ``q``."""
     scaled = problem.evaluate(psi, problem.x0 + problem.basis @ q, frames, jacobian=False)[0]
-    return problem.robust(scaled, problem.mask[frames], frames)[0]
+    return problem.robust(scaled, problem.mask[frames], frames, judged=False)[0]
 
 
 def _lost_frames(problem, psi, q, frames):
@@ -760,15 +861,17 @@ def _restarted(problem, data, psi, q, frames, settings, lost):
     a silent tag, is kept by the warm start until the model is right); each frame keeps
     the lowest cost of the three.
     """
-    ranges, tag_ranges = data
-    calibrated = problem.calibrated(q)
+    try:
+        calibrated = problem.calibrated(q)
+    except ValueError:      # values no pump has: left to the verdict
+        return psi, 0
     chain = settings.chain(calibrated)
     cold = psi.copy()
     for index in lost:
-        solved = _solve(chain, calibrated, ranges, tag_ranges, frames[index], None, False)
+        solved = _solve(chain, calibrated, data, frames[index], None, False)
         if solved is not None:
             cold[index] = np.r_[solved[1]['slew'], solved[1]['pitches']]
-    warm = _propagate(chain, calibrated, ranges, tag_ranges, frames, psi[0])
+    warm = _propagate(chain, calibrated, data, frames, psi[0])
     warm = np.where(np.isfinite(warm), warm, psi)
     costs = np.stack([_frame_costs(problem, candidate, q, frames)
                       for candidate in (psi, cold, warm)])
@@ -777,26 +880,49 @@ def _restarted(problem, data, psi, q, frames, settings, lost):
     return chosen, int(np.count_nonzero(best))
 
 
+def _blockage(problem, data, psi, q, frames, settings):
+    """
+    Set each range's NLOS prior from its link's other frames (``core.blockage``).
+
+    Returns the chain of the links' NLOS states (None: frames taken as independent) and
+    the largest change of a prior.
+    """
+    if problem.mixture.fraction == 0.0:
+        return None, 0.0
+    scaled = problem.evaluate(psi, problem.x0 + problem.basis @ q, frames, jacobian=False)[0]
+    log_ratio = problem.log_likelihood_ratio(scaled, frames)
+    elapsed = np.diff(data.times[frames])
+    if settings.nlos_duration is None:
+        chain = BlockageChain.learn(problem.mixture.fraction, log_ratio, elapsed)
+    else:
+        chain = BlockageChain(problem.mixture.fraction, settings.nlos_duration)
+    return chain, problem.judge(frames, chain.priors(log_ratio, elapsed), log_ratio)
+
+
 def _joint_fit(problem, data, psi, q, frames, settings, refits):
     """
-    Return the joint fit's angles, q, iterations and convergence.
+    Return the joint fit's angles, q, iterations, convergence and the links' NLOS chain.
 
-    After each fit, chain with the calibrated model restarts the frames
-    (:func:`_restarted`: a chain start at a wrong fold) and, while that fits any better,
-    the fit is repeated, at most ``refits`` times.
+    Before each fit the ranges are judged (:func:`_blockage`: each range's probability of
+    being NLOS, given its link's other frames too, since blockages persist) and set aside
+    by it; after each, chain with the calibrated model restarts the frames
+    (:func:`_restarted`: a chain start at a wrong fold) and, while either changes
+    anything, the fit is repeated, at most ``refits`` times.
     """
     total = 0
+    blockage, _ = _blockage(problem, data, psi, q, frames, settings)
     for round_ in range(refits + 1):
         psi, q, _, iterations, converged = _least_squares(problem, psi, q, frames,
                                                           settings.max_iter, settings.tol)
         total += iterations
         if round_ == refits:
             break
+        blockage, change = _blockage(problem, data, psi, q, frames, settings)
         lost = _lost_frames(problem, psi, q, frames)
         psi, changed = _restarted(problem, data, psi, q, frames, settings, lost)
-        if changed == 0:
+        if changed == 0 and change < PRIOR_CHANGE:
             break
-    return psi, q, total, converged
+    return psi, q, total, converged, blockage
 
 
 def _uncertainty(problem, psi, q, frames):
@@ -850,11 +976,12 @@ def _status(wandered, converged, poorly, advice, max_iter, frames, rms_before, r
                   f'{rms_after:.3g} m')
 
 
-def calibrate(model, ranges, *, tag_ranges=None, anchor_ranges=None, fixed_anchors=(0,),
-              sigma=0.1, eta=0.0, tag_sigma=None, anchor_sigma=None, prior_sigma=0.5,
-              nlos_fraction=0.1, nlos_gamma=1.0, learn_noise=False, start=None,
-              max_iter=100, tol=1e-10, refits=2, hypotheses=4,
-              anchor_tolerance=ANCHOR_TOLERANCE, offset_tolerance=OFFSET_TOLERANCE):
+def calibrate(model, ranges, *, stamps=None, tag_ranges=None, anchor_ranges=None,
+              fixed_anchors=(0,), sigma=0.1, eta=0.0, tag_sigma=None, anchor_sigma=None,
+              prior_sigma=0.5, nlos_fraction=0.1, nlos_gamma=1.0, nlos_duration=None,
+              learn_noise=False, start=None, max_iter=100, tol=1e-10, refits=3,
+              hypotheses=4, anchor_tolerance=ANCHOR_TOLERANCE,
+              offset_tolerance=OFFSET_TOLERANCE):
     """
     Calibrate the free anchors' positions and the device range offsets from a recording.
 
@@ -867,6 +994,10 @@ def calibrate(model, ranges, *, tag_ranges=None, anchor_ranges=None, fixed_ancho
         Tag-anchor ranges of each frame as the modules report them, metres; NaN (or any
         non-finite or negative value) where missing. The boom should move: a slew sweep
         and some luffing locate the anchors.
+    stamps : array_like, shape (N,), optional
+        When each frame was taken, seconds, in time order (ValueError otherwise); None:
+        frames one period apart. How long a blocked link stays blocked is reckoned in them
+        (across a gap, a link's states are independent).
     tag_ranges : array_like, shape (N, p, p), optional
         Tag-tag ranges, metres, NaN where missing; they also split the link offsets
         between tags and anchors (the gauge, see the module's description).
@@ -891,6 +1022,11 @@ def calibrate(model, ranges, *, tag_ranges=None, anchor_ranges=None, fixed_ancho
     nlos_fraction, nlos_gamma : float
         The NLOS mixture (prior blocked fraction, mean excess in metres) the ranges are
         fitted under, as the chain estimator's; ``nlos_fraction=0``: plain least squares.
+    nlos_duration : float, optional
+        How long a blocked link stays blocked on average, seconds (frame periods without
+        ``stamps``): each range is judged under the NLOS probability its link's other
+        frames give it (``core.blockage``). None: learned from the recording (the most
+        likely of ``core.blockage.DURATIONS``); 0: every frame on its own.
     learn_noise : bool
         After the joint fit, learn the tag-anchor range noise (``sigma``, ``eta`` and the
         NLOS mixture) from its residuals (``core.noise_learning``) and fit again under it:
@@ -932,6 +1068,9 @@ def calibrate(model, ranges, *, tag_ranges=None, anchor_ranges=None, fixed_ancho
     p, m = model.n_sections, model.n_anchors
     count = len(ranges) if np.ndim(ranges) == 3 else 0
     ranges = _finite_ranges(ranges, (count, p, m), 'ranges')
+    stamps = _stamps(stamps, count)
+    if nlos_duration is not None and not float(nlos_duration) >= 0.0:
+        raise ValueError(f'nlos_duration must be >= 0, got {nlos_duration}')
     if tag_ranges is not None:
         tag_ranges = _finite_ranges(tag_ranges, (count, p, p), 'tag_ranges')
         tag_ranges[:, np.arange(p), np.arange(p)] = np.nan
@@ -939,27 +1078,29 @@ def calibrate(model, ranges, *, tag_ranges=None, anchor_ranges=None, fixed_ancho
     tag_sigma = sigma if tag_sigma is None else tag_sigma
     anchor_sigma = sigma if anchor_sigma is None else anchor_sigma
     settings = _Settings(float(sigma), float(eta), float(tag_sigma), float(nlos_fraction),
-                         float(nlos_gamma), max_iter, tol)
+                         float(nlos_gamma), max_iter, tol,
+                         None if nlos_duration is None else float(nlos_duration))
     pairs, survey = _survey(model, anchor_ranges, fixed, float(anchor_sigma), settings,
                             prior_sigma)
     problem = _Problem(model, ranges, tag_ranges, fixed, settings, pairs, survey)
-    data = (ranges, tag_ranges)
+    data = _Recording.of(ranges, tag_ranges, stamps)
     psi_all, q, rms_before = _start(problem, data, start, settings, hypotheses)
-    enough = problem.mask[:, :p * m].sum(axis=1) >= p + 1
-    frames = np.flatnonzero(np.all(np.isfinite(psi_all), axis=1) & enough)
+    frames = np.flatnonzero(np.all(np.isfinite(psi_all), axis=1) & problem.located())
     if frames.size == 0:
         raise ValueError('no frame of the recording could be solved: nothing to calibrate')
-    psi, q, iterations, converged = _joint_fit(problem, data, psi_all[frames], q, frames,
-                                               settings, refits)
+    psi, q, iterations, converged, blockage = _joint_fit(problem, data, psi_all[frames], q,
+                                                         frames, settings, refits)
     if learn_noise:
         settings = _learned_noise(problem, psi, q, frames, settings)
         problem.set_noise(settings)
-        psi, q, more, converged = _joint_fit(problem, data, psi, q, frames, settings, refits)
+        psi, q, more, converged, blockage = _joint_fit(problem, data, psi, q, frames,
+                                                       settings, refits)
         iterations += more
     return _result(problem, psi, q, frames, count, survey, {
         'rms_before': rms_before, 'iterations': iterations, 'converged': converged,
         'began': began, 'max_iter': max_iter, 'anchor_tolerance': anchor_tolerance,
-        'offset_tolerance': offset_tolerance, 'noise': settings.noise()})
+        'offset_tolerance': offset_tolerance, 'noise': settings.noise(),
+        'nlos_duration': 0.0 if blockage is None else blockage.duration})
 
 
 def _result(problem, psi, q, frames, count, survey, facts):
@@ -1000,4 +1141,5 @@ def _result(problem, psi, q, frames, count, survey, facts):
         poorly_determined=poorly, gauge=problem.gauge, converged=facts['converged'],
         iterations=facts['iterations'], frames_used=used, postures=postures, nlos=nlos,
         covariance=covariance, seconds=time.perf_counter() - facts['began'], survey=survey,
-        anchor_rms_after=_anchor_rms(problem, q), range_noise=facts['noise'])
+        anchor_rms_after=_anchor_rms(problem, q), range_noise=facts['noise'],
+        nlos_duration=facts['nlos_duration'])

@@ -38,6 +38,9 @@ __all__ = ['NlosMixture', 'LinkLoss']
 
 _HALF_LOG_2PI = 0.5 * np.log(2.0 * np.pi)
 
+#: Closest a link's own prior NLOS probability comes to 0 or 1.
+PRIOR_LIMIT = 1e-6
+
 
 @dataclass(frozen=True)
 class NlosMixture:
@@ -81,9 +84,15 @@ class NlosMixture:
         s = np.asarray(excess, dtype=float)
         return self.bind(np.broadcast_to(np.asarray(sigma, dtype=float), s.shape))(s)
 
-    def bind(self, sigma):
-        """:meth:`loss` for ranges of fixed sigmas (any shape), its constants computed once."""
-        return LinkLoss(self, sigma)
+    def bind(self, sigma, prior=None):
+        """
+        Return :meth:`loss` for ranges of fixed sigmas (any shape), its constants computed once.
+
+        ``prior``: each range's own prior NLOS probability, shaped like ``sigma``, instead of
+        ``fraction`` (a link's neighbours in time, ``core.blockage``); ignored when
+        ``fraction`` is 0.
+        """
+        return LinkLoss(self, sigma, prior)
 
     def approximate_loss(self, excess, sigma):
         """
@@ -110,16 +119,33 @@ class LinkLoss:
     matters inside an iterative fit where the same links are evaluated many times.
     """
 
-    def __init__(self, mixture, sigma):
+    def __init__(self, mixture, sigma, prior=None):
         self.gaussian = mixture.fraction == 0.0
         if self.gaussian:
             return
         self.inverse_g = np.asarray(sigma, dtype=float) / mixture.gamma
-        self.los_offset = np.log1p(-mixture.fraction)
-        self.blocked_offset = (np.log(mixture.fraction) + _HALF_LOG_2PI
-                               + np.log(self.inverse_g) + 0.5 * self.inverse_g ** 2)
+        if prior is None:
+            prior = mixture.fraction
+        else:   # certainty either way would make the loss flat or the fit blind
+            prior = np.clip(np.asarray(prior, dtype=float), PRIOR_LIMIT, 1.0 - PRIOR_LIMIT)
+        self.los_offset = np.log1p(-prior)
+        self.evidence_offset = (_HALF_LOG_2PI + np.log(self.inverse_g)
+                                + 0.5 * self.inverse_g ** 2)
+        self.blocked_offset = np.log(prior) + self.evidence_offset
         self.zero_cost, self.zero_slope = 0.0, 0.0
         self.zero_cost, self.zero_slope, _ = self(np.zeros_like(self.inverse_g))
+
+    def log_likelihood_ratio(self, excess):
+        """
+        Return log p(excess | NLOS) / p(excess | line of sight), whatever the prior.
+
+        ``excess`` in units of the links' sigmas, shaped like them; 0 for a Gaussian loss.
+        """
+        s = np.asarray(excess, dtype=float)
+        if self.gaussian:
+            return np.zeros_like(s)
+        return (self.evidence_offset - self.inverse_g * s + log_ndtr(s - self.inverse_g)
+                + 0.5 * s ** 2)
 
     def __call__(self, excess):
         """(cost, slope, nlos) of excesses shaped like the sigmas; see :meth:`NlosMixture.loss`."""

@@ -160,6 +160,10 @@ def noise_settings(document):
                                    f'{"> 0" if low is not None else "in [0, 1)"}, got '
                                    f'{section.get(name)!r}')
         settings[keyword] = value
+    learn = section.get('learn_noise', True)
+    if not isinstance(learn, bool):
+        raise CalibrationError(f'learn_noise: must be true or false, got {learn!r}')
+    settings['learn_noise'] = learn     # as the estimator: nobody knows a site's noise
     return settings
 
 
@@ -482,8 +486,7 @@ def run(args, out=None):
     import numpy as np
     import yaml
 
-    from epp_ros.config import ConfigError, default_config_path, load_pump_config
-    from epp_ros.core import calibrate
+    from epp_ros.config import default_config_path, load_pump_config
     progress = Progress()
     config_path = Path(args.config) if args.config else default_config_path()
     config = load_pump_config(config_path)
@@ -492,7 +495,8 @@ def run(args, out=None):
     fixed, note = fixed_anchor_indices(config, args.fixed_anchors)
     if args.out is not None and Path(args.out).is_dir():
         raise CalibrationError(f'--out {args.out} is a directory')
-    ranges, tag_ranges, _, damage = read_ranges(args.bag, config, args.salvage, progress)
+    ranges, tag_ranges, stamps, damage = read_ranges(args.bag, config, args.salvage,
+                                                     progress)
     if damage:
         print(f'epp_calibrate: salvaged {args.bag}: {damage}', file=sys.stderr)
     survey, survey_line = read_survey(args.bag, config, args.salvage, args.no_survey)
@@ -506,40 +510,10 @@ def run(args, out=None):
     print(f'{args.bag}: {len(ranges)} frames of /uwb/ranges ({usable} usable), '
           f'{p} tags, {len(config.anchor_names)} anchors; {note}', file=out)
     progress.say(f'calibrating {usable} frames ...')
-    has_tag_ranges = bool(np.isfinite(tag_ranges).any())
-    # Passed only when there are some: a bag without them calibrates as it always did.
-    surveyed = {} if survey is None else {'anchor_ranges': survey}
-    try:
-        result = calibrate(before, ranges, tag_ranges=tag_ranges if has_tag_ranges else None,
-                           fixed_anchors=fixed, **surveyed, **settings)
-    except ValueError as exc:
-        text = str(exc).splitlines()[0]
-        text = text if len(text) <= 120 else text[:117] + '...'
-        hint = '' if survey is None else ' (or try --no-survey)'
-        raise CalibrationError(f'{args.bag}: cannot calibrate ({text}): the recording hardly '
-                               'determines the parameters; record the boom slewing and '
-                               f'luffing through its range{hint}; nothing written') from None
+    result = _calibration(args, before, (ranges, tag_ranges, stamps, survey), fixed, settings)
     for line in report_lines(config, before, result, fixed, survey_line):
         print(line, file=out)
-    written = None
-    if args.out is not None and (result.success or args.force):
-        try:
-            write_config(args.out, source_text, result)
-        except ConfigError as exc:
-            raise CalibrationError(f'the calibrated config does not validate ({exc}); '
-                                   'nothing written') from None
-        except OSError as exc:
-            raise CalibrationError(f'cannot write {args.out}: {exc}') from None
-        written = str(args.out)
-        print(f'wrote {args.out}: start the nodes with --params-file {args.out}', file=out)
-        if not result.success:
-            print(f'epp_calibrate: warning: --force wrote {args.out} although the recording '
-                  f'{result.status.replace("_", " ")}: its poorly determined parameters '
-                  f'({", ".join(result.poorly_determined) or "all"}) may be further off than '
-                  'if left as configured', file=sys.stderr)
-    elif args.out is not None:
-        print(f'nothing written to {args.out}: the verdict is {result.status} (--force '
-              'writes it anyway, at your risk)', file=out)
+    written = _written(args, source_text, result, out)
     if args.plot:
         plot(args.plot, config, before, result, ranges, fixed)
         print(f'plotted {args.plot}', file=out)
@@ -551,6 +525,57 @@ def run(args, out=None):
               file=sys.stderr)
         return 0 if written else 2
     return 0
+
+
+def _calibration(args, before, recording, fixed, settings):
+    """
+    Return ``core.calibrate``'s result on the recording, or raise CalibrationError.
+
+    ``recording``: the ranges, tag-tag ranges, stamps and anchor-anchor rounds (None).
+    """
+    import numpy as np
+
+    from epp_ros.core import calibrate
+    ranges, tag_ranges, stamps, survey = recording
+    # Passed only when there are some: a bag without them calibrates as it always did.
+    optional = {} if survey is None else {'anchor_ranges': survey}
+    if np.isfinite(tag_ranges).any():
+        optional['tag_ranges'] = tag_ranges
+    try:
+        return calibrate(before, ranges, stamps=stamps, fixed_anchors=fixed, **optional,
+                         **settings)
+    except ValueError as exc:
+        text = str(exc).splitlines()[0]
+        text = text if len(text) <= 120 else text[:117] + '...'
+        hint = '' if survey is None else ' (or try --no-survey)'
+        raise CalibrationError(f'{args.bag}: cannot calibrate ({text}): the recording hardly '
+                               'determines the parameters; record the boom slewing and '
+                               f'luffing through its range{hint}; nothing written') from None
+
+
+def _written(args, source_text, result, out):
+    """Write the calibrated config when the verdict (or ``--force``) allows; its path."""
+    from epp_ros.config import ConfigError
+    if args.out is None:
+        return None
+    if not (result.success or args.force):
+        print(f'nothing written to {args.out}: the verdict is {result.status} (--force '
+              'writes it anyway, at your risk)', file=out)
+        return None
+    try:
+        write_config(args.out, source_text, result)
+    except ConfigError as exc:
+        raise CalibrationError(f'the calibrated config does not validate ({exc}); '
+                               'nothing written') from None
+    except OSError as exc:
+        raise CalibrationError(f'cannot write {args.out}: {exc}') from None
+    print(f'wrote {args.out}: start the nodes with --params-file {args.out}', file=out)
+    if not result.success:
+        print(f'epp_calibrate: warning: --force wrote {args.out} although the recording '
+              f'{result.status.replace("_", " ")}: its poorly determined parameters '
+              f'({", ".join(result.poorly_determined) or "all"}) may be further off than '
+              'if left as configured', file=sys.stderr)
+    return str(args.out)
 
 
 def main(argv=None):
