@@ -96,9 +96,14 @@ SELECTION_ITERATIONS = 30
 #: above which a recording is reported as poorly exciting, whatever its length.
 CONDITION_LIMIT = 1e4
 
-#: Largest change of a range's NLOS prior (from its link's other frames) below which the
-#: joint fit is not repeated for it.
-PRIOR_CHANGE = 0.05
+#: Fraction of the ranges judged otherwise (their NLOS probability moved by more than a
+#: half) below which the joint fit is not repeated for them.
+JUDGED_OTHERWISE = 1e-3
+
+#: Robust cost (units of sigma squared) by which chain's angles must fit a frame better
+#: than the joint fit's to replace them: a fold, not the difference between the fit's
+#: weighting of the ranges and the mixture's.
+RESTART_GAIN = 2.0
 
 
 @dataclass
@@ -416,8 +421,8 @@ class _Problem:
         Set the ranges of ``frames`` aside by their probability of being NLOS from now on.
 
         ``prior``, ``log_ratio`` (n, rows): each range's NLOS prior (from its link's other
-        frames) and likelihood ratio (:meth:`log_likelihood_ratio`). Returns the largest
-        change of a range's NLOS probability.
+        frames) and likelihood ratio (:meth:`log_likelihood_ratio`). Returns the fraction of
+        the measured ranges judged otherwise than before (NLOS probability moved by > 0.5).
         """
         with np.errstate(divide='ignore'):
             logit = np.log(prior) - np.log1p(-prior) + log_ratio
@@ -427,7 +432,8 @@ class _Problem:
             self.blocked = np.zeros(self.measured.shape)
         self.blocked[frames] = blocked
         self.set_prior(frames, prior)
-        return float(np.max(np.abs(blocked - before), initial=0.0))
+        mask = self.mask[frames]
+        return float(np.mean(np.abs(blocked - before)[mask] > 0.5)) if mask.any() else 0.0
 
     def anchor_terms(self, q):
         """
@@ -859,7 +865,8 @@ def _restarted(problem, data, psi, q, frames, settings, lost):
     Chain with the calibrated model solves the lost frames from scratch and goes through
     the whole recording again warm-started (a fold taken wrongly at the start, or after
     a silent tag, is kept by the warm start until the model is right); each frame keeps
-    the lowest cost of the three.
+    the lowest cost of the three, its fit's angles unless another is lower by
+    :data:`RESTART_GAIN`.
     """
     try:
         calibrated = problem.calibrated(q)
@@ -875,7 +882,8 @@ def _restarted(problem, data, psi, q, frames, settings, lost):
     warm = np.where(np.isfinite(warm), warm, psi)
     costs = np.stack([_frame_costs(problem, candidate, q, frames)
                       for candidate in (psi, cold, warm)])
-    best = np.argmin(costs - 1e-9 * np.abs(costs[0]), axis=0)     # ties: keep the fit's
+    costs[0] -= RESTART_GAIN        # the fit's own angles but for a clearly better fold
+    best = np.argmin(costs, axis=0)
     chosen = np.choose(best[:, None], (psi, cold, warm))
     return chosen, int(np.count_nonzero(best))
 
@@ -903,14 +911,14 @@ def _joint_fit(problem, data, psi, q, frames, settings, refits):
     """
     Return the joint fit's angles, q, iterations, convergence and the links' NLOS chain.
 
-    Before each fit the ranges are judged (:func:`_blockage`: each range's probability of
-    being NLOS, given its link's other frames too, since blockages persist) and set aside
-    by it; after each, chain with the calibrated model restarts the frames
-    (:func:`_restarted`: a chain start at a wrong fold) and, while either changes
-    anything, the fit is repeated, at most ``refits`` times.
+    The first fit is under the NLOS mixture, each range on its own. After each fit the
+    ranges are judged (:func:`_blockage`: each range's probability of being NLOS, given its
+    link's other frames too, since blockages persist), to be set aside by it in the next
+    fit; chain with the calibrated model restarts the frames (:func:`_restarted`: a chain
+    start at a wrong fold); while either changes anything, the fit is repeated, at most
+    ``refits`` times.
     """
-    total = 0
-    blockage, _ = _blockage(problem, data, psi, q, frames, settings)
+    total, blockage = 0, None
     for round_ in range(refits + 1):
         psi, q, _, iterations, converged = _least_squares(problem, psi, q, frames,
                                                           settings.max_iter, settings.tol)
@@ -920,7 +928,7 @@ def _joint_fit(problem, data, psi, q, frames, settings, refits):
         blockage, change = _blockage(problem, data, psi, q, frames, settings)
         lost = _lost_frames(problem, psi, q, frames)
         psi, changed = _restarted(problem, data, psi, q, frames, settings, lost)
-        if changed == 0 and change < PRIOR_CHANGE:
+        if changed == 0 and change < JUDGED_OTHERWISE:
             break
     return psi, q, total, converged, blockage
 

@@ -38,7 +38,8 @@ import numpy as np
 
 from .model import BoomModel
 
-__all__ = ['XIE3DIM', 'xie3dim', 'truck_pump', 'random_posture', 'RangeNoise', 'AngleNoise',
+__all__ = ['XIE3DIM', 'xie3dim', 'truck_pump', 'TRUCK_BODY_ANCHORS', 'truck_body_anchors',
+           'truck_outriggers', 'random_posture', 'RangeNoise', 'AngleNoise',
            'observe', 'Trajectory', 'working_cycle', 'Motion', 'WorkingMotion', 'StillMotion',
            'JoystickMotion', 'STOP_PROBABILITY', 'MOTIONS', 'make_motion', 'FieldEffects',
            'FIELD_EFFECTS', 'field_effects', 'FieldFrame', 'FieldSimulator', 'simulate_field']
@@ -76,6 +77,22 @@ def xie3dim():
     base = np.array(XIE3DIM['base'])
     lengths = np.linalg.norm(np.diff(np.vstack([base, joints]), axis=0), axis=1)
     return BoomModel(lengths, base, XIE3DIM['anchors']), joints
+
+
+#: :func:`truck_pump`'s anchors on the truck body (the turret, the cab roof, the chassis's
+#: rear): they stay where configured and define the truck frame; the others, on the
+#: outriggers, are set up anew on every site.
+TRUCK_BODY_ANCHORS = (0, 5, 6)
+
+
+def truck_outriggers(model):
+    """Return the indices of :func:`truck_pump`'s outrigger anchors in ``model``."""
+    return tuple(j for j in range(model.n_anchors) if j not in TRUCK_BODY_ANCHORS)
+
+
+def truck_body_anchors(model):
+    """Return the indices of :func:`truck_pump`'s anchors on the truck body in ``model``."""
+    return tuple(j for j in TRUCK_BODY_ANCHORS if j < model.n_anchors)
 
 
 def truck_pump(arm_lengths=(9.0, 7.0, 7.0, 9.0, 9.0), base_height=3.5, n_anchors=6):

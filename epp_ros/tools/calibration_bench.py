@@ -15,11 +15,12 @@
 """
 ``epp_bench calibration``: calibrate from a recording, then track with the calibration.
 
-Each seed simulates the truck pump (``core.simulate.truck_pump``) in four cases (:data:`CASES`):
-tag and anchor range offsets of 0.15 m (standard deviation, per device); the four
-outrigger anchors 0.3 m (per axis) from their configured places; both (the issue's
-calibration case); and both with every other field effect at once (``FIELD_EFFECTS``:
-sigma growing with distance, persistent NLOS, TDMA slots, silent tags). Range noise sigma
+Each seed simulates the truck pump (``core.simulate.truck_pump``) in five cases
+(:data:`CASES`): tag and anchor range offsets of 0.15 m (standard deviation, per device);
+the four outrigger anchors 0.3 m (per axis) from their configured places; both (the
+issue's calibration case); both with a fifth of the links blocked, 3 s at a time
+(``nlos_persistent``); and both with every other field effect at once (sigma growing with
+distance, persistent NLOS, TDMA slots, silent tags). Range noise sigma
 is 0.1 m but where a case says otherwise. Each case records ``seconds`` of a working cycle
 at 10 Hz and, once a second, a round of anchor-anchor ranges (``FieldSimulator.
 anchor_ranges``: ``seconds`` rounds, each direction of each pair), and compares side by
@@ -45,7 +46,8 @@ import time
 
 from epp_ros.core import calibrate, PostureEstimator, survey_anchors
 from epp_ros.core.bounds import crlb
-from epp_ros.core.simulate import (field_effects, FieldEffects, FieldSimulator, truck_pump,
+from epp_ros.core.simulate import (field_effects, FieldEffects, FieldSimulator,
+                                   truck_body_anchors, truck_outriggers, truck_pump,
                                    WorkingMotion)
 import numpy as np
 
@@ -57,8 +59,8 @@ WARM_UP_S = 5.0         #: seconds of the fresh recording not scored
 OFFSET = 0.15           #: m, std of each tag's and anchor's range offset
 SHIFT = 0.3             #: m per axis, std of how far each outrigger anchor is off
 SIGMA = 0.1             #: m, range noise
-FIXED = (0, 5)          #: the turret and the cab (truck_pump's anchor order)
-OUTRIGGERS = (1, 2, 3, 4)
+FIXED = truck_body_anchors(truck_pump())     #: the turret and the cab
+OUTRIGGERS = truck_outriggers(truck_pump())
 METHODS = ('chain', 'track')
 MODELS = ('configured', 'survey', 'calibrated', '+ anchor ranges', 'true')
 #: name: (offsets, outriggers moved, the other field effects at once).
@@ -66,6 +68,7 @@ CASES = {
     'offsets': (True, False, ''),
     'anchors_moved': (False, True, ''),
     'both': (True, True, ''),
+    'nlos': (True, True, 'nlos_persistent'),
     'all': (True, True, 'sigma_distance,nlos_persistent,tdma,dropouts'),
 }
 #: The issue's targets: metres, metres, seconds, and ratios to the clean bound.
@@ -133,13 +136,15 @@ def _calibrations(model, frames, rounds, true_model):
     before and after (NaN but for calibrations).
     """
     ranges = np.array([frame.ranges for frame in frames])
+    stamps = np.array([frame.stamp for frame in frames])
     began = time.perf_counter()
     survey = survey_anchors(model, rounds, fixed_anchors=FIXED, sigma=SIGMA)
     surveyed = model.with_calibration(survey.anchors, survey.anchor_offsets)
     survey_s = time.perf_counter() - began
-    plain = calibrate(model, ranges, fixed_anchors=FIXED, sigma=SIGMA, learn_noise=True)
-    joint = calibrate(model, ranges, fixed_anchors=FIXED, sigma=SIGMA, learn_noise=True,
-                      anchor_ranges=rounds)
+    plain = calibrate(model, ranges, stamps=stamps, fixed_anchors=FIXED, sigma=SIGMA,
+                      learn_noise=True)
+    joint = calibrate(model, ranges, stamps=stamps, fixed_anchors=FIXED, sigma=SIGMA,
+                      learn_noise=True, anchor_ranges=rounds)
     nan = float('nan')
     return {'configured': (model, ('', 0.0, None, nan, nan)),
             'survey': (surveyed, (survey.status, survey_s, None, nan, nan)),
@@ -221,7 +226,7 @@ def _line(row):
     """Return a row of the table; targets marked on the calibrated models only."""
     calibrated = row['model'] in ('calibrated', '+ anchor ranges')
     errors = row['case'] in ('both', 'all') and calibrated
-    ratios = row['case'] != 'both' and calibrated
+    ratios = row['case'] in ('offsets', 'anchors_moved', 'all') and calibrated
     crlb_ = row['link_offset_crlb_m']
     return (f'| {row["seed"]} | {row["case"]} | {row["model"]} | {row["status"] or "-"} | '
             f'{_cell(row["anchor_m"], TARGETS["anchor_m"], scored=errors)} | '
@@ -267,7 +272,8 @@ def markdown(report):
              + ' | '.join(f'{m}, valid frames' for m in METHODS) + ' |',
              '|---|---|---|---|---|---|---|---|' + '---|' * 2 * len(METHODS)]
     lines += [_line(row) for seed_row in report['rows'] for row in seed_row['cases']]
-    lines += ['', f'Cases: offsets {OFFSET:g} m; outriggers {SHIFT:g} m off; both; all (both, '
+    lines += ['', f'Cases: offsets {OFFSET:g} m; outriggers {SHIFT:g} m off; both; nlos (both, '
+              'and a fifth of the links blocked, 3 s at a time); all (both, '
               f'and {CASES["all"][2].replace(",", ", ")}). Both calibrations learn the '
               'range noise (learn_noise). Link offsets, CRLB: the RMS of the standard '
               'deviations the calibration reports, what the recording can give. Valid '

@@ -30,9 +30,11 @@ noise (every link measured, none blocked; ``sigma0 + k r`` per link):
 - cost: track and chain per frame, and the chain's Gauss-Newton against scipy's
   ``least_squares`` on the same fits.
 
-Offsets and moved anchors are calibration's (no target here): they must not diverge.
+Offsets and moved anchors are calibration's (no target here): they must not diverge. The
+moved anchors are the outriggers (``simulate.truck_outriggers``): the turret's and the cab's
+define the truck frame and stay.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import time
 
 from epp_ros.core import PostureEstimator
@@ -40,7 +42,8 @@ from epp_ros.core.bounds import crlb, posterior_crlb
 from epp_ros.core.chain import angles_from_joints, ChainMethod
 from epp_ros.core.measurements import Measurements, Residuals, SensorNoise
 from epp_ros.core.simulate import (field_effects, FieldEffects, JoystickMotion, Motion,
-                                   simulate_field, truck_pump, WorkingMotion, xie3dim)
+                                   simulate_field, truck_outriggers, truck_pump,
+                                   WorkingMotion, xie3dim)
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -117,6 +120,8 @@ def run_case(name, seconds, seed):
     model = truck_pump()
     rng = np.random.default_rng([seed, sum(map(ord, name))])
     effects = field_effects(effects_names) if effects_names else FieldEffects()
+    if effects.moving_anchors is None:      # the body's anchors stay on the body
+        effects = replace(effects, moving_anchors=truck_outriggers(model))
     motion = _motion(motion_name, model, seconds, rng)
     frames = simulate_field(model, motion, seconds, effects, rng, 1.0 / RATE)
     scored = [frame.stamp >= WARM_UP_S for frame in frames]
