@@ -34,7 +34,7 @@ def blocked_links(rng, frames, links, fraction, duration):
 
 
 def excesses(rng, blocked):
-    """Return range excesses (metres): Gaussian, plus an exponential one when blocked."""
+    """Return range excesses in metres: Gaussian, and an exponential excess when blocked."""
     return (rng.normal(0.0, SIGMA, blocked.shape)
             + blocked * rng.exponential(GAMMA, blocked.shape))
 
