@@ -217,6 +217,8 @@ def test_measurements_and_estimators_see_offset_corrected_ranges():
     ({'fixed_anchors': (0, 0)}, 'fixed_anchors'),
     ({'fixed_anchors': 'turret'}, 'fixed_anchors'),
     ({'ranges': np.full((3, 5, 6), np.nan)}, 'no frame'),
+    ({'ranges': np.stack([np.full((5, 6), 10.0)] * 3) * np.r_[1, np.nan, 1, 1, 1][:, None]},
+     'every tag but the tip'),
     ({'stamps': [0.0, 0.1]}, r'stamps must have shape \(3,\)'),
     ({'stamps': [0.0, np.nan, 0.2]}, 'stamps must be finite'),
     ({'stamps': [0.0, 0.2, 0.1]}, 'in time order'),
@@ -277,3 +279,14 @@ def test_a_gap_in_the_recording_with_the_boom_parked_elsewhere_after_it():
     truth = np.array([frame.joints for frame in frames])
     assert np.linalg.norm(fitted - truth, axis=-1).max() < 1.0
     assert np.abs(result.anchors - simulator.true_anchors).max() < 0.1
+
+
+def test_a_tag_silent_at_the_start_and_between_others_leaves_its_frames_out():
+    model, simulator, ranges, _ = recording(0, 0.0, 15.0)
+    ranges[:20, 1] = np.nan         # the second tag silent for the first 2 s
+    ranges[60:65, 2] = np.nan
+    result = calibrate(model, ranges, fixed_anchors=FIXED)
+    assert not result.frames_used[:20].any() and not result.frames_used[60:65].any()
+    assert result.frames_used[20:60].all()
+    np.testing.assert_allclose(result.anchors, simulator.true_anchors, atol=1e-6)
+    np.testing.assert_allclose(result.link_offsets, true_links(simulator), atol=1e-6)

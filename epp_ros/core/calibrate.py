@@ -827,7 +827,8 @@ def _start(problem, data, start, settings, hypotheses):
         return psi_all, q, rms
     chain = settings.chain(model)
     usable, starts = np.flatnonzero(enough), []
-    for frame in usable[:10]:       # the first frame chain can solve
+    # The first located frame chain can solve (a tag may be silent for seconds).
+    for frame in np.flatnonzero(enough & problem.located()):
         starts = _hypotheses(chain, model, data, frame, hypotheses)
         if starts:
             usable = usable[usable >= frame]
@@ -1091,6 +1092,9 @@ def calibrate(model, ranges, *, stamps=None, tag_ranges=None, anchor_ranges=None
     pairs, survey = _survey(model, anchor_ranges, fixed, float(anchor_sigma), settings,
                             prior_sigma)
     problem = _Problem(model, ranges, tag_ranges, fixed, settings, pairs, survey)
+    if not problem.located().any():
+        raise ValueError('no frame in which every tag but the tip has three or more ranges: '
+                         'nothing to calibrate (is a tag dead?)')
     data = _Recording.of(ranges, tag_ranges, stamps)
     psi_all, q, rms_before = _start(problem, data, start, settings, hypotheses)
     frames = np.flatnonzero(np.all(np.isfinite(psi_all), axis=1) & problem.located())
