@@ -27,15 +27,24 @@ angles are eliminated frame by frame (a Schur complement, as in bundle adjustmen
 leaves a small dense system in the shared parameters. Levenberg–Marquardt steps that system
 with the analytic Jacobian (``BoomModel.joint_jacobian``).
 
-Ranges are fitted under the chain estimator's NLOS mixture (``core.nlos``), by iteratively
-reweighted least squares: the maximum-likelihood estimate when some links are blocked. A
-symmetric robust loss (Huber, soft-L1) would not do here: NLOS excesses are one-sided, so
-a symmetric loss leaves part of their mean in every estimated location parameter, and the
-range offsets are exactly location parameters. The noise is the estimators' (sigma growing
-with the range, ``eta``); with ``learn_noise`` it is learned from the first joint fit's
-residuals (``core.noise_learning``) and the fit repeated under it. A mixture far from the
-data's biases the offsets too: a 10 % blocked prior on clean ranges inflates the errors'
-chi-square by about half over 60 s of recording.
+The first fit is under the chain estimator's NLOS mixture (``core.nlos``), by iteratively
+reweighted least squares. A symmetric robust loss (Huber, soft-L1) would not do here: NLOS
+excesses are one-sided, so a symmetric loss leaves part of their mean in every estimated
+location parameter, and the range offsets are exactly location parameters. Then each
+range is judged: its probability of being NLOS, from its own excess under the mixture and
+from its link's other frames (``core.blockage``: blocked links stay blocked for seconds, so
+a small excess amid a blocked stretch is suspect); the next fits weight each range by its
+probability of being clear, and judge again. Judged ranges are set aside rather than fitted
+through the model of their excess: each blocked range would pull the fit by sigma/gamma,
+and the offsets gather those pulls and the undetected small excesses over the recording.
+Frames in which a tag between others is not located (under three ranges) are left out of
+the joint fit: the sections on either side of it have two solutions there.
+
+The noise is the estimators' (sigma growing with the range, ``eta``); with ``learn_noise``
+it is learned from the first joint fit's residuals (``core.noise_learning``) and the fit
+repeated under it. A mixture far from the data's biases the offsets too: a 10 % blocked
+prior on clean ranges inflates the errors' chi-square by about half over 60 s of
+recording.
 
 Each frame's angles start from chain, warm-started through the recording; after each joint
 fit chain goes through it again with the calibrated model (and solves the worst frames from
@@ -258,22 +267,18 @@ class _Problem:
         if self.pairs is not None:
             self.pairs.bind(self.mixture)
 
-    def located(self):
+    def located(self, tip=False):
         """
         Return whether each frame's ranges locate every tag but the tip's on its own (N,).
 
         With a tag between others unheard, the two sections about it have two solutions
         (an elbow either way) that merge as the elbow straightens: such a frame says
-        little about the shared parameters and makes the joint fit crawl.
+        little about the shared parameters and makes the joint fit crawl. ``tip``: the
+        tip's too (an unheard tip leaves its section's angle to chance).
         """
         counts = self.mask[:, :self.n_links].reshape(-1, self.p, self.m).sum(axis=2)
-        return np.all(counts[:, :-1] >= 3, axis=1) & (counts.sum(axis=1) >= self.p + 1)
-
-    def prior(self, frames):
-        """Return each range's prior NLOS probability (n, rows) in ``frames``."""
-        if self.blocked_prior is None:
-            return np.full((frames.size, self.measured.shape[1]), self.mixture.fraction)
-        return self.blocked_prior[frames]
+        tags = counts if tip else counts[:, :-1]
+        return np.all(tags >= 3, axis=1) & (counts.sum(axis=1) >= self.p + 1)
 
     def set_prior(self, frames, prior):
         """Fit the ranges of ``frames`` under their own NLOS priors (n, rows) from now on."""
@@ -827,8 +832,10 @@ def _start(problem, data, start, settings, hypotheses):
         return psi_all, q, rms
     chain = settings.chain(model)
     usable, starts = np.flatnonzero(enough), []
-    # The first located frame chain can solve (a tag may be silent for seconds).
-    for frame in np.flatnonzero(enough & problem.located()):
+    # The first frame with every tag located that chain can solve (a tag may be silent for
+    # seconds, and a start at a wrong fold is followed through the recording).
+    located = problem.located(tip=True)
+    for frame in np.flatnonzero(enough & (located if located.any() else problem.located())):
         starts = _hypotheses(chain, model, data, frame, hypotheses)
         if starts:
             usable = usable[usable >= frame]
@@ -891,10 +898,13 @@ def _restarted(problem, data, psi, q, frames, settings, lost):
 
 def _blockage(problem, data, psi, q, frames, settings):
     """
-    Set each range's NLOS prior from its link's other frames (``core.blockage``).
+    Judge each range: its NLOS probability, its prior from its link's other frames.
 
-    Returns the chain of the links' NLOS states (None: frames taken as independent) and
-    the largest change of a prior.
+    The prior comes from ``core.blockage`` (a blocked link stays blocked), its duration
+    learned unless given.
+
+    Returns the chain of the links' NLOS states (None without NLOS) and the fraction of
+    the ranges judged otherwise than before (``_Problem.judge``).
     """
     if problem.mixture.fraction == 0.0:
         return None, 0.0
