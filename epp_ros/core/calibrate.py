@@ -606,6 +606,8 @@ def _select(problem, chain, model, data, usable, hypotheses, max_iter, tol):
         The shared parameters fitted.
     rms_before : float
         Metres, the range RMS of the chain's own choice with the configured model.
+    fit : tuple
+        The best fit's angles (n, p + 1) and its frames (n,).
 
     """
     stride = max(1, usable.size // SELECTION_FRAMES)
@@ -623,10 +625,11 @@ def _select(problem, chain, model, data, usable, hypotheses, max_iter, tol):
                                             frames, min(max_iter, SELECTION_ITERATIONS), tol)
         score = cost / problem.mask[frames].sum()
         if best is None or score < best[0]:
-            best = (score, psi[0], q)
+            best = (score, psi, q, frames)
     if best is None:
         raise ValueError('no frame of the recording could be solved: nothing to calibrate')
-    return best[1], best[2], rms_before
+    _, psi, q, frames = best
+    return psi[0], q, rms_before, (psi, frames)
 
 
 def _range_rms(problem, psi, x, frames):
@@ -813,12 +816,15 @@ def _survey(model, anchor_ranges, fixed, anchor_sigma, settings, prior_sigma):
     return AnchorPairs(rounds, anchor_sigma, mixture), survey
 
 
-def _start(problem, data, start, settings, hypotheses):
+def _start(problem, data, start, settings, hypotheses, learn_noise):
     """
-    Return every frame's starting angles (N, p + 1) (NaN: unused), q and the RMS before.
+    Return every frame's starting angles (N, p + 1) (NaN: unused), q, RMS before, settings.
 
     Without ``start``: chain from the best of the first frame's ``hypotheses`` (fitted on a
-    subsample with the configured model), then through the recording warm-started.
+    subsample with the configured model), then through the recording warm-started. With
+    ``learn_noise`` the hypotheses are ranked again under the noise learned from the best
+    one's fit: under a noise far from the data's (a tip's ranges three times noisier than
+    told) a wrong fold of a section, with its tag's offset off by a metre, can fit best.
     """
     count, p, m = data.ranges.shape
     model = problem.model
@@ -829,7 +835,7 @@ def _start(problem, data, start, settings, hypotheses):
         frames = np.flatnonzero(np.all(np.isfinite(psi_all), axis=1) & enough)
         rms = _range_rms(problem, psi_all[frames], problem.x_given, frames) \
             if frames.size else float('nan')
-        return psi_all, q, rms
+        return psi_all, q, rms, settings
     chain = settings.chain(model)
     usable, starts = np.flatnonzero(enough), []
     # The first frame with every tag located that chain can solve (a tag may be silent for
@@ -840,12 +846,17 @@ def _start(problem, data, start, settings, hypotheses):
         if starts:
             usable = usable[usable >= frame]
             break
-    first, q, rms_before = _select(problem, chain, model, data, usable, starts,
-                                   settings.max_iter, settings.tol)
+    first, q, rms_before, (psi, frames) = _select(problem, chain, model, data, usable, starts,
+                                                  settings.max_iter, settings.tol)
+    if learn_noise:
+        settings = _learned_noise(problem, psi, q, frames, settings)
+        problem.set_noise(settings)
+        first, q, _, _ = _select(problem, settings.chain(model), model, data, usable, starts,
+                                 settings.max_iter, settings.tol)
     started = problem.calibrated(q)
     psi_all = np.full((count, p + 1), np.nan)
     psi_all[usable] = _propagate(settings.chain(started), started, data, usable, first)
-    return psi_all, q, rms_before
+    return psi_all, q, rms_before, settings
 
 
 def _frame_costs(problem, psi, q, frames):
@@ -1106,7 +1117,8 @@ def calibrate(model, ranges, *, stamps=None, tag_ranges=None, anchor_ranges=None
         raise ValueError('no frame in which every tag but the tip has three or more ranges: '
                          'nothing to calibrate (is a tag dead?)')
     data = _Recording.of(ranges, tag_ranges, stamps)
-    psi_all, q, rms_before = _start(problem, data, start, settings, hypotheses)
+    psi_all, q, rms_before, settings = _start(problem, data, start, settings, hypotheses,
+                                              learn_noise)
     frames = np.flatnonzero(np.all(np.isfinite(psi_all), axis=1) & problem.located())
     if frames.size == 0:
         raise ValueError('no frame of the recording could be solved: nothing to calibrate')
