@@ -24,8 +24,8 @@ The problem is one least squares over every frame's p + 1 angles (slew and pitch
 free anchors' positions and the offsets. Each frame's ranges depend on its own angles and
 on the few shared parameters only, so the normal equations are block-arrow shaped: the
 angles are eliminated frame by frame (a Schur complement, as in bundle adjustment), which
-leaves a small dense system in the shared parameters. Levenberg–Marquardt steps that system
-with the analytic Jacobian (``BoomModel.joint_jacobian``).
+leaves a small dense system in the shared parameters (``core.block_arrow``'s
+Levenberg–Marquardt), with the analytic Jacobian (``BoomModel.joint_jacobian``).
 
 The first fit is under the chain estimator's NLOS mixture (``core.nlos``), by iteratively
 reweighted least squares. A symmetric robust loss (Huber, soft-L1) would not do here: NLOS
@@ -79,6 +79,7 @@ import time
 import numpy as np
 from scipy.special import expit
 
+from .block_arrow import eliminate, least_squares, normal_equations
 from .blockage import BlockageChain
 from .chain import angles_from_joints, ChainMethod, SearchExhausted
 from .measurements import Measurements, Residuals
@@ -454,88 +455,6 @@ class _Problem:
                                 self.offset_column, self.basis)
 
 
-def _normal_blocks(angle, shared, slope, weights, pair_gradient=0.0, pair_information=0.0):
-    """
-    Return the block-arrow normal equations: U (n, a, a), W (n, a, q), V, g_a, g_q.
-
-    The anchor-anchor ranges' gradient and information (shared parameters only) add to
-    ``g_q`` and ``V``.
-    """
-    weighted = angle * weights[..., None]
-    blocks = np.einsum('nla,nlb->nab', weighted, angle)
-    coupling = np.einsum('nla,nlq->naq', weighted, shared)
-    shared_block = np.einsum('nlq,nlr->qr', shared * weights[..., None], shared)
-    return (blocks, coupling, shared_block + pair_information,
-            np.einsum('nla,nl->na', angle, slope),
-            np.einsum('nlq,nl->q', shared, slope) + pair_gradient)
-
-
-def _schur(blocks, coupling, shared_block, pseudo=False):
-    """
-    Return the shared parameters' information with the angles eliminated, and U^-1.
-
-    ``pseudo``: U's pseudo-inverse, for a frame whose angles the ranges do not all
-    determine (a silent tag, few links); exact, as such angle changes move no range.
-    """
-    inverse = np.linalg.pinv(blocks, rcond=1e-10, hermitian=True) if pseudo \
-        else np.linalg.inv(blocks)
-    reduced = shared_block - np.einsum('naq,nab,nbr->qr', coupling, inverse, coupling)
-    return 0.5 * (reduced + reduced.T), inverse
-
-
-def _step(normal, damping):
-    """Return the Levenberg–Marquardt step (angles (n, a), shared (q,)) for ``damping``."""
-    blocks, coupling, shared_block, gradient_a, gradient_q = normal
-    size = blocks.shape[1]
-    diagonal = np.einsum('nii->ni', blocks)
-    # A small ridge relative to each frame's scale holds still the angles no range sees (a
-    # silent tag's): rounding in their zero gradient would otherwise step them by radians.
-    ridge = damping * diagonal + 1e-9 * (diagonal.max(axis=1, keepdims=True) + 1.0)
-    damped = blocks + ridge[:, :, None] * np.eye(size)
-    shared_damped = shared_block + damping * np.diag(np.diag(shared_block) + 1e-9)
-    reduced, inverse = _schur(damped, coupling, shared_damped)
-    right = gradient_q - np.einsum('naq,nab,nb->q', coupling, inverse, gradient_a)
-    step_q = -np.linalg.solve(reduced, right)
-    step_a = -np.einsum('nab,nb->na', inverse, gradient_a + coupling @ step_q)
-    return step_a, step_q
-
-
-def _least_squares(problem, psi, q, frames, max_iter, tol):
-    """Levenberg–Marquardt on the NLOS loss from ``psi`` (n, p + 1), ``q``; as chain.fit."""
-    mask = problem.mask[frames]
-
-    def state(psi, q):
-        scaled, angle, shared = problem.evaluate(psi, problem.x0 + problem.basis @ q, frames)
-        cost, slope, weights, _ = problem.robust(scaled, mask, frames)
-        pair_cost, pair_gradient, pair_information, _ = problem.anchor_terms(q)
-        return (float(cost.sum()) + pair_cost,
-                (angle, shared, slope, weights, pair_gradient, pair_information))
-
-    cost, parts = state(psi, q)
-    damping, iterations, converged = 1e-6, 0, False
-    while iterations < max_iter:
-        iterations += 1
-        normal = _normal_blocks(*parts)
-        while True:
-            step_a, step_q = _step(normal, damping)
-            trial_psi, trial_q = psi + step_a, q + step_q
-            trial_cost, trial_parts = state(trial_psi, trial_q)
-            if trial_cost <= cost or damping > 1e10:
-                break
-            damping *= 4.0
-        if trial_cost > cost:
-            converged = True
-            break
-        stalled = cost - trial_cost <= 1e-10 * max(abs(trial_cost), 1e-300)
-        largest = max(np.max(np.abs(step_a)), np.max(np.abs(step_q), initial=0.0))
-        psi, q, cost, parts = trial_psi, trial_q, trial_cost, trial_parts
-        damping = max(damping / 3.0, 1e-9)
-        if stalled or largest <= tol:
-            converged = True
-            break
-    return psi, q, cost, iterations, converged
-
-
 def _solve(chain, model, data, frame, prior, warm):
     """Return chain's (joints, info) of one frame of the recording, None when unsolved."""
     measurements, _ = data.measurements(model, frame)
@@ -621,8 +540,8 @@ def _select(problem, chain, model, data, usable, hypotheses, max_iter, tol):
         frames, psi = subsample[solved], psi[solved]
         if number == 0:
             rms_before = _range_rms(problem, psi, problem.x_given, frames)
-        psi, q, cost, _, _ = _least_squares(problem, psi, np.zeros(problem.basis.shape[1]),
-                                            frames, min(max_iter, SELECTION_ITERATIONS), tol)
+        psi, q, cost, _, _ = least_squares(problem, psi, np.zeros(problem.basis.shape[1]),
+                                           frames, min(max_iter, SELECTION_ITERATIONS), tol)
         score = cost / problem.mask[frames].sum()
         if best is None or score < best[0]:
             best = (score, psi, q, frames)
@@ -942,8 +861,8 @@ def _joint_fit(problem, data, psi, q, frames, settings, refits):
     """
     total, blockage = 0, None
     for round_ in range(refits + 1):
-        psi, q, _, iterations, converged = _least_squares(problem, psi, q, frames,
-                                                          settings.max_iter, settings.tol)
+        psi, q, _, iterations, converged = least_squares(problem, psi, q, frames,
+                                                         settings.max_iter, settings.tol)
         total += iterations
         if round_ == refits:
             break
@@ -966,9 +885,9 @@ def _uncertainty(problem, psi, q, frames):
     x = problem.x0 + problem.basis @ q
     scaled, angle, shared = problem.evaluate(psi, x, frames)
     _, slope, weights, nlos_links = problem.robust(scaled, problem.mask[frames], frames)
-    blocks, coupling, shared_block, _, _ = _normal_blocks(angle, shared, slope, weights)
+    blocks, coupling, shared_block, _, _ = normal_equations(angle, shared, slope, weights)
     _, _, pair_information, pair_parts = problem.anchor_terms(q)
-    information = _schur(blocks, coupling, shared_block, pseudo=True)[0] + pair_information
+    information = eliminate(blocks, coupling, shared_block, pseudo=True)[0] + pair_information
     squares, count = np.sum(weights * scaled ** 2), float(weights.sum())
     if pair_parts is not None:
         squares += np.sum(pair_parts[1] * pair_parts[0] ** 2)

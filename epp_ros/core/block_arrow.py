@@ -1,0 +1,116 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Levenberg–Marquardt for a block-arrow least squares: per-frame angles and shared parameters.
+
+Each frame's residuals depend on its own angles (a few) and on the shared parameters (a few
+dozen) only, so the normal equations are block-arrow shaped: a block U per frame, its
+coupling W to the shared parameters, and the shared block V. The angles are eliminated
+frame by frame (a Schur complement, as in bundle adjustment), which leaves a small dense
+system in the shared parameters; the frames' steps follow from it. ``core.calibrate`` is
+the user: the frames of a recording, the anchors and range offsets shared.
+"""
+import numpy as np
+
+__all__ = ['normal_equations', 'eliminate', 'damped_step', 'least_squares']
+
+
+def normal_equations(angle, shared, slope, weights, pair_gradient=0.0, pair_information=0.0):
+    """
+    Return the block-arrow normal equations: U (n, a, a), W (n, a, q), V, g_a, g_q.
+
+    The anchor-anchor ranges' gradient and information (shared parameters only) add to
+    ``g_q`` and ``V``.
+    """
+    weighted = angle * weights[..., None]
+    blocks = np.einsum('nla,nlb->nab', weighted, angle)
+    coupling = np.einsum('nla,nlq->naq', weighted, shared)
+    shared_block = np.einsum('nlq,nlr->qr', shared * weights[..., None], shared)
+    return (blocks, coupling, shared_block + pair_information,
+            np.einsum('nla,nl->na', angle, slope),
+            np.einsum('nlq,nl->q', shared, slope) + pair_gradient)
+
+
+def eliminate(blocks, coupling, shared_block, pseudo=False):
+    """
+    Return the shared parameters' information with the angles eliminated, and U^-1.
+
+    ``pseudo``: U's pseudo-inverse, for a frame whose angles the ranges do not all
+    determine (a silent tag, few links); exact, as such angle changes move no range.
+    """
+    inverse = np.linalg.pinv(blocks, rcond=1e-10, hermitian=True) if pseudo \
+        else np.linalg.inv(blocks)
+    reduced = shared_block - np.einsum('naq,nab,nbr->qr', coupling, inverse, coupling)
+    return 0.5 * (reduced + reduced.T), inverse
+
+
+def damped_step(normal, damping):
+    """Return the Levenberg–Marquardt step (angles (n, a), shared (q,)) for ``damping``."""
+    blocks, coupling, shared_block, gradient_a, gradient_q = normal
+    size = blocks.shape[1]
+    diagonal = np.einsum('nii->ni', blocks)
+    # A small ridge relative to each frame's scale holds still the angles no range sees (a
+    # silent tag's): rounding in their zero gradient would otherwise step them by radians.
+    ridge = damping * diagonal + 1e-9 * (diagonal.max(axis=1, keepdims=True) + 1.0)
+    damped = blocks + ridge[:, :, None] * np.eye(size)
+    shared_damped = shared_block + damping * np.diag(np.diag(shared_block) + 1e-9)
+    reduced, inverse = eliminate(damped, coupling, shared_damped)
+    right = gradient_q - np.einsum('naq,nab,nb->q', coupling, inverse, gradient_a)
+    step_q = -np.linalg.solve(reduced, right)
+    step_a = -np.einsum('nab,nb->na', inverse, gradient_a + coupling @ step_q)
+    return step_a, step_q
+
+
+def least_squares(problem, psi, q, frames, max_iter, tol):
+    """
+    Return Levenberg–Marquardt's minimum from ``psi`` (n, a) and ``q``, as ``chain.fit``.
+
+    ``problem`` gives the frames' scaled residuals and Jacobian blocks (``evaluate``), their
+    robust cost, slope and weights (``robust``) and the terms of ``q`` alone
+    (``anchor_terms``). Returns the angles, q, the cost, the iterations and whether it
+    converged.
+    """
+    mask = problem.mask[frames]
+
+    def state(psi, q):
+        scaled, angle, shared = problem.evaluate(psi, problem.x0 + problem.basis @ q, frames)
+        cost, slope, weights, _ = problem.robust(scaled, mask, frames)
+        pair_cost, pair_gradient, pair_information, _ = problem.anchor_terms(q)
+        return (float(cost.sum()) + pair_cost,
+                (angle, shared, slope, weights, pair_gradient, pair_information))
+
+    cost, parts = state(psi, q)
+    damping, iterations, converged = 1e-6, 0, False
+    while iterations < max_iter:
+        iterations += 1
+        normal = normal_equations(*parts)
+        while True:
+            step_a, step_q = damped_step(normal, damping)
+            trial_psi, trial_q = psi + step_a, q + step_q
+            trial_cost, trial_parts = state(trial_psi, trial_q)
+            if trial_cost <= cost or damping > 1e10:
+                break
+            damping *= 4.0
+        if trial_cost > cost:
+            converged = True
+            break
+        stalled = cost - trial_cost <= 1e-10 * max(abs(trial_cost), 1e-300)
+        largest = max(np.max(np.abs(step_a)), np.max(np.abs(step_q), initial=0.0))
+        psi, q, cost, parts = trial_psi, trial_q, trial_cost, trial_parts
+        damping = max(damping / 3.0, 1e-9)
+        if stalled or largest <= tol:
+            converged = True
+            break
+    return psi, q, cost, iterations, converged
