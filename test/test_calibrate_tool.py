@@ -332,3 +332,14 @@ def test_unreadable_anchor_ranges_give_one_line(tmp_path):
     lines = result.stderr.strip().splitlines()
     assert result.returncode == 2 and len(lines) == 1, result.stderr
     assert 'holds std_msgs/msg/String, expected sensor_msgs/msg/JointState' in lines[0]
+
+
+def test_the_noise_settings_follow_the_nodes_and_learn_the_noise_by_default():
+    document = yaml.safe_load(PUMP_YAML.read_text())
+    settings = tool.noise_settings(document)
+    assert settings['learn_noise'] is True
+    document['/**']['ros__parameters']['learn_noise'] = False
+    assert tool.noise_settings(document)['learn_noise'] is False
+    document['/**']['ros__parameters']['learn_noise'] = 'yes'
+    with pytest.raises(tool.CalibrationError, match='learn_noise'):
+        tool.noise_settings(document)
