@@ -81,6 +81,8 @@ from scipy.special import expit
 
 from .block_arrow import eliminate, least_squares, normal_equations
 from .blockage import BlockageChain
+from .calibration_verdict import (link_offset_std, poorly_determined, scaled_covariance,
+                                  verdict)
 from .chain import angles_from_joints, ChainMethod, SearchExhausted
 from .measurements import Measurements, Residuals
 from .model import ANCHOR_SEPARATION
@@ -101,10 +103,6 @@ SELECTION_FRAMES = 150
 #: Most Levenberg–Marquardt iterations of a hypothesis's fit: enough to rank them (the
 #: best one's fit goes on over the whole recording).
 SELECTION_ITERATIONS = 30
-
-#: Condition number (of the shared parameters' information, normalised to unit diagonal)
-#: above which a recording is reported as poorly exciting, whatever its length.
-CONDITION_LIMIT = 1e4
 
 #: Fraction of the ranges judged otherwise (their NLOS probability moved by more than a
 #: half) below which the joint fit is not repeated for them.
@@ -560,78 +558,6 @@ def _range_rms(problem, psi, x, frames):
         else float('nan')
 
 
-def _covariance(information, scale):
-    """Return ``scale^2 information^-1`` (inf along null directions) and the condition."""
-    diagonal = np.diag(information)
-    diagonal = np.where(diagonal > 0, np.sqrt(np.abs(diagonal)), 1.0)
-    normalised = information / np.outer(diagonal, diagonal)
-    values, vectors = np.linalg.eigh(normalised)
-    condition = float(values[-1] / values[0]) if values[0] > 0 else float('inf')
-    null = values <= 1e-12 * values[-1]
-    inverse = (vectors[:, ~null] / values[~null]) @ vectors[:, ~null].T
-    covariance = scale ** 2 * inverse / np.outer(diagonal, diagonal)
-    if null.any():      # what a null direction touches is undetermined
-        touched = np.abs(vectors[:, null]).max(axis=1) > 1e-6
-        covariance[touched, :] = np.inf
-        covariance[:, touched] = np.inf
-    return covariance, condition
-
-
-def _motion_advice(direction):
-    """Return which motion would locate an anchor along ``direction`` (3,) better."""
-    if abs(direction[2]) > 0.7:
-        return 'raise and lower the boom (luff) through a wider range'
-    return 'slew the boom through a wider sweep'
-
-
-def _verdict(problem, covariance, condition, anchor_tolerance, offset_tolerance):
-    """Return the poorly determined parameters' names and the advice for each."""
-    poorly, advice = [], []
-    for index, j in enumerate(problem.free):
-        block = covariance[3 * index:3 * index + 3, 3 * index:3 * index + 3]
-        if not np.all(np.isfinite(block)):
-            poorly.append(f'anchor {j}')
-            advice.append(f'anchor {j} is not located at all: slew and luff the boom')
-            continue
-        values, vectors = np.linalg.eigh(block)
-        if np.sqrt(max(values[-1], 0.0)) > anchor_tolerance:
-            direction = vectors[:, -1] * np.sign(vectors[np.argmax(np.abs(vectors[:, -1])), -1])
-            poorly.append(f'anchor {j}')
-            advice.append(f'anchor {j} is located to +-{np.sqrt(values[-1]):.3g} m along '
-                          f'({direction[0]:.2f}, {direction[1]:.2f}, {direction[2]:.2f}): '
-                          f'{_motion_advice(direction)}')
-    link_std = _link_std(problem, covariance)
-    poor = link_std > offset_tolerance
-    for k in np.flatnonzero(poor.all(axis=1)):      # a tag whose every link is uncertain
-        poorly.append(f'link offsets of tag {k}')
-        advice.append(f'the link offsets of tag {k} are known to +-{link_std[k].min():.3g} '
-                      f'to {link_std[k].max():.3g} m: luff section {k + 1} through a wider '
-                      f'range (the offset of its tag looks like a move along the line of sight)')
-    poor[poor.all(axis=1)] = False
-    for j in np.flatnonzero(poor.any(axis=0)):
-        poorly.append(f'link offsets of anchor {j}')
-        advice.append(f'the link offsets of anchor {j} are known to '
-                      f'+-{link_std[poor[:, j], j].max():.3g} m: move the boom nearer to and '
-                      f'farther from anchor {j} (slew and luff)')
-    if condition > CONDITION_LIMIT and not poorly:
-        poorly.append('the recording')
-        advice.append(f'the parameters are nearly confounded (condition number '
-                      f'{condition:.3g}): the boom hardly moved; slew and luff it')
-    return poorly, advice
-
-
-def _link_std(problem, covariance):
-    """Return the standard deviation (p, m) of each link offset, metres."""
-    n_anchor = 3 * problem.free.size
-    p, m = problem.p, problem.m
-    offsets = covariance[n_anchor:, n_anchor:]
-    tags, anchors = np.meshgrid(np.arange(p), p + np.arange(m), indexing='ij')
-    with np.errstate(invalid='ignore'):
-        variance = (offsets[tags, tags] + offsets[anchors, anchors]
-                    + 2 * offsets[tags, anchors])
-    return np.sqrt(np.where(np.isnan(variance), np.inf, np.maximum(variance, 0.0)))
-
-
 @dataclass(frozen=True)
 class _Recording:
     """The frames' ranges, and when they were taken."""
@@ -894,7 +820,7 @@ def _uncertainty(problem, psi, q, frames):
         count += float(pair_parts[1].sum())
     dof = max(count - frames.size * (p + 1) - q.size, 1.0)
     residual_scale = float(np.sqrt(squares / dof))
-    covariance_q, condition = _covariance(information, residual_scale)
+    covariance_q, condition = scaled_covariance(information, residual_scale)
     with np.errstate(invalid='ignore'):
         covariance = problem.basis @ np.nan_to_num(covariance_q, posinf=0.0) @ problem.basis.T
     undetermined = problem.basis[:, np.isinf(np.diag(covariance_q))].any(axis=1)
@@ -911,18 +837,6 @@ def _anchor_rms(problem, q):
     scaled = problem.pairs.residuals(anchors, anchor_offsets, problem.anchor_column,
                                      problem.offset_column, problem.n_x)[0]
     return float(np.sqrt(np.mean(scaled[problem.pairs.mask] ** 2))) * problem.pairs.sigma
-
-
-def _status(wandered, converged, poorly, advice, max_iter, frames, rms_before, rms_after):
-    """Return the status and the message of the verdict."""
-    if not converged and not wandered:
-        return 'not_converged', (f'the joint fit did not converge in {max_iter} iterations: '
-                                 'the result is not to be used')
-    if poorly:
-        return 'poorly_excited', ('the recording does not determine everything: '
-                                  + '; '.join(advice))
-    return 'ok', (f'calibrated from {frames.size} frames: range RMS {rms_before:.3g} m -> '
-                  f'{rms_after:.3g} m')
 
 
 def calibrate(model, ranges, *, stamps=None, tag_ranges=None, anchor_ranges=None,
@@ -1065,8 +979,8 @@ def _result(problem, psi, q, frames, count, survey, facts):
     n_anchor = 3 * problem.free.size
     anchor_std = np.zeros((m, 3))
     anchor_std[problem.free] = std[:n_anchor].reshape(-1, 3)
-    poorly, advice = _verdict(problem, covariance, condition, facts['anchor_tolerance'],
-                              facts['offset_tolerance'])
+    poorly, advice = poorly_determined(problem, covariance, condition,
+                                       facts['anchor_tolerance'], facts['offset_tolerance'])
     wandered = False
     try:
         calibrated = model.with_calibration(anchors, anchor_offsets, tag_offsets)
@@ -1076,7 +990,7 @@ def _result(problem, psi, q, frames, count, survey, facts):
         advice = advice + [f'the fit wandered to values no pump has ({exc}); record the '
                            'boom slewing and luffing every section']
     rms_after = _range_rms(problem, psi, problem.x0 + problem.basis @ q, frames)
-    status, message = _status(wandered, facts['converged'], poorly, advice,
+    status, message = verdict(wandered, facts['converged'], poorly, advice,
                               facts['max_iter'], frames, facts['rms_before'], rms_after)
     postures = np.full((count, p + 1), np.nan)
     postures[frames] = psi
@@ -1089,7 +1003,7 @@ def _result(problem, psi, q, frames, count, survey, facts):
         anchor_offsets=anchor_offsets, tag_offsets=tag_offsets,
         link_offsets=tag_offsets[:, None] + anchor_offsets[None, :], anchor_std=anchor_std,
         anchor_offset_std=std[n_anchor + p:], tag_offset_std=std[n_anchor:n_anchor + p],
-        link_offset_std=_link_std(problem, covariance), rms_before=facts['rms_before'],
+        link_offset_std=link_offset_std(problem, covariance), rms_before=facts['rms_before'],
         rms_after=rms_after, residual_scale=residual_scale, condition=condition,
         poorly_determined=poorly, gauge=problem.gauge, converged=facts['converged'],
         iterations=facts['iterations'], frames_used=used, postures=postures, nlos=nlos,
