@@ -14,14 +14,15 @@
 
 from epp_ros.core import calibrate, PostureEstimator, SurveyResult
 from epp_ros.core.measurements import Measurements
-from epp_ros.core.simulate import (FieldEffects, FieldSimulator, StillMotion, truck_pump,
+from epp_ros.core.simulate import (FieldEffects, FieldSimulator, StillMotion,
+                                   truck_body_anchors, truck_outriggers, truck_pump,
                                    WorkingMotion)
 import numpy as np
 import pytest
 
 #: Turret and cab stay where configured; the four outriggers move.
-FIXED = (0, 5)
-OUTRIGGERS = (1, 2, 3, 4)
+FIXED = truck_body_anchors(truck_pump())
+OUTRIGGERS = truck_outriggers(truck_pump())
 
 
 def recording(seed, sigma, seconds, motion=None, **others):

@@ -103,14 +103,14 @@ class BlockageChain:
         ndarray, shape (n, links)
 
         """
-        predicted, _ = self._forward(log_ratio, elapsed)
-        backward = self._backward(log_ratio, elapsed)
-        odds = predicted * backward
+        steps = self._steps(log_ratio, elapsed)
+        predicted, _ = self._forward(*steps)
+        odds = predicted * self._backward(*steps)
         return odds / (odds + 1.0 - predicted)
 
     def log_likelihood(self, log_ratio, elapsed):
         """Return the log-likelihood of the ranges (up to a constant in the chain)."""
-        return self._forward(log_ratio, elapsed)[1]
+        return self._forward(*self._steps(log_ratio, elapsed))[1]
 
     @classmethod
     def learn(cls, fraction, log_ratio, elapsed, durations=DURATIONS):
@@ -124,10 +124,13 @@ class BlockageChain:
         scores = [chain.log_likelihood(log_ratio, elapsed) for chain in chains]
         return chains[int(np.argmax(scores))]
 
-    def _forward(self, log_ratio, elapsed):
-        """Return P(blocked | earlier frames) (n, links) and the log-likelihood."""
+    def _steps(self, log_ratio, elapsed):
+        """Return the likelihood ratios (n, links) and the transitions (n - 1,) of each step."""
         ratio = np.exp(np.clip(log_ratio, -_LOG_RATIO_LIMIT, _LOG_RATIO_LIMIT))
-        stay, enter = self.transitions(elapsed)
+        return (ratio, *self.transitions(elapsed))
+
+    def _forward(self, ratio, stay, enter):
+        """Return P(blocked | earlier frames) (n, links) and the log-likelihood."""
         predicted = np.empty_like(ratio)
         blocked = np.full(ratio.shape[1], self.fraction)
         total = 0.0
@@ -140,10 +143,8 @@ class BlockageChain:
             blocked = blocked * ratio[n] / evidence
         return predicted, total
 
-    def _backward(self, log_ratio, elapsed):
+    def _backward(self, ratio, stay, enter):
         """Return p(later frames | blocked) / p(later frames | clear), (n, links)."""
-        ratio = np.exp(np.clip(log_ratio, -_LOG_RATIO_LIMIT, _LOG_RATIO_LIMIT))
-        stay, enter = self.transitions(elapsed)
         backward = np.ones_like(ratio)
         for n in range(ratio.shape[0] - 2, -1, -1):
             later = ratio[n + 1] * backward[n + 1]

@@ -279,13 +279,6 @@ class _Problem:
         tags = counts if tip else counts[:, :-1]
         return np.all(tags >= 3, axis=1) & (counts.sum(axis=1) >= self.p + 1)
 
-    def set_prior(self, frames, prior):
-        """Fit the ranges of ``frames`` under their own NLOS priors (n, rows) from now on."""
-        if self.blocked_prior is None:
-            self.blocked_prior = np.full(self.measured.shape, self.mixture.fraction)
-        self.blocked_prior[frames] = prior
-        self._losses = {}
-
     def log_likelihood_ratio(self, scaled, frames):
         """Return log p(range | NLOS) / p(range | clear) (n, rows), 0 where not measured."""
         ratio = self.mixture.bind(self.sigma[frames]).log_likelihood_ratio(-scaled)
@@ -431,11 +424,13 @@ class _Problem:
         with np.errstate(divide='ignore'):
             logit = np.log(prior) - np.log1p(-prior) + log_ratio
         blocked = np.where(self.mask[frames], expit(logit), 0.0)
-        before = np.zeros_like(blocked) if self.blocked is None else self.blocked[frames]
         if self.blocked is None:
             self.blocked = np.zeros(self.measured.shape)
+            self.blocked_prior = np.full(self.measured.shape, self.mixture.fraction)
+        before = self.blocked[frames].copy()
         self.blocked[frames] = blocked
-        self.set_prior(frames, prior)
+        self.blocked_prior[frames] = prior      # the mixture's, for judging folds
+        self._losses = {}
         mask = self.mask[frames]
         return float(np.mean(np.abs(blocked - before)[mask] > 0.5)) if mask.any() else 0.0
 
