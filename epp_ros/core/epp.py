@@ -73,7 +73,8 @@ class _EDMMethod:
     anchor_weight : float
         Weight of the anchor-anchor entries; inf holds them fixed.
     tol : float
-        Relative tolerance of the NEDM solver.
+        Stationarity tolerance of the NEDM solver (its relative KKT residual, see
+        :func:`~epp_ros.core.nedm.nearest_edm`).
     max_iter : int
         Its outer iterations at most.
     sigma : float

@@ -41,7 +41,8 @@ from typing import NamedTuple, Optional
 import numpy as np
 from scipy.linalg import lapack
 
-from .edm import centering_matrix, classical_mds, rank_penalty, symmetric_eigh
+from .edm import (centering_matrix, classical_mds, rank_penalty, squared_distances,
+                  symmetric_eigh)
 
 __all__ = ['nearest_edm', 'project_constrained_edm', 'NearestEDMResult', 'ProjectionResult']
 
@@ -69,6 +70,7 @@ class NearestEDMResult:
     inner_iterations: int       #: Newton iterations summed over all subproblems
     kkt_residual: float         #: of the last subproblem, in the units of G
     penalty_parameter: float    #: c at the end, in the units of G
+    stationarity: float         #: KKT residual of `points`, relative (see nearest_edm)
     converged: bool             #: ``status > 0``
     status: int                 #: 1 converged, 0 max_iter reached
     message: str                #: ``status`` in words
@@ -213,13 +215,16 @@ def project_constrained_edm(target, q, rows, cols, values, multipliers=None, tol
                      multipliers, tol, max_iter)
 
 
-#: ``NearestEDMResult.status``: the stopping rule held in the penalty iterations.
+#: ``NearestEDMResult.status``: of rank r and stationary to ``tol``.
 _CONVERGED = 1
-#: ``NearestEDMResult.status``: ``max_iter`` reached before the stopping rule held.
+#: ``NearestEDMResult.status``: ``max_iter`` reached before that.
 _MAX_ITER_REACHED = 0
 _MESSAGES = {
-    _CONVERGED: 'converged: rank error <= rank_tol and relative change of sqrt(f + c p) <= tol',
-    _MAX_ITER_REACHED: 'not converged: max_iter reached',
+    _CONVERGED: 'converged: rank error {rank_error:.2g} <= rank_tol and stationarity '
+                '{stationarity:.2g} <= tol',
+    _MAX_ITER_REACHED: 'not converged: max_iter reached with rank error {rank_error:.2g} '
+                       '(rank_tol {rank_tol:.2g}) and stationarity {stationarity:.2g} (tol '
+                       '{tol:.2g}): progress too slow to reach a stationary point',
 }
 
 # Initial c without a warm start: the convex solution's p(D), scaled units, clamped here.
@@ -274,6 +279,7 @@ class _Outcome(NamedTuple):
     duals: _DualState
     penalty_parameter: float            #: c
     iterations: int                     #: MM steps of the penalty iterations
+    stationarity: float                 #: of ``iterate``'s points (inf when not of rank r)
     status: int                         #: one of _MESSAGES
 
 
@@ -298,7 +304,8 @@ class _PenaltySolver:
         n = goal.shape[0]
         self.goal, self.rank, self.inner_tol = goal, rank, inner_tol
         self.sq_weights = weights ** 2
-        rows, cols = _constraint_operator(n, np.argwhere(np.triu(fixed, 1)))
+        self.fixed_pairs = np.argwhere(np.triu(fixed, 1))
+        rows, cols = _constraint_operator(n, self.fixed_pairs)
         majorizer = np.maximum(tau, weights.max(axis=1))      # w_i w_j >= H_ij^2
         q = np.sqrt(majorizer)
         self.w_outer = np.outer(majorizer, majorizer)
@@ -315,6 +322,38 @@ class _PenaltySolver:
     def objective(self, edm):
         """Return ``f(D) = 1/2 ||H o (D - G)||^2``, scaled units."""
         return 0.5 * np.sum(self.sq_weights * (edm - self.goal) ** 2)
+
+    def stationarity(self, edm):
+        """
+        Return the relative KKT residual of the rank-r problem at ``classical_mds(edm)``.
+
+        With ``D = D(X)`` for points ``X`` (n, r), the problem is ``min f(D(X))`` subject to
+        the fixed distances: its first-order condition is ``grad f(X) + sum_k mu_k
+        grad c_k(X) = 0``, where ``grad f(X) = 4 L(H o H o (D - G)) X`` (``L(S) = diag(S 1)
+        - S``) and ``c_k(X) = |x_a - x_b|^2 - G_ab`` for each fixed pair. The multipliers
+        ``mu`` are the least-squares ones; the residual is divided by
+        ``4 max(H o H) |X|_F``, so it is free of the units of G and of the weights' scale.
+        It measures the problem itself, not the penalty iterations (whose map crawls once
+        c is large and reports no motion far from a minimum).
+        """
+        points = classical_mds(edm, self.rank)
+        stress = self.sq_weights * (squared_distances(points) - self.goal)
+        laplacian = np.diag(stress.sum(axis=1)) - stress
+        gradient = (4.0 * laplacian @ points).ravel()
+        if self.fixed_pairs.size:
+            gradient = gradient - self._constraint_jacobian(points) @ np.linalg.lstsq(
+                self._constraint_jacobian(points), gradient, rcond=None)[0]
+        size = 4.0 * max(float(self.sq_weights.max()), 1e-300) * np.linalg.norm(points)
+        return float(np.linalg.norm(gradient) / size) if size > 0 else 0.0
+
+    def _constraint_jacobian(self, points):
+        """Gradients of ``|x_a - x_b|^2`` for the fixed pairs, as columns, (n r, k)."""
+        first, second = self.fixed_pairs[:, 0], self.fixed_pairs[:, 1]
+        difference = 2.0 * (points[first] - points[second])
+        jacobian = np.zeros((first.size,) + points.shape)
+        jacobian[np.arange(first.size), first] = difference
+        jacobian[np.arange(first.size), second] = -difference
+        return jacobian.reshape(first.size, -1).T
 
     def merit(self, iterate, c):
         """Return ``f + c p`` at ``iterate``: what the MM steps decrease."""
@@ -441,37 +480,33 @@ def _next_penalty(c, rank_error, rank, rank_tol):
     return c
 
 
-def _relative_change(previous, current):
-    """
-    Return the change of ``sqrt(f + c p)`` relative to its old value, or absolute below 1.
-
-    1 is the largest known squared distance: near an exact fit a relative change is noise.
-    """
-    return abs(previous - current) / max(1.0, previous)
+def _stationarity(solver, iterate, rank_tol):
+    """Return the KKT residual of ``iterate``, or inf while its rank error is above rank_tol."""
+    return solver.stationarity(iterate.edm) if iterate.rank_error <= rank_tol else np.inf
 
 
 def _penalty_iterations(solver, iterate, duals, c, tol, rank_tol, max_iter):
     """
     SQUAREM cycles on ``f + c p``, c following the schedule, until the stopping rule holds.
 
-    The rule: of rank r (rank error <= ``rank_tol``) and no longer moving (relative change
-    of ``sqrt(f + c p)`` <= ``tol``); a rank-r point still moving has not yet settled where
-    the penalty put it. Returns an :class:`_Outcome`.
+    The rule: of rank r (rank error <= ``rank_tol``) and stationary (KKT residual <= ``tol``,
+    see :meth:`_PenaltySolver.stationarity`). Slow progress is not convergence: once c is
+    large the MM map crawls along the rank-r set, changing ``f + c p`` by little per cycle
+    far from a minimum. Returns an :class:`_Outcome`.
     """
     iterations = 0
-    while iterations < max_iter:
-        previous = np.sqrt(solver.merit(iterate, c))
+    while True:
+        stationarity = _stationarity(solver, iterate, rank_tol)
+        if stationarity <= tol:
+            return _Outcome(iterate, duals, c, iterations, stationarity, _CONVERGED)
+        if iterations >= max_iter:
+            return _Outcome(iterate, duals, c, iterations, stationarity, _MAX_ITER_REACHED)
         iterate, duals, steps = solver.squarem_cycle(iterate, c, duals)
         iterations += steps
-        rank_error = iterate.rank_error
-        change = _relative_change(previous, np.sqrt(solver.merit(iterate, c)))
-        if rank_error <= rank_tol and change <= tol:
-            return _Outcome(iterate, duals, c, iterations, _CONVERGED)
-        c = _next_penalty(c, rank_error, solver.rank, rank_tol)
-    return _Outcome(iterate, duals, c, iterations, _MAX_ITER_REACHED)
+        c = _next_penalty(c, iterate.rank_error, solver.rank, rank_tol)
 
 
-def _result(solver, outcome, scale):
+def _result(solver, outcome, scale, tolerances):
     """Return ``outcome`` as a :class:`NearestEDMResult` in the units of the target."""
     edm = outcome.iterate.edm
     edm = 0.5 * (edm + edm.T) * scale
@@ -483,8 +518,10 @@ def _result(solver, outcome, scale):
         inner_iterations=outcome.duals.inner_iterations,
         kkt_residual=outcome.duals.kkt_residual * scale,
         penalty_parameter=outcome.penalty_parameter * scale,
-        converged=outcome.status != _MAX_ITER_REACHED, status=outcome.status,
-        message=_MESSAGES[outcome.status])
+        stationarity=outcome.stationarity, converged=outcome.status == _CONVERGED,
+        status=outcome.status, message=_MESSAGES[outcome.status].format(
+            rank_error=outcome.iterate.rank_error, stationarity=outcome.stationarity,
+            **tolerances))
 
 
 def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1e-7,
@@ -509,9 +546,10 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
         penalty iterations start with c = 1. Without one they start from the convex
         relaxation (c = 0).
     tol : float
-        Stop when the relative change of ``sqrt(f + c p)`` falls below ``tol`` ...
+        Converged when the relative KKT residual of the returned points (``stationarity``,
+        see Notes) is at most ``tol`` ...
     rank_tol : float
-        ... and the relative rank error ``p(D) / trace(-JDJ)`` is below ``rank_tol``.
+        ... and the relative rank error ``p(D) / trace(-JDJ)`` is at most ``rank_tol``.
     max_iter : int
         Outer iterations (MM steps) at most; a SQUAREM cycle of 2 or 3 steps may pass it.
     tau : float
@@ -528,15 +566,25 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
     Returns
     -------
     NearestEDMResult
-        ``status`` is 1 (converged: rank error <= ``rank_tol`` and relative change
-        <= ``tol``) or 0 (``max_iter`` reached); ``converged`` is ``status > 0``. A convex
-        relaxation already of rank r is iterated on until it too stops moving: its first
-        SQUAREM cycle is its minimiser only when every weight is equal and >= ``tau``.
+        ``status`` is 1 (converged: rank error <= ``rank_tol`` and stationarity <= ``tol``)
+        or 0 (``max_iter`` reached first; the message gives both measures);
+        ``converged`` is ``status > 0``.
 
     Notes
     -----
     The problem is solved in units where the largest known squared distance is 1; results
     are returned in the units of ``target``.
+
+    ``stationarity`` is the first-order (KKT) condition of the rank-r problem in the
+    returned points ``X``: ``|grad f(X) + J_c(X)^T mu|_F / (4 max(H o H) |X|_F max|G|)``
+    with the least-squares multipliers ``mu`` of the fixed distances. It does not depend on
+    the penalty parameter, and slow progress does not pass for it: once c is large the
+    MM map moves the iterate along the rank-r set by little per step while far from a
+    minimum (on weighted problems, by a few per cent of f or more). Like any first-order
+    measure it bounds the distance to a minimum only where f curves: near a minimum with
+    smallest curvature ``mu``, ``f - f* <~ |grad f|^2 / (2 mu)``; along flat valleys (points
+    that span fewer than ``rank`` dimensions, missing distances) a point stationary to
+    ``tol`` may still be some way from the minimum.
 
     """
     target, weights, fixed, known = _checked_input(target, weights, fixed, rank)
@@ -544,4 +592,4 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
     solver = _PenaltySolver(goal, weights, fixed, rank, tau, inner_tol)
     iterate, duals, c = _start(solver, known, initial, scale, penalty_parameter)
     outcome = _penalty_iterations(solver, iterate, duals, c, tol, rank_tol, max_iter)
-    return _result(solver, outcome, scale)
+    return _result(solver, outcome, scale, {'tol': tol, 'rank_tol': rank_tol})
