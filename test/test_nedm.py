@@ -204,7 +204,10 @@ def kkt_residual(points, target, weights, fixed_pairs):
     for a, b in fixed_pairs:
         known[a, b] = known[b, a] = True
     scale = np.max(np.abs(target[known]))
-    return np.linalg.norm(gradient) / (4 * np.max(weights ** 2) * np.linalg.norm(points) * scale)
+    infeasible = max([abs(np.sum((points[a] - points[b]) ** 2) - target[a, b]) / scale
+                      for a, b in fixed_pairs], default=0.0)
+    return max(np.linalg.norm(gradient) / (4 * np.max(weights ** 2) * np.linalg.norm(points)
+                                           * scale), infeasible)
 
 
 @pytest.mark.parametrize('seed, fixed_pairs', [(1, []), (2, [(0, 1), (1, 2)]), (3, [(2, 5)])])

@@ -333,18 +333,26 @@ class _PenaltySolver:
         - S``) and ``c_k(X) = |x_a - x_b|^2 - G_ab`` for each fixed pair. The multipliers
         ``mu`` are the least-squares ones; the residual is divided by
         ``4 max(H o H) |X|_F``, so it is free of the units of G and of the weights' scale.
+        Primal feasibility counts too: the largest violation of a fixed distance (a
+        fraction of the largest G) is returned when it is larger (a warm start that is
+        not feasible is not a stationary point).
         It measures the problem itself, not the penalty iterations (whose map crawls once
         c is large and reports no motion far from a minimum).
         """
         points = classical_mds(edm, self.rank)
-        stress = self.sq_weights * (squared_distances(points) - self.goal)
+        distances = squared_distances(points)
+        stress = self.sq_weights * (distances - self.goal)
         laplacian = np.diag(stress.sum(axis=1)) - stress
         gradient = (4.0 * laplacian @ points).ravel()
+        infeasible = 0.0
         if self.fixed_pairs.size:
+            first, second = self.fixed_pairs.T
+            infeasible = float(np.max(np.abs(distances[first, second]
+                                             - self.goal[first, second])))
             gradient = gradient - self._constraint_jacobian(points) @ np.linalg.lstsq(
                 self._constraint_jacobian(points), gradient, rcond=None)[0]
         size = 4.0 * max(float(self.sq_weights.max()), 1e-300) * np.linalg.norm(points)
-        return float(np.linalg.norm(gradient) / size) if size > 0 else 0.0
+        return max(float(np.linalg.norm(gradient) / size) if size > 0 else 0.0, infeasible)
 
     def _constraint_jacobian(self, points):
         """Gradients of ``|x_a - x_b|^2`` for the fixed pairs, as columns, (n r, k)."""
@@ -577,7 +585,8 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
 
     ``stationarity`` is the first-order (KKT) condition of the rank-r problem in the
     returned points ``X``: ``|grad f(X) + J_c(X)^T mu|_F / (4 max(H o H) |X|_F max|G|)``
-    with the least-squares multipliers ``mu`` of the fixed distances. It does not depend on
+    with the least-squares multipliers ``mu`` of the fixed distances, or the largest
+    violation of a fixed squared distance over ``max|G|`` when that is larger. It does not depend on
     the penalty parameter, and slow progress does not pass for it: once c is large the
     MM map moves the iterate along the rank-r set by little per step while far from a
     minimum (on weighted problems, by a few per cent of f or more). Like any first-order
