@@ -173,10 +173,45 @@ def test_a_joint_with_one_range_is_ambiguous_unless_time_rules_the_fold_out():
 
 def test_predicted_uncertainty_is_the_bound_at_the_estimate():
     slew, pitches, joints = random_posture(MODEL, np.random.default_rng(7))
+    unbiased = PostureEstimator(MODEL, 'cepp', sigma=0.1, nlos_fraction=0.0, link_bias_std=0.0,
+                                common_bias_std=0.0)
+    unbiased.update(MODEL.ranges(joints))
+    bound = crlb(MODEL, slew, pitches, 0.1)
+    assert unbiased.last_diagnostics['predicted_rmse'] == pytest.approx(bound.rmse, rel=1e-6)
+    # By default the ranges' biases are not known: each link's own (0.1 m) widens every
+    # range's sigma, and the common part adds to what is predicted.
     estimator = PostureEstimator(MODEL, 'cepp', sigma=0.1, nlos_fraction=0.0)
     estimator.update(MODEL.ranges(joints))
-    bound = crlb(MODEL, slew, pitches, 0.1)
-    assert estimator.last_diagnostics['predicted_rmse'] == pytest.approx(bound.rmse, rel=1e-6)
+    widened = crlb(MODEL, slew, pitches, np.hypot(0.1, 0.1))
+    assert estimator.last_diagnostics['noise_rmse'] == pytest.approx(widened.rmse, rel=1e-6)
+    assert estimator.last_diagnostics['predicted_rmse'] > 1.5 * widened.rmse
+
+
+def test_predicted_std_covers_link_biases_the_noise_alone_would_not():
+    # Each link's own bias, constant over frames: per frame one more error per range. Told
+    # about it, the checks keep the frames and the predicted std covers their errors.
+    slew, pitches, joints = random_posture(MODEL, np.random.default_rng(21))
+    rng = np.random.default_rng(22)
+    trials, sigma, link_std = 200, 0.05, 0.1
+    squared, predicted = [], []
+    for _ in range(trials):
+        bias = link_std * rng.standard_normal((MODEL.n_sections, MODEL.n_anchors))
+        ranges = MODEL.ranges(joints) + bias + sigma * rng.standard_normal(bias.shape)
+        estimator = PostureEstimator(MODEL, 'chain', learn_noise=False, sigma=sigma,
+                                     nlos_fraction=0.0, link_bias_std=link_std,
+                                     common_bias_std=0.0)
+        estimator.reset(joints)
+        estimator.update(ranges)
+        result = estimator.last_diagnostics
+        if result['valid']:
+            squared.append(np.sum((result['estimate'] - joints) ** 2, axis=1))
+            predicted.append(result['joint_std'] ** 2)
+    # The residual test's false alarms and the NLOS mixture's doubts refuse a few.
+    assert len(squared) >= 0.9 * trials
+    # Per joint, the mean squared error over the trials against the predicted variance:
+    # a mean of ~chi-square(3) terms, relative standard error about sqrt(2 / trials).
+    measured, expected = np.mean(squared, axis=0), np.mean(predicted, axis=0)
+    np.testing.assert_allclose(measured, expected, rtol=5 * np.sqrt(2 / len(squared)))
 
 
 def test_the_residual_test_flags_a_frame_the_noise_cannot_explain():

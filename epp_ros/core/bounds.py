@@ -35,6 +35,16 @@ direction unmeasured and a noiseless direction of the motion are all exact. For 
 Gaussian model the Kalman filter attains the bound; with a constant-velocity model of the
 boom it falls below the single-frame bound, tends to it as the process noise grows, and
 stays finite through a frame with too few links.
+
+Real ranges also carry biases that calibration does not remove exactly (a link's own term,
+growth with range, the tag's orientation; ``core.link_errors``). They are constant over
+frames, so no residual test sees the part of them a fit absorbs, and the bound above is
+then too small: a fit weighted by ``Sigma^-1`` moves by ``F^-1 A^T Sigma^-1 b`` for range
+biases ``b``. With ``b ~ N(0, B)`` (:class:`RangeBiasPrior`: a common part and a part of
+each link's own), the error covariance is ``F^-1 + F^-1 A^T Sigma^-1 B Sigma^-1 A F^-1``
+(:func:`bias_covariance`), which no number of frames reduces. Within one frame a link's
+own part is one more independent error per range (``B = l^2 I`` only widens sigma); the
+common part is what a fit absorbs.
 """
 from dataclasses import dataclass
 
@@ -43,7 +53,68 @@ import numpy as np
 from .measurements import Measurements, Residuals, SensorNoise
 
 __all__ = ['fisher_information', 'Bound', 'crlb', 'bound_from_information',
+           'bound_from_covariance', 'RangeBiasPrior', 'bias_covariance',
            'posterior_information', 'posterior_crlb']
+
+
+@dataclass(frozen=True)
+class RangeBiasPrior:
+    """
+    What is not known of the biases left in the tag-anchor ranges, metres.
+
+    A range's systematic error is ``c + e_kj``: ``c ~ N(0, common_std^2)`` shared by every
+    link, ``e_kj ~ N(0, link_std^2)`` each link's own; both constant over frames. Zero: the
+    ranges are unbiased once the model's offsets are taken off (the simulator's pumps).
+    Uncalibrated DW1000-class links have a common part of ~0.2-0.4 m at a boom's ranges
+    and ~0.1 m of their own (``simulate.FIELD_EFFECTS['real_uwb']``).
+    """
+
+    link_std: float = 0.0
+    common_std: float = 0.0
+
+    def __post_init__(self):
+        for name in ('link_std', 'common_std'):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer,
+                                                                 np.floating)) \
+                    or not np.isfinite(value) or value < 0:
+                raise ValueError(f'{name}: must be a finite number >= 0, got {value!r}')
+            object.__setattr__(self, name, float(value))
+
+    def __bool__(self):
+        """Whether any bias is unknown."""
+        return self.link_std > 0 or self.common_std > 0
+
+
+def bias_covariance(jacobian, sigma, links, information_inverse, link_std=0.0,
+                    common_std=0.0):
+    """
+    Return the covariance (p + 1, p + 1) range biases add to a weighted fit of psi.
+
+    Parameters
+    ----------
+    jacobian : ndarray, shape (n, p + 1)
+        Of the scaled residuals (rows divided by ``sigma``), as ``Residuals.jacobian``.
+    sigma : ndarray, shape (n,)
+        Each row's standard deviation (the fit's weights are ``sigma^-2``).
+    links : ndarray of bool, shape (n,)
+        The rows that are tag-anchor ranges (the biased ones).
+    information_inverse : ndarray, shape (p + 1, p + 1)
+        ``F^-1`` of the same rows.
+    link_std, common_std : float
+        Standard deviations of each link's own bias and of the part common to all (see
+        :class:`RangeBiasPrior`), metres.
+
+    Returns
+    -------
+    ndarray, shape (p + 1, p + 1)
+        ``F^-1 M B M^T F^-1`` with ``M = A^T Sigma^-1`` over the link rows and
+        ``B = link_std^2 I + common_std^2 1 1^T``.
+
+    """
+    mapped = information_inverse @ (jacobian[links] / np.asarray(sigma)[links, None]).T
+    total = mapped.sum(axis=1)
+    return link_std ** 2 * mapped @ mapped.T + common_std ** 2 * np.outer(total, total)
 
 
 def fisher_information(model, slew, pitches, sigma, measured=None):
@@ -116,7 +187,11 @@ def bound_from_information(model, slew, pitches, information):
     if not np.all(np.isfinite(eigenvalues)) or eigenvalues[0] <= 1e-14 * eigenvalues[-1]:
         infinite = np.full((p + 1, p + 1), np.inf)
         return Bound(infinite, np.full((p, 3, 3), np.inf), float('inf'))
-    covariance = (vectors / eigenvalues) @ vectors.T
+    return bound_from_covariance(model, slew, pitches, (vectors / eigenvalues) @ vectors.T)
+
+
+def bound_from_covariance(model, slew, pitches, covariance):
+    """Return the :class:`Bound` at a posture of psi's covariance (p + 1, p + 1), rad^2."""
     jacobian = model.joint_jacobian(slew, pitches)
     joint_covariance = np.einsum('kcq,qr,kdr->kcd', jacobian, covariance, jacobian)
     rmse = float(np.sqrt(np.trace(joint_covariance, axis1=-2, axis2=-1).sum()

@@ -31,6 +31,7 @@ import time
 import numpy as np
 
 from .baselines import SDPMethod, SRLSMethod, TPSMMethod
+from .bounds import RangeBiasPrior
 from .chain import ChainMethod
 from .epp import CEPP, EPP1, EPP2
 from .integrity import ERROR, Integrity, IntegrityLimits, OK, Thresholds
@@ -56,7 +57,7 @@ RANGE_METHODS = [name for name, cls in METHODS.items() if 'ranges' in cls.inputs
 #: told about the noise (which the integrity checks use for every method) and the ground.
 ESTIMATOR_OPTIONS = {'sigma': 0.1, 'eta': 0.0, 'tag_sigma': None, 'pitch_sigma': np.radians(0.5),
                      'slew_sigma': np.radians(0.5), 'nlos_fraction': 0.1, 'nlos_gamma': 1.0,
-                     'lowest_joint': -0.5}
+                     'lowest_joint': -0.5, 'link_bias_std': 0.1, 'common_bias_std': 0.25}
 
 
 def accepted_options(method):
@@ -85,8 +86,9 @@ def _told(options):
         if value is not None and not (isinstance(value, (int, float, np.integer, np.floating))
                                       and np.isfinite(value)):
             raise ValueError(f'{name}: must be a finite number, got {value!r}')
-    if told['eta'] < 0:
-        raise ValueError(f'eta: must be >= 0, got {told["eta"]}')
+    for name in ('eta', 'link_bias_std', 'common_bias_std'):
+        if told[name] < 0:
+            raise ValueError(f'{name}: must be >= 0, got {told[name]}')
     if told['tag_sigma'] is None:
         told['tag_sigma'] = told['sigma']
     return told
@@ -97,7 +99,9 @@ def _integrity(model, told, limits, thresholds):
     noise = SensorNoise(float(told['sigma']), float(told['tag_sigma']),
                         float(told['pitch_sigma']), float(told['slew_sigma']))
     nlos = NlosMixture(float(told['nlos_fraction']), float(told['nlos_gamma']))
-    return Integrity(model, noise, nlos, told['eta'], told['lowest_joint'], limits, thresholds)
+    bias = RangeBiasPrior(float(told['link_bias_std']), float(told['common_bias_std']))
+    return Integrity(model, noise, nlos, told['eta'], told['lowest_joint'], limits, thresholds,
+                     bias)
 
 
 class PostureEstimator:
@@ -133,7 +137,11 @@ class PostureEstimator:
         (tag-anchor range standard deviation, 0.1 m), ``eta`` (multiplicative range
         noise, 0), ``tag_sigma`` (tag-tag ranges; ``sigma``), ``pitch_sigma`` and
         ``slew_sigma`` (angle sensors, 0.5 deg), ``nlos_fraction`` (0.1) and ``nlos_gamma``
-        (1 m), ``lowest_joint`` (-0.5 m). And the method's own: ``prior_weight`` (weight
+        (1 m), ``lowest_joint`` (-0.5 m), ``link_bias_std`` (0.1 m) and ``common_bias_std``
+        (0.25 m): what is not known of the ranges' biases once the model's offsets are
+        taken off, each link's own and the part common to all (uncalibrated DW1000-class
+        links: see ``core.bounds.RangeBiasPrior``); they add to the predicted joint
+        standard deviations the thresholds judge. And the method's own: ``prior_weight`` (weight
         of tag-tag distances from the previous pose, default 0; the paper uses 1),
         ``anchor_weight`` (inf: anchor-anchor distances fixed, the default; a number:
         weighted), ``tol``, ``max_iter``; CEPP also ``predict_slew`` (default true; false:

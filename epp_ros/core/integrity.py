@@ -39,7 +39,8 @@ import math
 import numpy as np
 from scipy.special import betainc, gammaincc, gammainccinv
 
-from .bounds import bound_from_information
+from .bounds import (bias_covariance, bound_from_covariance, bound_from_information,
+                     RangeBiasPrior)
 from .chain import angles_from_joints
 from .measurements import Measurements, Residuals, wrap_angle
 
@@ -229,12 +230,21 @@ class Integrity:
         No joint is below this height, metres.
     limits : IntegrityLimits
     thresholds : Thresholds
+    bias : RangeBiasPrior
+        What is not known of the ranges' biases. Each link's own part is, within one
+        frame, another independent error of each range: it adds to the range sigma of
+        every check (:meth:`link_sigma`). The part common to all links moves a fit in a
+        direction its residuals barely see: it adds to each joint's predicted standard
+        deviation (``joint_std``, ``predicted_rmse``, judged by the observability
+        thresholds) only; the checks of ambiguity and of jumps leave it out (a bias
+        constant over frames neither folds a joint nor makes it jump).
 
     """
 
     def __init__(self, model, noise, nlos, eta=0.0, lowest_joint=-0.5,
-                 limits=IntegrityLimits(), thresholds=Thresholds()):
+                 limits=IntegrityLimits(), thresholds=Thresholds(), bias=RangeBiasPrior()):
         self.model = model
+        self.bias = bias
         self.noise = noise
         self.nlos = nlos
         self.eta = float(eta)
@@ -243,7 +253,8 @@ class Integrity:
         self.thresholds = thresholds
         # The mixture's per-link constants, bound once where the sigmas are fixed.
         fixed = np.ndim(noise.range_sigma) == 0 and not self.eta
-        self._link_loss = nlos.bind(np.asarray(noise.range_sigma, float)) if fixed else None
+        self._link_loss = nlos.bind(np.hypot(float(noise.range_sigma), bias.link_std)) \
+            if fixed else None
         self._tag_loss = nlos.bind(np.asarray(noise.tag_sigma, float))
 
     # -- the pieces -----------------------------------------------------------------------
@@ -253,6 +264,8 @@ class Integrity:
                                 measurements.ranges.shape)
         if self.eta:
             sigma = np.hypot(sigma, self.eta * np.nan_to_num(measurements.ranges))
+        if self.bias.link_std:
+            sigma = np.hypot(sigma, self.bias.link_std)
         return sigma
 
     def _excess(self, joints, measurements):
@@ -363,17 +376,34 @@ class Integrity:
         model's prediction is not trusted to make a posture valid (its process noise is
         itself a guess).
         """
+        return self.bounds(joints, measurements, kept, angles)[0]
+
+    def bounds(self, joints, measurements, kept, angles):
+        """
+        Return :meth:`bound`, and that bound with the unknown common range bias added.
+
+        Both count each link's own bias in its sigma; the second is the first when no
+        common bias is unknown or the first is infinite.
+        """
         slew, pitches = angles
         ranges, tag_ranges = kept
         used = Measurements(np.where(ranges, measurements.ranges, np.nan),
                             np.where(tag_ranges, measurements.tag_ranges, np.nan),
                             measurements.pitches, measurements.slew)
         noise = self.noise
-        if self.eta:
+        if self.eta or self.bias.link_std:
             noise = type(noise)(self.link_sigma(measurements), noise.tag_sigma,
                                 noise.pitch_sigma, noise.slew_sigma)
-        jacobian = Residuals(self.model, used, noise).jacobian(np.r_[slew, pitches])
-        return bound_from_information(self.model, slew, pitches, jacobian.T @ jacobian)
+        residuals = Residuals(self.model, used, noise)
+        jacobian = residuals.jacobian(np.r_[slew, pitches])
+        random = bound_from_information(self.model, slew, pitches, jacobian.T @ jacobian)
+        if not self.bias.common_std or not math.isfinite(random.rmse):
+            return random, random
+        links = np.arange(residuals.size) < np.count_nonzero(residuals.link_mask)
+        added = bias_covariance(jacobian, residuals.sigma, links, random.parameter_covariance,
+                                common_std=self.bias.common_std)
+        return random, bound_from_covariance(self.model, slew, pitches,
+                                             random.parameter_covariance + added)
 
     def reach(self, reference, elapsed, reference_std):
         """
@@ -391,13 +421,14 @@ class Integrity:
         return (self.limits.max_angular_rate * elapsed * (radius + levers)
                 + 3.0 * np.asarray(reference_std))
 
-    def point_bound(self, joints, measurements, kept):
+    def point_bound(self, joints, measurements, kept, biased=False):
         """
         Per-joint standard deviations (p,) of joints located each from its own ranges.
 
         The bound of a method that does not hold the boom to its p + 1 angles (EPP1, EPP2,
         the per-tag baselines): each joint's 3-D Fisher information from its kept links;
-        infinite for a joint with fewer than three, or with anchors on one line.
+        infinite for a joint with fewer than three, or with anchors on one line. With
+        ``biased``, the bias common to all links is added, as in :meth:`bounds`.
         """
         units = joints[:, None, :] - self.model.anchors                         # (p, m, 3)
         units /= np.maximum(_norm(units), 1e-12)[..., None]
@@ -405,9 +436,13 @@ class Integrity:
         information = np.einsum('km,kmi,kmj->kij', weights, units, units)
         std = np.full(self.model.n_sections, np.inf)
         for k, matrix in enumerate(information):
-            values = np.linalg.eigvalsh(matrix)
+            values, vectors = np.linalg.eigh(matrix)
             if values[0] > 1e-12 * max(values[-1], 1e-300):
-                std[k] = math.sqrt(np.sum(1.0 / values))
+                covariance = (vectors / values) @ vectors.T
+                if biased and self.bias.common_std:
+                    total = covariance @ (units[k] * weights[k][:, None]).sum(axis=0)
+                    covariance = covariance + self.bias.common_std ** 2 * np.outer(total, total)
+                std[k] = math.sqrt(np.trace(covariance))
         return std
 
     def _near(self, joint_std):
@@ -592,12 +627,17 @@ class Integrity:
         self._plausibility(joints, angles[0], reach, elapsed, checks, values)
         kept = self._consistency(joints if timed_joints is None else timed_joints,
                                  measurements, checks, values)
-        joint_std = (self.bound(joints, measurements, kept, angles).joint_std if chain
-                     else self.point_bound(joints, measurements, kept))
+        if chain:
+            joint_std, total_std = (bound.joint_std for bound in self.bounds(
+                joints, measurements, kept, angles))
+        else:
+            joint_std = self.point_bound(joints, measurements, kept)
+            total_std = self.point_bound(joints, measurements, kept, biased=True)
         # Postures are weighed where each tag was when it ranged (a moving boom, TDMA).
         shift = 0.0 if timed_joints is None else np.asarray(timed_joints) - joints
         seen = joints + shift
-        self._observability(joint_std, checks, values)
+        values['noise_rmse'] = float(np.sqrt(np.mean(joint_std ** 2)))
+        self._observability(total_std, checks, values)
         values['reach_std'] = np.maximum(joint_std,
                                          self.fold_spread(seen, measurements, angles[0]))
         ambiguous = set(self.ambiguous_joints(seen, measurements, joint_std, angles[0], reach))

@@ -36,6 +36,7 @@ import operator
 
 import numpy as np
 
+from .link_errors import bias_at_range, LinkErrors
 from .model import BoomModel
 
 __all__ = ['XIE3DIM', 'xie3dim', 'truck_pump', 'TRUCK_BODY_ANCHORS', 'truck_body_anchors',
@@ -569,16 +570,30 @@ def _check_positive(name, value):
         raise ValueError(f'{name} must be finite and > 0, got {value!r}')
 
 
-def _effect_number(name, value, high=np.inf, positive=False):
-    """Return ``value`` as a float in [0, high] (or (0, high]); ValueError naming the field."""
+def _effect_number(name, value, high=np.inf, positive=False, low=0.0):
+    """Return ``value`` as a float in [low, high] (or (0, high]); ValueError naming the field."""
     try:
         number = float(value)
     except (TypeError, ValueError):
         raise ValueError(f'FieldEffects.{name} must be a number, got {value!r}') from None
-    if not (np.isfinite(number) and 0.0 <= number <= high and (number > 0 or not positive)):
-        interval = f'{"(" if positive else "["}0, {high:g}]'
+    if not (np.isfinite(number) and low <= number <= high and (number > 0 or not positive)):
+        interval = f'{"(" if positive else "["}{low:g}, {high:g}]'
         raise ValueError(f'FieldEffects.{name} must be finite and in {interval}, got {value!r}')
     return number
+
+
+def _bias_curve(value):
+    """Return ``value`` as a tuple of finite (range, bias) pairs in increasing range."""
+    try:
+        knots = np.asarray(value, dtype=float).reshape(-1, 2) if len(value) else np.zeros((0, 2))
+    except (TypeError, ValueError):
+        raise ValueError('FieldEffects.bias_curve must be (range m, bias m) pairs, got '
+                         f'{value!r}') from None
+    if not np.all(np.isfinite(knots)) or np.any(np.diff(knots[:, 0]) <= 0) or np.any(
+            knots[:, 0] < 0):
+        raise ValueError('FieldEffects.bias_curve must be finite (range m, bias m) pairs in '
+                         f'increasing range >= 0, got {value!r}')
+    return tuple((float(r), float(b)) for r, b in knots)
 
 
 def _anchor_indices(value):
@@ -601,9 +616,12 @@ class FieldEffects:
     """
     How a pump in the field departs from its configuration; each effect is off by default.
 
-    A measured range is ``r + o_tag + o_anchor + (sigma + sigma_per_metre r) N + X``,
-    clipped at zero, where r is the true distance from the tag to the anchor's TRUE
-    position, N standard normal, ``o`` the per-device offsets and X the NLOS excess.
+    A measured range is ``r + o_tag + o_anchor + b_link + (sigma + sigma_per_metre r) N +
+    X``, clipped at zero, where r is the true distance from the tag to the anchor's TRUE
+    position, N standard normal, ``o`` the per-device offsets, ``b_link`` what real links
+    add (a common bias, a pair term, growth with range and with the tag's orientation,
+    outliers; all zero by default; see :mod:`epp_ros.core.link_errors`) and X the NLOS
+    excess. With ``correlated_fraction`` > 0 part of N is correlated in time.
 
     Persistent conditions (a blocked link, a silent tag) are two-state Markov chains in
     continuous time, one per link or tag: in the long run a fraction ``f`` of the time in
@@ -644,14 +662,29 @@ class FieldEffects:
     bias_period: float = 120.0          #: s, period of the bias's slow part
     slew_encoder: bool = False          #: simulate a slew encoder
     slew_error: float = float(np.radians(0.5))     #: rad, bound of its uniform error
+    range_bias: float = 0.0             #: m, bias common to every link (may be < 0)
+    link_offset: float = 0.0            #: m, std of each link's own constant bias (pair)
+    bias_curve: tuple = ()              #: ((m, m), ...): bias by range, piecewise linear
+    orientation_bias: float = 0.0       #: m, RMS of a link's bias with the tag's pitch
+    outlier_rate: float = 0.0           #: outliers per link and second
+    outlier_duration: float = 0.25      #: s, mean length of one
+    outlier_size: float = 1.0           #: m, std of an outlier's excess (signed)
+    correlated_fraction: float = 0.0    #: share of the noise variance correlated in time
+    noise_correlation_time: float = 2.4     #: s, of that share
 
     def __post_init__(self):
         for name in ('sigma', 'sigma_per_metre', 'tag_offset', 'anchor_offset',
                      'anchor_shift', 'nlos_duration', 'nlos_gamma', 'dropout_duration',
-                     'pitch_sigma', 'inclinometer_bias', 'slew_error'):
+                     'pitch_sigma', 'inclinometer_bias', 'slew_error', 'link_offset',
+                     'orientation_bias', 'outlier_rate', 'outlier_duration', 'outlier_size',
+                     'noise_correlation_time'):
             object.__setattr__(self, name, _effect_number(name, getattr(self, name)))
-        for name in ('nlos_fraction', 'dropout_fraction', 'link_dropout'):
+        for name in ('nlos_fraction', 'dropout_fraction', 'link_dropout',
+                     'correlated_fraction'):
             object.__setattr__(self, name, _effect_number(name, getattr(self, name), high=1.0))
+        object.__setattr__(self, 'range_bias', _effect_number(
+            'range_bias', self.range_bias, low=-np.inf))
+        object.__setattr__(self, 'bias_curve', _bias_curve(self.bias_curve))
         object.__setattr__(self, 'bias_period',
                            _effect_number('bias_period', self.bias_period, positive=True))
         for name in ('tdma', 'inclinometers', 'slew_encoder'):
@@ -674,6 +707,20 @@ FIELD_EFFECTS = {
     'anchors_moved': FieldEffects(anchor_shift=0.2),
     'inclinometer_bias': FieldEffects(inclinometers=True,
                                       inclinometer_bias=float(np.radians(2.0))),
+    # Real DW1000-class links (public two-way-ranging recordings with motion-capture
+    # truth; an outdoor DWM1001 one for the range curve): link biases +0.04 / +0.18 /
+    # +0.33 m at the 5th / 50th / 95th percentile, of which ~4.5 cm RMS belongs to the
+    # pair; +-6 cm with the tag's orientation; -1 cm at 2-6 m, +23 cm at 25 m, +30 cm at
+    # 55 m; sigma 6-8 cm on a moving body, autocorrelation 0.73 at one frame and 0.50 at
+    # ten (76 % of the variance with a 2.4 s correlation time); ~33 outliers of 1-4
+    # frames per link-hour, the largest +-3.3 m.
+    'real_uwb': FieldEffects(sigma=0.07, range_bias=0.18, tag_offset=0.05, anchor_offset=0.05,
+                             link_offset=0.045, orientation_bias=0.06,
+                             bias_curve=((2.0, -0.01), (6.0, -0.01), (25.0, 0.23),
+                                         (55.0, 0.30)),
+                             outlier_rate=33.0 / 3600.0, outlier_duration=0.25,
+                             outlier_size=1.0, correlated_fraction=0.76,
+                             noise_correlation_time=2.4),
 }
 
 
@@ -804,6 +851,11 @@ class FieldSimulator:
     bias_offset, bias_amplitude, bias_phase : ndarray, shape (p,)
         The inclinometer biases' constant parts and slow sinusoids' amplitudes (radians)
         and phases (:meth:`inclinometer_bias`).
+    links : LinkErrors
+        What real links add (:mod:`epp_ros.core.link_errors`), drawn from a generator of
+        its own; ``links.link_offsets`` (p, m) are the tag-anchor pairs' own biases.
+    anchor_pair_offsets : ndarray, shape (m, m)
+        The anchor-anchor pairs' own biases, symmetric, metres.
 
     """
 
@@ -829,6 +881,10 @@ class FieldSimulator:
         self._stamp = None
         # Last, so that every draw above and every frame's draws stay as they were.
         self._anchor_rng = _child_generator(rng)
+        link_rng = _child_generator(rng)
+        self.links = LinkErrors(effects, (p, m), link_rng)
+        pairs = np.triu(link_rng.normal(0.0, effects.link_offset, (m, m)), 1)
+        self.anchor_pair_offsets = pairs + pairs.T
 
     def _moving_anchors(self, indices):
         m = self.model.n_anchors
@@ -845,9 +901,10 @@ class FieldSimulator:
         Return one round of anchor-anchor ranges, as the anchors measure them.
 
         Anchor i's range to anchor j is the distance between their TRUE positions plus
-        ``anchor_offsets[i] + anchor_offsets[j]`` plus noise of the tag ranges' sigma
-        (``sigma + sigma_per_metre d``), drawn for each direction independently, clipped
-        at zero.
+        ``anchor_offsets[i] + anchor_offsets[j]``, the links' common bias, the pair's own
+        and the bias at that range (``range_bias``, ``anchor_pair_offsets``,
+        ``bias_curve``), plus noise of the tag ranges' sigma (``sigma + sigma_per_metre
+        d``), drawn for each direction independently, clipped at zero.
 
         Parameters
         ----------
@@ -865,8 +922,10 @@ class FieldSimulator:
         anchors, effects = self.true_anchors, self.effects
         distances = np.linalg.norm(anchors[:, None] - anchors[None], axis=-1)
         sigma = effects.sigma + effects.sigma_per_metre * distances
+        bias = (effects.range_bias + self.anchor_pair_offsets
+                + bias_at_range(effects.bias_curve, distances))
         ranges = np.maximum(distances + self.anchor_offsets[:, None] + self.anchor_offsets
-                            + sigma * rng.standard_normal(distances.shape), 0.0)
+                            + bias + sigma * rng.standard_normal(distances.shape), 0.0)
         np.fill_diagonal(ranges, np.nan)
         return ranges
 
@@ -911,7 +970,7 @@ class FieldSimulator:
             self._step_chains(stamp - self._stamp)
         self._stamp = stamp
         range_stamps = self.slot_times(stamp)
-        ranges = self._measure(self._true_ranges(motion, range_stamps))
+        ranges = self._measure(*self._tags(motion, range_stamps))
         slew_true, pitches_true = motion.angles(stamp)
         pitches, slew = self._angle_sensors(stamp, float(slew_true), pitches_true)
         return FieldFrame(stamp, ranges, range_stamps, pitches, slew,
@@ -920,25 +979,29 @@ class FieldSimulator:
                           self._silent.copy())
 
     def _step_chains(self, elapsed):
+        self.links.step(elapsed)
         effects = self.effects
         self._nlos = _markov_step(self._nlos, effects.nlos_fraction, effects.nlos_duration,
                                   elapsed, self.rng)
         self._silent = _markov_step(self._silent, effects.dropout_fraction,
                                     effects.dropout_duration, elapsed, self.rng)
 
-    def _true_ranges(self, motion, range_stamps):
-        """Return the distances (p, m) from each tag, at its slot time, to the true anchors."""
+    def _tags(self, motion, range_stamps):
+        """Return each tag (p, 3) and its section's pitch (p,), each at its slot time."""
         p = self.model.n_sections
-        tags = motion.joints(range_stamps)[np.arange(p), np.arange(p)]
-        return np.linalg.norm(tags[:, None, :] - self.true_anchors[None], axis=-1)
+        slew, pitches = motion.angles(range_stamps)
+        tags = self.model.forward_kinematics(slew, pitches)[np.arange(p), np.arange(p)]
+        return tags, np.asarray(pitches)[np.arange(p), np.arange(p)]
 
-    def _measure(self, true_ranges):
+    def _measure(self, tags, pitches):
         effects, rng = self.effects, self.rng
+        true_ranges = np.linalg.norm(tags[:, None, :] - self.true_anchors[None], axis=-1)
         sigma = effects.sigma + effects.sigma_per_metre * true_ranges
-        noise = sigma * rng.standard_normal(true_ranges.shape)
+        noise = self.links.noise(sigma, rng.standard_normal(true_ranges.shape))
         excess = self._nlos * rng.exponential(effects.nlos_gamma, true_ranges.shape)
+        bias = self.links.bias(true_ranges, tags, self.true_anchors, pitches)
         ranges = np.maximum(true_ranges + self.tag_offsets[:, None] + self.anchor_offsets
-                            + noise + excess, 0.0)
+                            + bias + noise + excess + self.links.outliers(), 0.0)
         missing = rng.random(true_ranges.shape) < effects.link_dropout
         ranges[missing | self._silent[:, None]] = np.nan
         return ranges

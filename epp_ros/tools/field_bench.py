@@ -65,8 +65,9 @@ CASES = {
     'all': ('sigma_distance,nlos_persistent,tdma,dropouts', 'working'),
     'offsets': ('offsets', 'working'),
     'anchors_moved': ('anchors_moved', 'working'),
+    'real_uwb': ('real_uwb', 'working'),
 }
-CALIBRATION = ('offsets', 'anchors_moved')
+CALIBRATION = ('offsets', 'anchors_moved', 'real_uwb')
 TARGETS = {'chain': 1.15, 'cepp': 1.3, 'track': 0.7}
 #: The process noise of the ``cv`` case, rad^2/s^3.
 CV_PROCESS_NOISE = 1e-4
@@ -128,7 +129,7 @@ def run_case(name, seconds, seed):
     bounds = np.array([_clean_bound(model, f, effects) for f in frames])[scored]
     results = {}
     for method, estimator in _estimators(model, effects).items():
-        squared, valid, times, published = [], 0, [], []
+        squared, valid, times, published, predicted = [], 0, [], [], []
         for frame, score in zip(frames, scored):
             start = time.perf_counter()
             returned = estimator.update(**frame.inputs())
@@ -140,8 +141,10 @@ def run_case(name, seconds, seed):
                 squared.append(error)
                 valid += diagnostics['valid']
                 published.append(bool(diagnostics['valid']))
+                predicted.append(diagnostics.get('predicted_rmse', np.nan))
         results[method] = {'squared': np.array(squared), 'valid': valid,
                            'published': np.array(published, dtype=bool),
+                           'predicted': np.array(predicted, dtype=float),
                            'ms': 1e3 * float(np.median(times))}
     return results, bounds, frames, model
 
