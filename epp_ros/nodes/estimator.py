@@ -135,6 +135,10 @@ SETTINGS = {
     'slew_sigma': _told('slew_sigma', 'Slew encoder standard deviation, rad.', 1e-6, 1.0),
     'lowest_joint': _told('lowest_joint', 'No joint is below this height, m (ground z = 0).',
                           -1e3, 1e3),
+    'link_bias_std': _told('link_bias_std', "Std of each range's own bias left after the "
+                           'offsets (not averaged over frames), m.', 0.0, 10.0),
+    'common_bias_std': _told('common_bias_std', 'Std of the bias common to all ranges left '
+                             'after the offsets, m: adds to the predicted RMSE.', 0.0, 10.0),
     'max_angular_rate': Setting(IntegrityLimits.max_angular_rate, 'Fastest slew or pitch '
                                 'rate of the boom, rad/s: rules out jumps and folds.', True,
                                 1e-4, 100.0),
@@ -147,7 +151,8 @@ SETTINGS = {
 #: Estimator options told by parameters of another name.
 OPTION_OF = {'range_sigma': 'sigma', 'nlos_fraction': 'nlos_fraction',
              'nlos_gamma': 'nlos_gamma', 'tag_sigma': 'tag_sigma', 'pitch_sigma': 'pitch_sigma',
-             'slew_sigma': 'slew_sigma', 'lowest_joint': 'lowest_joint'}
+             'slew_sigma': 'slew_sigma', 'lowest_joint': 'lowest_joint',
+             'link_bias_std': 'link_bias_std', 'common_bias_std': 'common_bias_std'}
 
 
 def _parameter_name(message):

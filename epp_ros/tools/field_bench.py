@@ -185,14 +185,37 @@ def _ratio_over(squared, bounds, frames):
     return _ratio(squared[frames], bounds[frames]) if frames.any() else float('nan')
 
 
+#: Metres: a frame published as valid this far off is wrong for a pump's controller ...
+WRONG_M = 1.0
+#: ... and confidently so when its predicted RMSE is under this fraction of its error.
+COVERED_FRACTION = 1.0 / 3.0
+
+
+def wrong_frames(squared, published, predicted):
+    """
+    Return how many frames were published as valid while more than ``WRONG_M`` off.
+
+    And of those, how many said so too little: a predicted RMSE under ``COVERED_FRACTION``
+    of the error (or none). ``squared`` (T,): each frame's mean squared joint error, m^2;
+    ``published`` (T,) bool; ``predicted`` (T,): the predicted RMSE, m (NaN: none).
+    """
+    error = np.sqrt(squared)
+    wrong = published & (error > WRONG_M)
+    confident = wrong & ~(np.asarray(predicted) >= COVERED_FRACTION * error)
+    return int(wrong.sum()), int(confident.sum())
+
+
 def _method_cell(runs, bounds, heard):
     """Return a method's figures in a case from its runs (see :func:`_case_runs`)."""
     squared = np.concatenate([run['squared'] for run in runs])
     published = np.concatenate([run['published'] for run in runs])
+    predicted = np.concatenate([run['predicted'] for run in runs])
+    wrong, confident = wrong_frames(squared, published, predicted)
     return {'ratio': _ratio(squared, bounds), 'heard_ratio': _ratio_over(squared, bounds, heard),
             'published_ratio': _ratio_over(squared, bounds, published),
             'valid': sum(run['valid'] for run in runs) / bounds.size,
-            'gross': sum(run['gross'] for run in runs)}
+            'gross': sum(run['gross'] for run in runs),
+            'wrong_valid': wrong, 'confidently_wrong': confident}
 
 
 def field_rows(seconds, seeds):
