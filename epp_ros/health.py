@@ -153,6 +153,12 @@ def report(diagnostics, lengths):
         values['NLOS fraction'] = f'{noise.nlos_fraction:.3f}'
         values['NLOS mean excess [m]'] = f'{noise.nlos_gamma:.3f}'
         values['noise learned from links'] = str(noise.links)
+    if 'range_bias' in diagnostics:         # the common bias taken off the ranges
+        offset, slope = diagnostics['range_bias']
+        values['range bias [m]'] = f'{offset:.4f}'
+        values['range bias per metre'] = f'{slope:.5f}'
+    if 'noise_rmse' in diagnostics:         # the predicted RMSE without the common bias
+        values['noise RMSE [m]'] = f'{diagnostics["noise_rmse"]:.4f}'
     if 'nlos_links' in diagnostics:
         blocked = np.asarray(diagnostics['nlos_links'])
         values['NLOS links'] = str(int(np.sum(blocked)))

@@ -282,8 +282,9 @@ def test_range_biases_add_the_covariance_they_give_a_weighted_fit(link_std, comm
     residuals = Residuals(model, Measurements.ranges_only(distances), SensorNoise(sigma))
     jacobian = residuals.jacobian(truth)
     inverse = np.linalg.inv(jacobian.T @ jacobian)
+    common = (np.ones((residuals.size, 1)), np.array([[common_std ** 2]]))
     expected = inverse + bias_covariance(jacobian, residuals.sigma, residuals.ranged(),
-                                         inverse, link_std, common_std)
+                                         inverse, link_std, common)
     measured = np.cov(np.array(estimates).T)
     # Variances of 400 draws: relative standard error sqrt(2 / 400) = 7 %.
     np.testing.assert_allclose(np.diag(measured), np.diag(expected),

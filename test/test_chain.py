@@ -17,7 +17,7 @@ from epp_ros.core import PostureEstimator
 from epp_ros.core.bounds import crlb, fisher_information
 from epp_ros.core.chain import angles_from_joints
 from epp_ros.core.simulate import random_posture, RangeNoise, truck_pump, working_cycle, xie3dim
-from monte_carlo import assert_mse_at_bound
+from monte_carlo import assert_mse_at_bound, UNBIASED
 import numpy as np
 import pytest
 
@@ -30,7 +30,7 @@ def test_cold_start_recovers_any_posture_exactly(geometry):
     rng = np.random.default_rng(1)
     for _ in range(15):
         slew, pitches, joints = random_posture(model, rng)
-        estimator = PostureEstimator(model, 'chain', sigma=1e-3, nlos_fraction=0.0)
+        estimator = PostureEstimator(model, 'chain', sigma=1e-3, nlos_fraction=0.0, **UNBIASED)
         np.testing.assert_allclose(estimator.update(model.ranges(joints)), joints, atol=1e-8)
         diagnostics = estimator.last_diagnostics
         assert diagnostics['status'] == 'ok' and not diagnostics['nlos_links'].any()
@@ -91,7 +91,7 @@ def test_monte_carlo_rmse_matches_the_bound():
     slew, pitches, joints = random_posture(model, rng)
     sigma, trials = 0.05, 400
     bound = crlb(model, slew, pitches, sigma)
-    estimator = PostureEstimator(model, 'chain', sigma=sigma)
+    estimator = PostureEstimator(model, 'chain', sigma=sigma, **UNBIASED)
     estimator.update(model.ranges(joints))                      # warm start at the truth
     squared = []
     for _ in range(trials):

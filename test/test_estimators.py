@@ -17,6 +17,7 @@ from pathlib import Path
 from epp_ros.core import BoomModel, PostureEstimator, RANGE_METHODS
 from epp_ros.core.simulate import random_posture, RangeNoise, truck_pump, working_cycle, xie3dim
 from epp_ros.tools.experiments import method_estimate
+from monte_carlo import UNBIASED
 import numpy as np
 import pytest
 import yaml
@@ -28,7 +29,7 @@ BOOM_METHODS = ['cepp', 'chain', 'epp1', 'epp2']
 #: Methods that place each tag from its own four anchor ranges.
 PER_TAG = ('epp1', 'srls', 'sdp')
 #: Noise-free frames, and the estimator told so: one frame then determines the posture.
-EXACT = {'sigma': 1e-3, 'nlos_fraction': 0.0}
+EXACT = {'sigma': 1e-3, 'nlos_fraction': 0.0, **UNBIASED}
 
 
 @pytest.mark.parametrize('geometry', sorted(GEOMETRIES))
@@ -97,7 +98,7 @@ def test_missing_ranges_are_tolerated(method):
         joints = random_posture(model, rng)[2]
         ranges = model.ranges(joints)
         ranges[rng.random(ranges.shape) < 0.15] = np.nan
-        estimator = PostureEstimator(model, method)
+        estimator = PostureEstimator(model, method, **UNBIASED)
         estimate = estimator.update(ranges)
         diagnostics = estimator.last_diagnostics
         assert diagnostics['missing_links'] == np.isnan(ranges).sum()
@@ -168,7 +169,7 @@ def test_too_little_information_returns_previous_estimate_never_nan(method):
 def test_reset_forgets_the_warm_start():
     model = truck_pump()
     joints = random_posture(model, np.random.default_rng(8))[2]
-    estimator = PostureEstimator(model, 'cepp')
+    estimator = PostureEstimator(model, 'cepp', **UNBIASED)
     estimator.update(model.ranges(joints))
     estimator.update(model.ranges(joints))
     assert not estimator.last_diagnostics['cold_start']

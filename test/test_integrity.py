@@ -19,6 +19,7 @@ from epp_ros.core.integrity import (_binomial_tail, _chi_square_limit, fold_alte
                                     IntegrityLimits, Thresholds)
 from epp_ros.core.measurements import Measurements
 from epp_ros.core.simulate import random_posture, RangeNoise, truck_pump, working_cycle
+from monte_carlo import UNBIASED
 import numpy as np
 import pytest
 from scipy.stats import binom, chi2
@@ -173,8 +174,7 @@ def test_a_joint_with_one_range_is_ambiguous_unless_time_rules_the_fold_out():
 
 def test_predicted_uncertainty_is_the_bound_at_the_estimate():
     slew, pitches, joints = random_posture(MODEL, np.random.default_rng(7))
-    unbiased = PostureEstimator(MODEL, 'cepp', sigma=0.1, nlos_fraction=0.0, link_bias_std=0.0,
-                                common_bias_std=0.0)
+    unbiased = PostureEstimator(MODEL, 'cepp', sigma=0.1, nlos_fraction=0.0, **UNBIASED)
     unbiased.update(MODEL.ranges(joints))
     bound = crlb(MODEL, slew, pitches, 0.1)
     assert unbiased.last_diagnostics['predicted_rmse'] == pytest.approx(bound.rmse, rel=1e-6)
@@ -198,8 +198,8 @@ def test_predicted_std_covers_link_biases_the_noise_alone_would_not():
         bias = link_std * rng.standard_normal((MODEL.n_sections, MODEL.n_anchors))
         ranges = MODEL.ranges(joints) + bias + sigma * rng.standard_normal(bias.shape)
         estimator = PostureEstimator(MODEL, 'chain', learn_noise=False, sigma=sigma,
-                                     nlos_fraction=0.0, link_bias_std=link_std,
-                                     common_bias_std=0.0)
+                                     nlos_fraction=0.0, **{**UNBIASED,
+                                                           'link_bias_std': link_std})
         estimator.reset(joints)
         estimator.update(ranges)
         result = estimator.last_diagnostics
@@ -272,7 +272,7 @@ def test_the_residual_thresholds_grade_the_line_of_sight_residuals():
     levels = {}
     for warn, error in ((0.5, 2.0), (0.01, 2.0), (0.01, 0.02)):
         estimator = PostureEstimator(MODEL, 'chain', thresholds=Thresholds(
-            residual_warn=warn, residual_error=error))
+            residual_warn=warn, residual_error=error), **UNBIASED)
         estimator.update(ranges)
         diagnostics = estimator.last_diagnostics
         assert 0.03 < diagnostics['los_residual_rms'] < 0.3          # about sigma

@@ -60,20 +60,23 @@ __all__ = ['fisher_information', 'Bound', 'crlb', 'bound_from_information',
 @dataclass(frozen=True)
 class RangeBiasPrior:
     """
-    What is not known of the biases left in the tag-anchor ranges, metres.
+    What is not known of the biases left in the tag-anchor ranges.
 
-    A range's systematic error is ``c + e_kj``: ``c ~ N(0, common_std^2)`` shared by every
-    link, ``e_kj ~ N(0, link_std^2)`` each link's own; both constant over frames. Zero: the
-    ranges are unbiased once the model's offsets are taken off (the simulator's pumps).
-    Uncalibrated DW1000-class links have a common part of ~0.2-0.4 m at a boom's ranges
-    and ~0.1 m of their own (``simulate.FIELD_EFFECTS['real_uwb']``).
+    A range ``r`` has the systematic error ``c + s (r - r0) + e_kj``: ``c ~ N(0,
+    common_std^2)`` (metres) and ``s ~ N(0, slope_std^2)`` (metres per metre, about ``r0 =
+    core.bias_learning.REFERENCE_RANGE``) shared by every link, ``e_kj ~ N(0, link_std^2)``
+    each link's own; all constant over frames. Zero: the ranges are unbiased once the
+    model's offsets are taken off (the simulator's pumps). Uncalibrated DW1000-class links
+    have a common part of ~0.2-0.4 m at a boom's ranges, growing by ~1 cm per metre, and
+    ~0.1 m of each link's own (``simulate.FIELD_EFFECTS['real_uwb']``).
     """
 
     link_std: float = 0.0
     common_std: float = 0.0
+    slope_std: float = 0.0
 
     def __post_init__(self):
-        for name in ('link_std', 'common_std'):
+        for name in ('link_std', 'common_std', 'slope_std'):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float, np.integer,
                                                                  np.floating)) \
@@ -83,11 +86,14 @@ class RangeBiasPrior:
 
     def __bool__(self):
         """Whether any bias is unknown."""
-        return self.link_std > 0 or self.common_std > 0
+        return self.link_std > 0 or self.common_std > 0 or self.slope_std > 0
+
+    def common_covariance(self):
+        """Return the covariance (2, 2) of the common offset (m) and slope (m/m)."""
+        return np.diag([self.common_std ** 2, self.slope_std ** 2])
 
 
-def bias_covariance(jacobian, sigma, links, information_inverse, link_std=0.0,
-                    common_std=0.0):
+def bias_covariance(jacobian, sigma, links, information_inverse, link_std=0.0, common=None):
     """
     Return the covariance (p + 1, p + 1) range biases add to a weighted fit of psi.
 
@@ -101,20 +107,26 @@ def bias_covariance(jacobian, sigma, links, information_inverse, link_std=0.0,
         The rows that are tag-anchor ranges (the biased ones).
     information_inverse : ndarray, shape (p + 1, p + 1)
         ``F^-1`` of the same rows.
-    link_std, common_std : float
-        Standard deviations of each link's own bias and of the part common to all (see
-        :class:`RangeBiasPrior`), metres.
+    link_std : float
+        Standard deviation of each link's own bias, metres.
+    common : tuple (ndarray (L, k), ndarray (k, k)), optional
+        The common bias: its directions over the L link rows (the bias of link row i is
+        ``design[i] @ beta``) and the covariance of ``beta``.
 
     Returns
     -------
     ndarray, shape (p + 1, p + 1)
         ``F^-1 M B M^T F^-1`` with ``M = A^T Sigma^-1`` over the link rows and
-        ``B = link_std^2 I + common_std^2 1 1^T``.
+        ``B = link_std^2 I + design C design^T``.
 
     """
     mapped = information_inverse @ (jacobian[links] / np.asarray(sigma)[links, None]).T
-    total = mapped.sum(axis=1)
-    return link_std ** 2 * mapped @ mapped.T + common_std ** 2 * np.outer(total, total)
+    added = link_std ** 2 * mapped @ mapped.T
+    if common is not None:
+        design, covariance = common
+        through = mapped @ design
+        added = added + through @ covariance @ through.T
+    return added
 
 
 def fisher_information(model, slew, pitches, sigma, measured=None):

@@ -25,17 +25,19 @@ positions (p, 3), keeping the previous estimate as the warm start. Methods:
 - the paper's baselines (``core.baselines``): ``srls`` (each tag alone), ``sdp`` (the
   Biswas–Ye relaxation; needs the optional cvxpy) and ``tpsm`` (angle sensors only).
 """
+from dataclasses import replace
 import inspect
 import time
 
 import numpy as np
 
 from .baselines import SDPMethod, SRLSMethod, TPSMMethod
+from .bias_learning import BiasLearner
 from .bounds import RangeBiasPrior
-from .chain import ChainMethod
+from .chain import angles_from_joints, ChainMethod
 from .epp import CEPP, EPP1, EPP2
 from .integrity import ERROR, Integrity, IntegrityLimits, OK, Thresholds
-from .measurements import Measurements, plausible_limits, SensorNoise
+from .measurements import Measurements, plausible_limits, Residuals, SensorNoise
 from .methods import FrameResult
 from .multilateration import cold_start_guess
 from .nlos import NlosMixture
@@ -57,7 +59,8 @@ RANGE_METHODS = [name for name, cls in METHODS.items() if 'ranges' in cls.inputs
 #: told about the noise (which the integrity checks use for every method) and the ground.
 ESTIMATOR_OPTIONS = {'sigma': 0.1, 'eta': 0.0, 'tag_sigma': None, 'pitch_sigma': np.radians(0.5),
                      'slew_sigma': np.radians(0.5), 'nlos_fraction': 0.1, 'nlos_gamma': 1.0,
-                     'lowest_joint': -0.5, 'link_bias_std': 0.1, 'common_bias_std': 0.25}
+                     'lowest_joint': -0.5, 'link_bias_std': 0.1, 'common_bias_std': 0.25,
+                     'bias_slope_std': 0.01}
 
 
 def accepted_options(method):
@@ -86,7 +89,7 @@ def _told(options):
         if value is not None and not (isinstance(value, (int, float, np.integer, np.floating))
                                       and np.isfinite(value)):
             raise ValueError(f'{name}: must be a finite number, got {value!r}')
-    for name in ('eta', 'link_bias_std', 'common_bias_std'):
+    for name in ('eta', 'link_bias_std', 'common_bias_std', 'bias_slope_std'):
         if told[name] < 0:
             raise ValueError(f'{name}: must be >= 0, got {told[name]}')
     if told['tag_sigma'] is None:
@@ -99,7 +102,8 @@ def _integrity(model, told, limits, thresholds):
     noise = SensorNoise(float(told['sigma']), float(told['tag_sigma']),
                         float(told['pitch_sigma']), float(told['slew_sigma']))
     nlos = NlosMixture(float(told['nlos_fraction']), float(told['nlos_gamma']))
-    bias = RangeBiasPrior(float(told['link_bias_std']), float(told['common_bias_std']))
+    bias = RangeBiasPrior(float(told['link_bias_std']), float(told['common_bias_std']),
+                          float(told['bias_slope_std']))
     return Integrity(model, noise, nlos, told['eta'], told['lowest_joint'], limits, thresholds,
                      bias)
 
@@ -130,19 +134,23 @@ class PostureEstimator:
     learn_noise : bool
         Learn the range noise (``sigma``, ``eta``, ``nlos_fraction``, ``nlos_gamma``) from
         the residuals while running (``core.noise_learning``), starting from the told
-        values; the solver and the integrity checks then use what was learned. False: the
-        told values stay (benchmarks that tell the truth).
+        values, and the range bias common to all links (``core.bias_learning``), starting
+        from none; the solver and the integrity checks then use what was learned. False:
+        the told values stay (benchmarks that tell the truth).
     **options
         What the estimator is told, for every method (``ESTIMATOR_OPTIONS``): ``sigma``
         (tag-anchor range standard deviation, 0.1 m), ``eta`` (multiplicative range
         noise, 0), ``tag_sigma`` (tag-tag ranges; ``sigma``), ``pitch_sigma`` and
         ``slew_sigma`` (angle sensors, 0.5 deg), ``nlos_fraction`` (0.1) and ``nlos_gamma``
-        (1 m), ``lowest_joint`` (-0.5 m), ``link_bias_std`` (0.1 m) and ``common_bias_std``
-        (0.25 m): what is not known of the ranges' biases once the model's offsets are
-        taken off, each link's own and the part common to all (uncalibrated DW1000-class
-        links: see ``core.bounds.RangeBiasPrior``); they add to the predicted joint
-        standard deviations the thresholds judge. And the method's own: ``prior_weight`` (weight
-        of tag-tag distances from the previous pose, default 0; the paper uses 1),
+        (1 m), ``lowest_joint`` (-0.5 m), ``link_bias_std`` (0.1 m), ``common_bias_std``
+        (0.25 m) and ``bias_slope_std`` (0.01 m/m): what is not known of the ranges' biases
+        once the model's offsets are taken off, each link's own and the part common to
+        all, an offset and a growth with range (uncalibrated DW1000-class links: see
+        ``core.bounds.RangeBiasPrior``); they add to the predicted joint standard
+        deviations the thresholds judge, and with ``learn_noise`` the common part is
+        learned and taken off the ranges (``core.bias_learning``). And the method's own:
+        ``prior_weight`` (weight of tag-tag distances from the previous pose, default 0;
+        the paper uses 1),
         ``anchor_weight`` (inf: anchor-anchor distances fixed, the default; a number:
         weighted), ``tol``, ``max_iter``; CEPP also ``predict_slew`` (default true; false:
         the paper's plane from the previous pose), ``slew_iterations`` (re-solves after
@@ -185,6 +193,7 @@ class PostureEstimator:
         self.method = method
         self._settings = {}
         self._learner = None
+        self._bias_learner = None
         self.last_diagnostics = None
         self._configure(integrity=integrity, thresholds=thresholds,
                         reset_after_failures=reset_after_failures, learn_noise=learn_noise,
@@ -233,16 +242,21 @@ class PostureEstimator:
         self.reset_after_failures = int(reset_after_failures)
         configured = RangeNoiseEstimate(told['sigma'], told['eta'], told['nlos_fraction'],
                                         told['nlos_gamma'])
+        same_bias = all(told[name] == self._told.get(name) for name in (
+            'link_bias_std', 'common_bias_std', 'bias_slope_std')) if self._learner else False
         keep = (learn_noise and self._learner is not None
-                and self._learner.configured == configured)
+                and self._learner.configured == configured and same_bias)
         if not keep:            # what was learned from other told values starts over
             self._learner = NoiseLearner(configured) if learn_noise else None
+            self._bias_learner = BiasLearner(told['common_bias_std'], told['bias_slope_std'],
+                                             told['link_bias_std']) if learn_noise else None
         self._told = told
         self._settings = {'integrity': integrity, 'thresholds': thresholds,
                           'reset_after_failures': reset_after_failures,
                           'learn_noise': bool(learn_noise), 'options': dict(options)}
         if keep:
             self._use_noise(self._learner.estimate)
+        self._share_bias()
 
     @property
     def noise(self):
@@ -260,8 +274,49 @@ class PostureEstimator:
             told['tag_sigma'] = estimate.sigma          # tag-tag ranges are UWB ranges too
         self.integrity = _integrity(self.model, told, self._settings['integrity'],
                                     self._settings['thresholds'])
+        self._share_bias()
         if hasattr(self._solver, 'tune'):
             self._solver.tune(**estimate.as_options())
+
+    def _share_bias(self):
+        """Tell the integrity checks what is still unknown of the learned common bias."""
+        if self._bias_learner is not None:
+            self.integrity.common_covariance = self._bias_learner.covariance()
+
+    @property
+    def range_bias(self):
+        """Return the common range bias taken off (offset m, slope m/m at 20 m), or zeros."""
+        return np.zeros(2) if self._bias_learner is None else self._bias_learner.estimate.copy()
+
+    def _unbiased(self, measurements):
+        """Return ``measurements`` with the learned common bias taken off the ranges."""
+        if self._bias_learner is None or not self._bias_learner.estimate.any():
+            return measurements
+        ranges = measurements.ranges
+        return replace(measurements, ranges=ranges - self._bias_learner.correction(ranges))
+
+    def _learn_bias(self, joints, measurements, verdict):
+        """
+        Add a frame's line-of-sight residuals to the common bias learned.
+
+        From frames published, and from those refused only as too uncertain: the prior on
+        the bias alone can make the first frames so, and only frames can shrink it.
+        """
+        if self._bias_learner is None or verdict.status not in ('ok', 'unobservable'):
+            return
+        kept = np.isfinite(measurements.ranges)
+        blocked = verdict.values.get('nlos_links')
+        if blocked is not None:
+            kept &= ~np.asarray(blocked, dtype=bool)
+        sigma = self.integrity.link_sigma(measurements)
+        residuals = Residuals(self.model, Measurements.ranges_only(
+            np.where(kept, measurements.ranges, np.nan)), SensorNoise(sigma))
+        slew, pitches = angles_from_joints(self.model, joints)
+        psi = np.r_[slew, pitches]
+        scaled, geometry = residuals.residuals(psi)
+        if self._bias_learner.observe(residuals.jacobian(psi, geometry), residuals.sigma,
+                                      scaled, geometry[1]):
+            self._share_bias()
 
     def reset(self, joints=None):
         """
@@ -334,8 +389,10 @@ class PostureEstimator:
         measurements, implausible = Measurements.clean(self.model, ranges, tag_ranges,
                                                        pitches, slew, self._limits, stamp,
                                                        range_stamps)
+        measurements = self._unbiased(measurements)
         valid = np.isfinite(measurements.ranges)
         diagnostics = {'method': self.method, 'noise': self.noise,
+                       'range_bias': self.range_bias,
                        'missing_links': int(p * m - valid.sum()),
                        'implausible_links': implausible, 'cold_start': self._warm is None,
                        'reacquired': False, 'iterations': 0,
@@ -357,6 +414,7 @@ class PostureEstimator:
             solved, verdict = self._bootstrap_noise(measurements, stamp, solved, verdict)
         joints, info = solved
         self._learn(joints, info, measurements, verdict)
+        self._learn_bias(joints, measurements, verdict)
         diagnostics.update(info, noise=self.noise)       # as learned from this frame
         if not verdict.lost and hasattr(self._solver, 'accept'):
             self._solver.accept()           # a motion model takes the fit as its state

@@ -39,6 +39,7 @@ import math
 import numpy as np
 from scipy.special import betainc, gammaincc, gammainccinv
 
+from .bias_learning import bias_design
 from .bounds import (bias_covariance, bound_from_covariance, bound_from_information,
                      RangeBiasPrior)
 from .chain import angles_from_joints
@@ -245,6 +246,9 @@ class Integrity:
                  limits=IntegrityLimits(), thresholds=Thresholds(), bias=RangeBiasPrior()):
         self.model = model
         self.bias = bias
+        #: Covariance (2, 2) of the common bias's offset and slope still unknown: the
+        #: prior's, or less once the estimator has learned it (``core.bias_learning``).
+        self.common_covariance = bias.common_covariance()
         self.noise = noise
         self.nlos = nlos
         self.eta = float(eta)
@@ -397,11 +401,12 @@ class Integrity:
         residuals = Residuals(self.model, used, noise)
         jacobian = residuals.jacobian(np.r_[slew, pitches])
         random = bound_from_information(self.model, slew, pitches, jacobian.T @ jacobian)
-        if not self.bias.common_std or not math.isfinite(random.rmse):
+        if not self.common_covariance.any() or not math.isfinite(random.rmse):
             return random, random
         links = np.arange(residuals.size) < np.count_nonzero(residuals.link_mask)
+        common = (bias_design(residuals.measured[links]), self.common_covariance)
         added = bias_covariance(jacobian, residuals.sigma, links, random.parameter_covariance,
-                                common_std=self.bias.common_std)
+                                common=common)
         return random, bound_from_covariance(self.model, slew, pitches,
                                              random.parameter_covariance + added)
 
@@ -439,9 +444,10 @@ class Integrity:
             values, vectors = np.linalg.eigh(matrix)
             if values[0] > 1e-12 * max(values[-1], 1e-300):
                 covariance = (vectors / values) @ vectors.T
-                if biased and self.bias.common_std:
-                    total = covariance @ (units[k] * weights[k][:, None]).sum(axis=0)
-                    covariance = covariance + self.bias.common_std ** 2 * np.outer(total, total)
+                if biased and self.common_covariance.any():
+                    design = bias_design(np.nan_to_num(measurements.ranges[k]))
+                    through = covariance @ (units[k] * weights[k][:, None]).T @ design
+                    covariance = covariance + through @ self.common_covariance @ through.T
                 std[k] = math.sqrt(np.trace(covariance))
         return std
 

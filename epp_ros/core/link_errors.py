@@ -131,8 +131,9 @@ class LinkErrors:
 
     def noise(self, sigma, white):
         """
-        Return the noise of each link, metres: ``white`` (standard normal) mixed with the
-        correlated part so that the total has standard deviation ``sigma`` (p, m).
+        Return the noise of each link (p, m), metres, of standard deviation ``sigma``.
+
+        ``white`` (standard normal) mixed with the correlated part by their shares.
         """
         share = self.effects.correlated_fraction
         return sigma * (np.sqrt(1.0 - share) * white + np.sqrt(share) * self._slow)

@@ -586,14 +586,15 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
     ``stationarity`` is the first-order (KKT) condition of the rank-r problem in the
     returned points ``X``: ``|grad f(X) + J_c(X)^T mu|_F / (4 max(H o H) |X|_F max|G|)``
     with the least-squares multipliers ``mu`` of the fixed distances, or the largest
-    violation of a fixed squared distance over ``max|G|`` when that is larger. It does not depend on
-    the penalty parameter, and slow progress does not pass for it: once c is large the
-    MM map moves the iterate along the rank-r set by little per step while far from a
-    minimum (on weighted problems, by a few per cent of f or more). Like any first-order
-    measure it bounds the distance to a minimum only where f curves: near a minimum with
-    smallest curvature ``mu``, ``f - f* <~ |grad f|^2 / (2 mu)``; along flat valleys (points
-    that span fewer than ``rank`` dimensions, missing distances) a point stationary to
-    ``tol`` may still be some way from the minimum.
+    violation of a fixed squared distance over ``max|G|`` when that is larger. It does not
+    depend on the penalty parameter, and slow progress does not pass for it: once c is
+    large the MM map moves the iterate along the rank-r set by little per step while far
+    from a minimum (on weighted problems, by a few per cent of f or more). Like any
+    first-order measure it bounds the distance to a minimum only where f curves: near a
+    minimum with smallest curvature ``mu``, ``f - f* <~ |grad f|^2 / (2 mu)``; along flat
+    valleys (points that span fewer than ``rank`` dimensions, missing distances) a point
+    stationary to ``tol`` may still be some way from the minimum. Fixed distances are held
+    to about ``inner_tol``: a ``tol`` below ~10 ``inner_tol`` cannot be met.
 
     """
     target, weights, fixed, known = _checked_input(target, weights, fixed, rank)
