@@ -19,7 +19,7 @@ from epp_ros.core.measurements import Measurements, Residuals, SensorNoise
 from epp_ros.core.simulate import (AngleNoise, observe, random_posture, RangeNoise, truck_pump,
                                    working_cycle)
 from epp_ros.tools.experiments import method_estimate
-from monte_carlo import assert_mse_at_bound
+from monte_carlo import assert_mse_at_bound, UNBIASED
 import numpy as np
 import pytest
 
@@ -131,7 +131,8 @@ def test_fused_monte_carlo_rmse_matches_the_fused_bound():
     measured = Measurements.clean(model, **frames[0])[0]
     bound = crlb(model, slew, pitches, noise, measured)
     assert bound.rmse < crlb(model, slew, pitches, sigma).rmse
-    estimator = PostureEstimator(model, 'chain', sigma=sigma, pitch_sigma=angles.pitch_sigma)
+    estimator = PostureEstimator(model, 'chain', sigma=sigma, pitch_sigma=angles.pitch_sigma,
+                                 **UNBIASED)
     squared = [np.sum((estimator.update(**frame) - joints) ** 2) / 5 for frame in frames]
     assert_mse_at_bound(squared, bound.rmse, estimator)
 

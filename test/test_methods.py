@@ -18,6 +18,7 @@ from epp_ros.core.methods import FrameResult, PostureMethod
 from epp_ros.core.noise_learning import RangeNoiseEstimate
 from epp_ros.core.simulate import truck_pump
 from epp_ros.health import grade, WARN
+from monte_carlo import UNBIASED
 import numpy as np
 import pytest
 
@@ -48,7 +49,7 @@ def test_converged_is_true_only_when_it_is():
     slew, pitches = 0.4, np.radians([50.0, 20.0, 0.0, -20.0, -40.0])
     moved = MODEL.ranges(MODEL.forward_kinematics(slew + 0.05, pitches + 0.05))
     for max_iter, converged in ((1, False), (50, True)):
-        estimator = PostureEstimator(MODEL, 'chain')
+        estimator = PostureEstimator(MODEL, 'chain', **UNBIASED)
         estimator.update(MODEL.ranges(MODEL.forward_kinematics(slew, pitches)))
         estimator.reconfigure(max_iter=max_iter)
         estimator.update(moved)

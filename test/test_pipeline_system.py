@@ -23,7 +23,8 @@ import numpy as np
 import pytest
 import rclpy
 from sensor_msgs.msg import JointState
-from system import Listener, poses_to_joints, PUMP_YAML, script, start_emulator, truth_window
+from system import (Listener, poses_to_joints, PUMP_YAML, script, start_emulator, truth_window,
+                    UNBIASED_ARGS)
 
 pytestmark = pytest.mark.usefixtures('fresh_listener')
 CONFIG = load_pump_config(PUMP_YAML)
@@ -40,7 +41,7 @@ def start_pump(processes, tmp_path, name='ttyUWB', namespace=None, extra=(), see
     driver = processes([script('uwb_driver'), *remap, '--params-file', str(PUMP_YAML),
                         '-p', f'port:={link}', '-p', 'protocol:=json'])
     estimator = processes([script('posture_estimator'), *remap, '--params-file',
-                           str(PUMP_YAML)])
+                           str(PUMP_YAML), *UNBIASED_ARGS])
     return emulator, driver, estimator
 
 
@@ -99,7 +100,8 @@ def test_frames_missing_most_ranges_publish_no_nan(listener, processes, tmp_path
 
 
 def test_out_of_order_and_duplicate_frames_are_ignored_and_counted(listener, processes):
-    processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML)])
+    processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML),
+               *UNBIASED_ARGS])
     publisher = listener.create_publisher(JointState, 'uwb/ranges', RANGES_QOS)
     try:
         model = CONFIG.model()
@@ -243,7 +245,8 @@ def test_hostile_frames_are_not_published_and_eval_decides_the_same(listener, pr
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     from epp_ros import bags
     stamps, frames, bad = hostile_stream()
-    processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML)])
+    processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML),
+               *UNBIASED_ARGS])
     keep_all = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                           history=HistoryPolicy.KEEP_ALL)
     publisher = listener.create_publisher(JointState, 'uwb/ranges', keep_all)
@@ -313,7 +316,8 @@ def test_parameters_are_applied_live_or_refused(listener, processes):
     Valid changes apply from the next frame (a new method starting cold), invalid ones are
     refused with the reason, read-only ones too.
     """
-    processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML)])
+    processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML),
+               *UNBIASED_ARGS])
     publisher = listener.create_publisher(JointState, 'uwb/ranges', RANGES_QOS)
     model = CONFIG.model()
     joints = model.forward_kinematics(0.3, np.radians([50.0, 20.0, 0.0, -20.0, -40.0]))

@@ -17,6 +17,7 @@ from epp_ros.core import PostureEstimator
 from epp_ros.core.simulate import (field_effects, JoystickMotion, simulate_field, truck_pump,
                                    WorkingMotion)
 from epp_ros.core.track import constant_velocity
+from monte_carlo import UNBIASED
 import numpy as np
 import pytest
 
@@ -96,7 +97,7 @@ def test_both_folds_are_kept_until_the_data_decides():
     The tracker keeps both, refuses the frames, and settles when the tag's ranges come
     back, on the right fold.
     """
-    estimator = PostureEstimator(MODEL, 'track')
+    estimator = PostureEstimator(MODEL, 'track', **UNBIASED)
     slew, pitches = 0.3, np.radians([50.0, 20.0, -10.0, -20.0, -40.0])
     joints = MODEL.forward_kinematics(slew, pitches)
     ranges = MODEL.ranges(joints)

@@ -295,12 +295,13 @@ class PostureEstimator:
         ranges = measurements.ranges
         return replace(measurements, ranges=ranges - self._bias_learner.correction(ranges))
 
-    def _learn_bias(self, joints, measurements, verdict):
+    def _learn_bias(self, joints, info, measurements, verdict):
         """
         Add a frame's line-of-sight residuals to the common bias learned.
 
         From frames published, and from those refused only as too uncertain: the prior on
-        the bias alone can make the first frames so, and only frames can shrink it.
+        the bias alone can make the first frames so, and only frames can shrink it. Each
+        tag is where it was when it ranged (``timed_joints``), for a method that knows.
         """
         if self._bias_learner is None or verdict.status not in ('ok', 'unobservable'):
             return
@@ -312,10 +313,10 @@ class PostureEstimator:
         residuals = Residuals(self.model, Measurements.ranges_only(
             np.where(kept, measurements.ranges, np.nan)), SensorNoise(sigma))
         slew, pitches = angles_from_joints(self.model, joints)
-        psi = np.r_[slew, pitches]
-        scaled, geometry = residuals.residuals(psi)
-        if self._bias_learner.observe(residuals.jacobian(psi, geometry), residuals.sigma,
-                                      scaled, geometry[1]):
+        fitted = self.model.ranges(info.get('timed_joints', joints))[kept]
+        scaled = (fitted - measurements.ranges[kept]) / sigma[kept]
+        if self._bias_learner.observe(residuals.jacobian(np.r_[slew, pitches]), sigma[kept],
+                                      scaled, fitted):
             self._share_bias()
 
     def reset(self, joints=None):
@@ -414,7 +415,7 @@ class PostureEstimator:
             solved, verdict = self._bootstrap_noise(measurements, stamp, solved, verdict)
         joints, info = solved
         self._learn(joints, info, measurements, verdict)
-        self._learn_bias(joints, measurements, verdict)
+        self._learn_bias(joints, info, measurements, verdict)
         diagnostics.update(info, noise=self.noise)       # as learned from this frame
         if not verdict.lost and hasattr(self._solver, 'accept'):
             self._solver.accept()           # a motion model takes the fit as its state

@@ -139,6 +139,8 @@ SETTINGS = {
                            'offsets (not averaged over frames), m.', 0.0, 10.0),
     'common_bias_std': _told('common_bias_std', 'Std of the bias common to all ranges left '
                              'after the offsets, m: adds to the predicted RMSE.', 0.0, 10.0),
+    'bias_slope_std': _told('bias_slope_std', 'Std of the growth of that common bias with '
+                            'range, m per m.', 0.0, 1.0),
     'max_angular_rate': Setting(IntegrityLimits.max_angular_rate, 'Fastest slew or pitch '
                                 'rate of the boom, rad/s: rules out jumps and folds.', True,
                                 1e-4, 100.0),
@@ -152,7 +154,8 @@ SETTINGS = {
 OPTION_OF = {'range_sigma': 'sigma', 'nlos_fraction': 'nlos_fraction',
              'nlos_gamma': 'nlos_gamma', 'tag_sigma': 'tag_sigma', 'pitch_sigma': 'pitch_sigma',
              'slew_sigma': 'slew_sigma', 'lowest_joint': 'lowest_joint',
-             'link_bias_std': 'link_bias_std', 'common_bias_std': 'common_bias_std'}
+             'link_bias_std': 'link_bias_std', 'common_bias_std': 'common_bias_std',
+             'bias_slope_std': 'bias_slope_std'}
 
 
 def _parameter_name(message):
