@@ -86,14 +86,15 @@ def test_each_links_own_bias_is_a_floor_under_what_frames_tell():
     estimator = PostureEstimator(MODEL, 'chain', sigma=0.05, link_bias_std=0.1)
     run(estimator, frames)
     learner = estimator._bias_learner
-    assert learner.floor[0, 0] > 0
-    assert np.all(np.diag(estimator.integrity.common_covariance) >= np.diag(learner.floor))
+    assert learner.floor()[0, 0] > 0
+    assert np.all(np.diag(estimator.integrity.common_covariance) >= np.diag(learner.floor()))
     error = estimator.range_bias[0] - 0.2
     assert abs(error) < 4 * np.sqrt(estimator.integrity.common_covariance[0, 0])
 
 
 def test_a_frame_with_too_few_links_teaches_nothing():
-    learner = BiasLearner(0.25, 0.01, 0.1)
+    learner = BiasLearner(0.25, 0.01, 0.1, 6)
     jacobian = np.eye(6)[:, :4]
-    assert not learner.observe(jacobian, np.full(6, 0.1), np.zeros(6), np.full(6, 10.0))
+    assert not learner.observe(jacobian, np.full(6, 0.1), np.zeros(6), np.full(6, 10.0),
+                               np.arange(6))
     assert learner.frames == 0 and not learner.estimate.any()

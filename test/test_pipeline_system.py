@@ -245,8 +245,8 @@ def test_hostile_frames_are_not_published_and_eval_decides_the_same(listener, pr
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     from epp_ros import bags
     stamps, frames, bad = hostile_stream()
-    processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML),
-               *UNBIASED_ARGS])
+    # pump.yaml's settings, which epp_bag eval's estimator has by default.
+    processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML)])
     keep_all = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                           history=HistoryPolicy.KEEP_ALL)
     publisher = listener.create_publisher(JointState, 'uwb/ranges', keep_all)

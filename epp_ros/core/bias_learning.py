@@ -27,9 +27,11 @@ prior (the told ``common_bias_std`` and ``bias_slope_std``) keeps the estimate a
 until frames say otherwise. The estimator then takes the bias off every range, and the
 integrity checks count what is still unknown of it (:meth:`BiasLearner.covariance`).
 
-Each link's own bias does not average out over frames: its part of a frame's estimate
-(``link_std^2 M M^T``, ``M = (D_perp^T D_perp)^-1 D_perp^T Sigma^-1/2``) is kept as a
-floor under what is learned.
+Each link's own bias ``e`` does not average out over frames: a frame's estimate carries
+``(D_perp^T D_perp)^-1 D_perp^T Sigma^-1/2 e``, so the learned one carries ``(Lambda_0 +
+Lambda)^-1 S e`` with ``S`` the frames' ``D_perp^T Sigma^-1/2`` summed (forgotten alike) over
+every link; its covariance ``link_std^2 (Lambda_0 + Lambda)^-1 S S^T (Lambda_0 +
+Lambda)^-1`` is kept beside the statistical one.
 """
 import numpy as np
 
@@ -62,6 +64,8 @@ class BiasLearner:
         Prior standard deviation of the slope, metres per metre.
     link_std : float
         Each link's own bias, metres: the floor of what frames can tell of the common one.
+    links : int
+        How many links there are (p m): the columns of ``S``.
     memory : int
         Frames a new frame's information weighs as much as.
 
@@ -72,7 +76,7 @@ class BiasLearner:
 
     """
 
-    def __init__(self, common_std, slope_std, link_std, memory=MEMORY_FRAMES):
+    def __init__(self, common_std, slope_std, link_std, links, memory=MEMORY_FRAMES):
         prior = np.array([common_std, slope_std], dtype=float)
         self.fixed = ~(prior > 0)                  # a zero std: not learned, stays at 0
         self.prior_information = np.diag(np.where(self.fixed, 0.0, 1.0 / np.where(
@@ -81,7 +85,7 @@ class BiasLearner:
         self.forget = 1.0 - 1.0 / float(memory)
         self.information = np.zeros((2, 2))
         self.weighted = np.zeros(2)                # information times the estimate
-        self.floor = np.zeros((2, 2))
+        self.through = np.zeros((2, int(links)))    # S: how each link's bias gets in
         self.estimate = np.zeros(2)
         self.frames = 0
 
@@ -90,14 +94,23 @@ class BiasLearner:
         return bias_design(distances) @ self.estimate
 
     def covariance(self):
-        """Return what is not known of the bias (2, 2): the estimate's and the links' floor."""
+        """Return what is not known of the bias (2, 2): the estimate's and the links' share."""
+        return self._statistical() + self.floor()
+
+    def _statistical(self):
+        """Return ``(Lambda_0 + Lambda)^-1`` on the free parameters, zero elsewhere (2, 2)."""
         total = self.prior_information + self.information
         free = ~self.fixed
         covariance = np.zeros((2, 2))
         covariance[np.ix_(free, free)] = np.linalg.inv(total[np.ix_(free, free)])
-        return covariance + self.floor
+        return covariance
 
-    def observe(self, jacobian, sigma, residuals, distances):
+    def floor(self):
+        """Return the covariance (2, 2) the links' own biases leave in what is learned."""
+        carried = self._statistical() @ self.through
+        return self.link_std ** 2 * carried @ carried.T
+
+    def observe(self, jacobian, sigma, residuals, distances, links):
         """
         Add a frame's accepted fit; return whether the estimate changed.
 
@@ -111,6 +124,8 @@ class BiasLearner:
             Scaled residuals ``(fitted - measured) / sigma`` of the corrected ranges.
         distances : ndarray, shape (n,)
             Fitted distances of those links, metres.
+        links : ndarray of int, shape (n,)
+            Which links they are (flat indices of the (p, m) ranges).
 
         """
         free = ~self.fixed
@@ -122,22 +137,20 @@ class BiasLearner:
         if np.linalg.cond(information) > 1e12:
             return False
         found = np.linalg.solve(information, -projected.T @ residuals)
-        mapping = np.linalg.solve(information, projected.T / sigma)      # (k, n) in metres
-        self._add(information, self.estimate[free] + found,
-                  self.link_std ** 2 * mapping @ mapping.T)
+        through = np.zeros((free.sum(), self.through.shape[1]))
+        through[:, links] = projected.T / sigma                  # D_perp^T Sigma^-1/2, 1/m
+        self._add(information, self.estimate[free] + found, through)
         return True
 
-    def _add(self, information, value, floor):
-        """Fold in one frame's information on the free parameters and its estimate."""
+    def _add(self, information, value, through):
+        """Fold in one frame's information on the free parameters, its estimate and S."""
         free = ~self.fixed
         forget = self.forget if self.frames else 0.0
         block = np.ix_(free, free)
         self.information[block] = forget * self.information[block] + information
         self.weighted[free] = forget * self.weighted[free] + information @ value
+        self.through[free] = forget * self.through[free] + through
         self.frames += 1
-        # The floor: the average of the frames' link shares, over the same memory.
-        weight = 1.0 / min(self.frames, 1.0 / (1.0 - self.forget))
-        self.floor[block] += weight * (floor - self.floor[block])
         total = self.prior_information[block] + self.information[block]
         estimate = np.linalg.solve(total, self.weighted[free])
         self.estimate[free] = np.clip(estimate, -np.array(LIMITS)[free], np.array(LIMITS)[free])

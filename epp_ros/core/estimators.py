@@ -248,8 +248,9 @@ class PostureEstimator:
                 and self._learner.configured == configured and same_bias)
         if not keep:            # what was learned from other told values starts over
             self._learner = NoiseLearner(configured) if learn_noise else None
-            self._bias_learner = BiasLearner(told['common_bias_std'], told['bias_slope_std'],
-                                             told['link_bias_std']) if learn_noise else None
+            self._bias_learner = BiasLearner(
+                told['common_bias_std'], told['bias_slope_std'], told['link_bias_std'],
+                self.model.n_sections * self.model.n_anchors) if learn_noise else None
         self._told = told
         self._settings = {'integrity': integrity, 'thresholds': thresholds,
                           'reset_after_failures': reset_after_failures,
@@ -316,7 +317,7 @@ class PostureEstimator:
         fitted = self.model.ranges(info.get('timed_joints', joints))[kept]
         scaled = (fitted - measurements.ranges[kept]) / sigma[kept]
         if self._bias_learner.observe(residuals.jacobian(np.r_[slew, pitches]), sigma[kept],
-                                      scaled, fitted):
+                                      scaled, fitted, np.flatnonzero(kept)):
             self._share_bias()
 
     def reset(self, joints=None):
