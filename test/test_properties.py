@@ -17,6 +17,7 @@ from epp_ros.core import PostureEstimator, RANGE_METHODS
 from epp_ros.core.simulate import random_posture, RangeNoise, truck_pump, xie3dim
 from hypothesis import given, HealthCheck, settings
 from hypothesis import strategies as st
+from monte_carlo import UNBIASED
 import numpy as np
 
 MODELS = {'xie3dim': xie3dim()[0], 'truck': truck_pump()}
@@ -32,7 +33,9 @@ SETTINGS = settings(max_examples=25, deadline=None,
 def test_exact_ranges_give_the_exact_posture(seed, method, geometry):
     model = MODELS[geometry]
     joints = random_posture(model, np.random.default_rng(seed))[2]
-    estimator = PostureEstimator(model, method, sigma=1e-3, nlos_fraction=0.0)
+    # Told that the ranges are exact and unbiased: with real links' biases allowed for, a
+    # fold can be about as likely and the frame is refused as ambiguous (seed 15, cepp).
+    estimator = PostureEstimator(model, method, sigma=1e-3, nlos_fraction=0.0, **UNBIASED)
     estimate = estimator.update(model.ranges(joints))
     assert estimator.last_diagnostics['valid']
     np.testing.assert_allclose(estimate, joints, atol=1e-6)
