@@ -32,12 +32,36 @@ error is not a device offset plus white noise:
   time ``noise_correlation_time``, the rest white (autocorrelation ``w exp(-dt / tau)``).
 
 :class:`LinkErrors` holds one run's draws of these for a set of links; the field simulator
-adds them to its ranges. It draws from its own generator, so that runs without these
-effects keep every draw they had.
+adds them to its ranges. Outliers, like the simulator's blocked links and silent tags, are
+two-state chains stepped by :func:`markov_step`. It draws from its own generator, so that
+runs without these effects keep every draw they had.
 """
 import numpy as np
 
-__all__ = ['LinkErrors', 'bias_at_range']
+__all__ = ['LinkErrors', 'bias_at_range', 'markov_step']
+
+
+def markov_step(bad, fraction, duration, elapsed, rng):
+    """
+    Return the next states of two-state chains after ``elapsed`` seconds.
+
+    Parameters
+    ----------
+    bad : ndarray of bool
+        The states now.
+    fraction : float
+        Long-run fraction of time in the bad state.
+    duration : float
+        Mean time a visit to the bad state lasts, seconds; 0: independent of ``bad``.
+    elapsed : float
+        Seconds, > 0.
+    rng : numpy.random.Generator
+        Draws the transitions.
+
+    """
+    memory = duration * (1.0 - fraction)        # correlation time, seconds
+    decay = np.exp(-elapsed / memory) if memory > 0 else 0.0
+    return rng.random(bad.shape) < fraction + (bad - fraction) * decay
 
 
 def bias_at_range(curve, distances):
@@ -101,11 +125,8 @@ class LinkErrors:
         keep = np.exp(-elapsed / tau) if tau > 0 else 0.0
         self._slow = keep * self._slow + np.sqrt(1.0 - keep ** 2) * rng.standard_normal(
             self._slow.shape)
-        fraction = self._outlier_fraction()
-        memory = effects.outlier_duration * (1.0 - fraction)
-        decay = np.exp(-elapsed / memory) if memory > 0 else 0.0
-        self._outlying = rng.random(self._outlying.shape) < (
-            fraction + (self._outlying - fraction) * decay)
+        self._outlying = markov_step(self._outlying, self._outlier_fraction(),
+                                     effects.outlier_duration, elapsed, rng)
 
     def bias(self, distances, tags, anchors, pitches):
         """

@@ -349,8 +349,8 @@ class _PenaltySolver:
             first, second = self.fixed_pairs.T
             infeasible = float(np.max(np.abs(distances[first, second]
                                              - self.goal[first, second])))
-            gradient = gradient - self._constraint_jacobian(points) @ np.linalg.lstsq(
-                self._constraint_jacobian(points), gradient, rcond=None)[0]
+            jacobian = self._constraint_jacobian(points)
+            gradient = gradient - jacobian @ np.linalg.lstsq(jacobian, gradient, rcond=None)[0]
         size = 4.0 * max(float(self.sq_weights.max()), 1e-300) * np.linalg.norm(points)
         return max(float(np.linalg.norm(gradient) / size) if size > 0 else 0.0, infeasible)
 

@@ -36,7 +36,7 @@ import operator
 
 import numpy as np
 
-from .link_errors import bias_at_range, LinkErrors
+from .link_errors import bias_at_range, LinkErrors, markov_step
 from .model import BoomModel
 
 __all__ = ['XIE3DIM', 'xie3dim', 'truck_pump', 'TRUCK_BODY_ANCHORS', 'truck_body_anchors',
@@ -795,29 +795,6 @@ class FieldFrame:
         return inputs
 
 
-def _markov_step(bad, fraction, duration, elapsed, rng):
-    """
-    Return the next states of two-state chains after ``elapsed`` seconds.
-
-    Parameters
-    ----------
-    bad : ndarray of bool
-        The states now.
-    fraction : float
-        Long-run fraction of time in the bad state.
-    duration : float
-        Mean time a visit to the bad state lasts, seconds; 0: independent of ``bad``.
-    elapsed : float
-        Seconds, > 0.
-    rng : numpy.random.Generator
-        Draws the transitions.
-
-    """
-    memory = duration * (1.0 - fraction)        # correlation time, seconds
-    decay = np.exp(-elapsed / memory) if memory > 0 else 0.0
-    return rng.random(bad.shape) < fraction + (bad - fraction) * decay
-
-
 class FieldSimulator:
     """
     Plays :class:`FieldEffects` frame by frame on any :class:`Motion`.
@@ -981,10 +958,10 @@ class FieldSimulator:
     def _step_chains(self, elapsed):
         self.links.step(elapsed)
         effects = self.effects
-        self._nlos = _markov_step(self._nlos, effects.nlos_fraction, effects.nlos_duration,
-                                  elapsed, self.rng)
-        self._silent = _markov_step(self._silent, effects.dropout_fraction,
-                                    effects.dropout_duration, elapsed, self.rng)
+        self._nlos = markov_step(self._nlos, effects.nlos_fraction, effects.nlos_duration,
+                                 elapsed, self.rng)
+        self._silent = markov_step(self._silent, effects.dropout_fraction,
+                                   effects.dropout_duration, elapsed, self.rng)
 
     def _tags(self, motion, range_stamps):
         """Return each tag (p, 3) and its section's pitch (p,), each at its slot time."""
