@@ -21,7 +21,7 @@ seems further from the truck), and what it cannot absorb is what shows: projecti
 frame's scaled residuals ``z`` on the part of the bias's directions ``D = [1, r - r0] /
 sigma`` the fit's Jacobian ``A`` does not span, ``D_perp = (I - A F^-1 A^T) D``, estimates
 the bias the ranges still carry, ``b = -(D_perp^T D_perp)^-1 D_perp^T z``, with information
-``D_perp^T D_perp``: a few centimetres per frame on the pump's six anchors and five tags.
+``D_perp^T D_perp`` (large where the anchors see the tags from many directions).
 Frames add their information, forgetting with a memory of ``memory`` frames; a Gaussian
 prior (the told ``common_bias_std`` and ``bias_slope_std``) keeps the estimate at zero
 until frames say otherwise. The estimator then takes the bias off every range, and the
