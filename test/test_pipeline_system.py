@@ -45,8 +45,19 @@ def start_pump(processes, tmp_path, name='ttyUWB', namespace=None, extra=(), see
     return emulator, driver, estimator
 
 
+#: Seconds: a frame is stamped when the driver reads it, which on a loaded machine can be
+#: cycles after the emulator wrote it (a backlog read at start-up); its truth is among the
+#: cycles this far before its stamp.
+READ_LAG = 0.3
+
+
 def matched_errors(listener):
-    """RMSE of each received posture against the newest truth published before its frame."""
+    """
+    Return the RMSE of each received posture against its truth.
+
+    Its truth is the nearest of the truths published up to ``READ_LAG`` before its frame's
+    stamp (the newest one when the driver kept up).
+    """
     first, last = truth_window(listener)
     truth_stamps = np.array([to_seconds(m.header.stamp) for m in listener.truth])
     errors = []
@@ -54,9 +65,11 @@ def matched_errors(listener):
         stamp = to_seconds(posture.header.stamp)
         if not first <= stamp <= last + 0.05:
             continue
-        index = np.searchsorted(truth_stamps, stamp) - 1
-        errors.append(frame_rmse(poses_to_joints(posture),
-                                 poses_to_joints(listener.truth[index])))
+        newest = np.searchsorted(truth_stamps, stamp) - 1
+        oldest = max(np.searchsorted(truth_stamps, stamp - READ_LAG) - 1, 0)
+        joints = poses_to_joints(posture)
+        errors.append(min(frame_rmse(joints, poses_to_joints(listener.truth[index]))
+                          for index in range(oldest, newest + 1)))
     return np.array(errors)
 
 
