@@ -58,6 +58,9 @@ PUMP_PARAMETERS = {
                            '(empty: none); a range measures true + tag + anchor offset.'),
     'tag_offsets': ([], 'Constant each tag adds to its ranges, metres, as tag_names (empty: '
                         'none).'),
+    'pair_offsets': ([], "What each tag-anchor link adds beyond its tag's and anchor's "
+                         'offsets, metres, tag-major [t0:a0, t0:a1, ...] (empty: none); '
+                         'calibrated.'),
     'body_anchors': ([], 'Anchors on the truck body, by name: they define the truck frame '
                          'and calibration holds them; the others (outriggers) may move with '
                          'each set-up (empty: the first anchor).'),
@@ -155,6 +158,7 @@ class PumpConfig:
     anchor_offsets: tuple = None    #: metres each anchor adds to its ranges; None: zeros
     tag_offsets: tuple = None       #: metres each tag adds to its ranges; None: zeros
     body_anchors: tuple = None      #: names of the anchors on the truck body; None: the first
+    pair_offsets: tuple = None      #: metres each link adds beyond its devices', tag-major
 
     @property
     def body_anchor_indices(self):
@@ -172,7 +176,7 @@ class PumpConfig:
     def model(self):
         """Return the :class:`BoomModel` of this pump, with its device range offsets."""
         return BoomModel(self.arm_lengths, self.base, self.anchor_positions, self.pivot_offset,
-                         self.anchor_offsets, self.tag_offsets)
+                         self.anchor_offsets, self.tag_offsets, self.pair_offsets)
 
     @property
     def link_names(self):
@@ -437,9 +441,12 @@ def pump_config_from_parameters(values):
     anchor_offsets = _offsets(get['anchor_offsets'], 'anchor_offsets', 'anchor_names',
                               len(anchor_names))
     tag_offsets = _offsets(get['tag_offsets'], 'tag_offsets', 'tag_names', len(tag_names))
+    pair_offsets = _offsets(get['pair_offsets'], 'pair_offsets', 'tag_names x anchor_names',
+                            len(tag_names) * len(anchor_names))
     body_anchors = _body_anchors(get['body_anchors'], anchor_names)
     try:
-        BoomModel(arm_lengths, base, positions, pivot_offset, anchor_offsets, tag_offsets)
+        BoomModel(arm_lengths, base, positions, pivot_offset, anchor_offsets, tag_offsets,
+                  pair_offsets)
     except ValueError as exc:
         text = _short(str(exc), 300)
         raise ConfigError(f'anchor_positions: {text}' if text.startswith('anchors ') else text) \
@@ -448,7 +455,7 @@ def pump_config_from_parameters(values):
                        get['source_anchors'], tag_ids, anchor_ids)
     return PumpConfig(frame_id, arm_lengths, base, tag_names, tag_ids, anchor_names,
                       anchor_ids, positions, sources, pivot_offset, anchor_offsets, tag_offsets,
-                      body_anchors)
+                      body_anchors, pair_offsets)
 
 
 def _body_anchors(values, anchor_names):
@@ -603,6 +610,11 @@ def _yaml_list(values, column, per_line):
     return '[' + (',\n' + ' ' * (column + 1)).join(rows) + ']'
 
 
+#: The estimator's settings a calibration determines (metres, standard deviations): what it
+#: leaves unknown of each link's own bias and of the bias common to all.
+CALIBRATED_SETTINGS = ('link_bias_std', 'common_bias_std')
+
+
 def update_pump_yaml(text, values):
     """
     Return a pump.yaml's text with some pump parameters replaced, all else kept.
@@ -617,7 +629,8 @@ def update_pump_yaml(text, values):
     text : str
         A pump description as :func:`load_pump_config` reads it.
     values : dict
-        Parameter name (of PUMP_PARAMETERS) -> list of numbers.
+        Parameter name (of PUMP_PARAMETERS) -> list of numbers, or (of
+        :data:`CALIBRATED_SETTINGS`) -> a number >= 0.
 
     Returns
     -------
@@ -631,10 +644,14 @@ def update_pump_yaml(text, values):
         On unknown names, a text without the section, or a result that does not validate.
 
     """
-    unknown = sorted(set(values) - set(PUMP_PARAMETERS))
+    unknown = sorted(set(values) - set(PUMP_PARAMETERS) - set(CALIBRATED_SETTINGS))
     if unknown:
         raise ConfigError(f'unknown pump parameter(s) {unknown}')
-    values = {name: [float(_yaml_number(v)) for v in numbers]       # as written: to 1 um
+    for name in set(values) & set(CALIBRATED_SETTINGS):
+        if not float(values[name]) >= 0.0 or not np.isfinite(float(values[name])):
+            raise ConfigError(f'{name}: must be a finite number >= 0, got {values[name]!r}')
+    values = {name: float(_yaml_number(numbers)) if name in CALIBRATED_SETTINGS
+              else [float(_yaml_number(v)) for v in numbers]        # as written: to 1 um
               for name, numbers in values.items()}
     try:
         document = yaml.safe_load(text)
@@ -666,14 +683,18 @@ def _edit_in_place(text, values):
     edits, added = [], ''       # (start, end, new text); entries added after the positions
     column = entries['anchor_positions'][0].start_mark.column
     for name, numbers in values.items():
-        per_line = 3 if name == 'anchor_positions' else len(numbers) or 1
+        if isinstance(numbers, float):
+            written = _yaml_number(numbers)
+        else:
+            per_line = 3 if name == 'anchor_positions' else len(numbers) or 1
+            start = entries[name][1].start_mark.column if name in entries \
+                else column + len(name) + 2
+            written = _yaml_list(numbers, start, per_line)
         if name in entries:
             value = entries[name][1]
-            edits.append((value.start_mark.index, value.end_mark.index,
-                          _yaml_list(numbers, value.start_mark.column, per_line)))
+            edits.append((value.start_mark.index, value.end_mark.index, written))
         else:
-            added += (f'\n{" " * column}{name}: '
-                      + _yaml_list(numbers, column + len(name) + 2, per_line))
+            added += f'\n{" " * column}{name}: {written}'
     end = entries['anchor_positions'][1].end_mark.index
     edits.append((end, end, added))
     for start, end, new in sorted(edits, key=lambda edit: edit[0], reverse=True):

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-from epp_ros.core import calibrate, PostureEstimator, SurveyResult
+from epp_ros.core import BoomModel, calibrate, PostureEstimator, SurveyResult
+from epp_ros.core.calibration_verdict import implausible, integrated_autocorrelation, misfit
 from epp_ros.core.measurements import Measurements
 from epp_ros.core.simulate import (FieldEffects, FieldSimulator, StillMotion,
                                    truck_body_anchors, truck_outriggers, truck_pump,
@@ -144,9 +145,11 @@ def test_with_anchor_ranges_every_offset_lies_within_its_standard_deviation():
         fitted = np.r_[result.anchors[list(OUTRIGGERS)].ravel(), result.tag_offsets,
                        result.anchor_offsets]
         error = fitted - truth
-        scores.append(error / np.sqrt(np.diag(result.covariance)))
+        # The devices' parameters' marginal (the links' own offsets come after them).
+        covariance = result.covariance[:error.size, :error.size]
+        scores.append(error / np.sqrt(np.diag(covariance)))
         # Chi-square of the 23 parameters together: within 5 of its standard errors.
-        chi2 = error @ np.linalg.solve(result.covariance, error)
+        chi2 = error @ np.linalg.solve(covariance, error)
         assert abs(chi2 - error.size) < 5 * np.sqrt(2 * error.size)
         # Pinned by the anchor-anchor ranges, the anchor offsets beat the link offsets'.
         assert result.anchor_offset_std.max() < result.link_offset_std.max()
@@ -178,6 +181,118 @@ def test_recovered_parameters_lie_within_their_standard_deviations():
     scores = np.concatenate([score.ravel() for score in scores])
     assert scores.max() < 4.0
     assert 0.3 < np.sqrt(np.mean(scores ** 2)) < 2.0     # not grossly over- or under-confident
+
+
+def links_own_recording(seed, **others):
+    """Return the issue's minimal case: biases t_k + a_j + r_kj (r_kj ~ N(0, 4 cm)), 60 s."""
+    return recording(seed, 0.02, 60.0, link_offset=0.04, **others)
+
+
+def test_links_own_offsets_are_fitted_not_pushed_into_the_anchors():
+    """
+    Per-link biases the devices' offsets cannot explain: fitted under a learned prior.
+
+    The devices' model alone (``link_std=0``) moves the anchors by decimetres and says
+    they are known to millimetres. With the links' own offsets a result is never
+    confidently wrong: it is refused (``misfit``, ``not_converged``: the start took a wrong
+    basin) or every anchor and link offset lies within its standard deviation.
+    """
+    accurate = 0
+    for seed in (0, 2):
+        model, simulator, ranges, _ = links_own_recording(seed)
+        truth = true_links(simulator) + simulator.links.link_offsets
+        moved = list(OUTRIGGERS)
+        devices = calibrate(model, ranges, fixed_anchors=FIXED, sigma=0.02, link_std=0.0)
+        assert not devices.pair_offsets.any()
+        device_errors = np.abs(devices.anchors - simulator.true_anchors)[moved]
+        assert (device_errors / devices.anchor_std[moved]).max() > 4.0  # confidently wrong
+        result = calibrate(model, ranges, fixed_anchors=FIXED, sigma=0.02)
+        if result.status in ('misfit', 'not_converged'):
+            continue
+        errors = np.abs(result.anchors - simulator.true_anchors)[moved]
+        assert (errors / result.anchor_std[moved]).max() < 4.5
+        assert (np.abs(result.link_offsets - truth) / result.link_offset_std).max() < 4.5
+        # 30 links' offsets of 4 cm RMS: learned within what 30 draws (of which the devices'
+        # and anchors' parameters take about half) allow.
+        assert 0.02 < result.link_std < 0.07
+        np.testing.assert_allclose(result.model.link_offsets(), result.link_offsets)
+        link, common = result.bias_std
+        assert 0.0 < common <= link < 0.05
+        accurate += errors.max() < 0.05 < device_errors.max()
+    assert accurate >= 1
+
+
+def test_a_wrong_section_length_is_named_not_absorbed():
+    """The hostile case: the tip section 9.5 m long, configured 9.0 m."""
+    model = truck_pump()
+    lengths = model.arm_lengths.copy()
+    lengths[-1] = 9.5
+    real = BoomModel(lengths, model.base, model.anchors)
+    rng = np.random.default_rng(3)
+    simulator = FieldSimulator(real, FieldEffects(sigma=0.1, tag_offset=0.15,
+                                                  anchor_offset=0.15), rng)
+    motion = WorkingMotion(real, rng)
+    ranges = np.array([simulator.frame(motion, 0.1 * index).ranges for index in range(1200)])
+    result = calibrate(model, ranges, fixed_anchors=FIXED, learn_noise=True)
+    assert result.status == 'misfit' and not result.success
+    assert 'arm_lengths[4]' in result.message and 'tag 4' in result.message
+
+
+def test_misfit_names_the_tag_the_anchor_or_the_link_that_fits_worse():
+    expected = np.full((5, 6), 1000.0)
+    assert misfit(expected.copy(), expected, 1.0) == []
+    worse_tag = expected.copy()
+    worse_tag[3] *= 2.0
+    (advice,) = misfit(worse_tag, expected, 1.0)
+    assert 'tag 3 fit' in advice and 'arm_lengths[3]' in advice
+    worse_anchor = expected.copy()
+    worse_anchor[:, 5] *= 2.0
+    (advice,) = misfit(worse_anchor, expected, 1.0)
+    assert 'anchor 5' in advice
+    worse_link = expected.copy()
+    worse_link[1, 2] *= 3.0
+    (advice,) = misfit(worse_link, expected, 1.0)
+    assert 'tag 1 - anchor 2' in advice
+    # Correlated over 100 frames, 1000 ranges are 10 draws: twice the mean square is chance.
+    assert misfit(worse_tag, expected, 100.0) == []
+    offsets = np.full((5, 6), 0.1)
+    offsets[4] = 0.8
+    (advice,) = implausible(offsets)
+    assert 'tag 4' in advice and '+0.80 m' in advice
+
+
+def test_integrated_autocorrelation_of_known_processes():
+    """AR(1) of lag-one correlation rho: (1 + rho) / (1 - rho) frames; white noise: 1."""
+    rng = np.random.default_rng(7)
+    rho, frames, links = 0.8, 4000, 30
+    series = np.empty((frames, links))
+    series[0] = rng.standard_normal(links)
+    for t in range(1, frames):
+        series[t] = rho * series[t - 1] + np.sqrt(1 - rho ** 2) * rng.standard_normal(links)
+    mask = rng.random(series.shape) > 0.1           # a tenth of the ranges missing
+    # Sokal's estimate over 120,000 draws: its standard deviation about
+    # tau sqrt(2 (2 M + 1) / N) with M ~ 5 tau, 0.5 frames here.
+    time = integrated_autocorrelation(series + 3.0, mask)     # each link's mean off
+    assert abs(time - 9.0) < 2.0
+    white = integrated_autocorrelation(rng.standard_normal((frames, links)), mask)
+    assert 1.0 <= white < 1.3
+    assert integrated_autocorrelation(np.zeros((10, 3)), np.ones((10, 3), bool)) == 1.0
+
+
+def test_correlated_noise_weighs_as_fewer_frames():
+    """Noise correlated over seconds: the stated deviations cover the errors all the same."""
+    model, simulator, ranges, _ = recording(5, 0.05, 60.0, correlated_fraction=0.76,
+                                            noise_correlation_time=2.4)
+    result = calibrate(model, ranges, fixed_anchors=FIXED, sigma=0.05)
+    # 0.76 of the variance correlated over 24 frames: about 1 + 2 * 0.76 * 24 = 37 frames
+    # of which the joint fit's angles take some.
+    assert 5.0 < result.correlation < 60.0
+    moved = list(OUTRIGGERS)
+    scores = np.r_[(np.abs(result.anchors - simulator.true_anchors)[moved]
+                    / result.anchor_std[moved]).ravel(),
+                   (np.abs(result.link_offsets - true_links(simulator))
+                    / result.link_offset_std).ravel()]
+    assert scores.max() < 4.5 and np.sqrt(np.mean(scores ** 2)) < 2.0
 
 
 def test_a_parked_boom_is_reported_as_poorly_excited():
@@ -225,6 +340,7 @@ def test_measurements_and_estimators_see_offset_corrected_ranges():
     ({'stamps': [0.0, 0.2, 0.1]}, 'in time order'),
     ({'stamps': 'now'}, 'stamps must be a numeric array'),
     ({'nlos_duration': -1.0}, 'nlos_duration'),
+    ({'link_std': -0.1}, 'link_std'),
 ])
 def test_bad_recordings_are_refused(kwargs, message):
     model = truck_pump()
@@ -252,7 +368,7 @@ def test_links_blocked_for_seconds_are_set_aside_and_the_errors_stay_within_the_
                       simulator.tag_offsets, simulator.anchor_offsets]
         fitted = np.r_[result.anchors[list(OUTRIGGERS)].ravel(), result.tag_offsets,
                        result.anchor_offsets]
-        scores.append((fitted - truth) / np.sqrt(np.diag(result.covariance)))
+        scores.append((fitted - truth) / np.sqrt(np.diag(result.covariance)[:truth.size]))
         alone = calibrate(model, ranges, stamps=stamps, fixed_anchors=FIXED,
                           anchor_ranges=anchor_rounds(simulator, 30, seed), learn_noise=True,
                           nlos_duration=0.0)

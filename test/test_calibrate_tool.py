@@ -35,10 +35,15 @@ CONFIG = load_pump_config(PUMP_YAML)
 
 @pytest.fixture(scope='module')
 def good_bag(tmp_path_factory):
-    """30 s of a working cycle with offsets and moved anchors, low noise: calibratable."""
+    """
+    60 s of a working cycle with offsets and moved anchors, low noise: calibratable.
+
+    Links may have offsets of their own too, which leaves the tip's link offsets known to
+    +-4 cm after 30 s of this cycle (the tip's pitch hides them), +-2.5 cm after 60 s.
+    """
     path = tmp_path_factory.mktemp('bags') / 'field'
     assert bag_tool.main(['synth', str(path), '--field', 'offsets,anchors_moved,sigma_low',
-                          '--duration', '30', '--start', '1000', '--seed', '0']) == 0
+                          '--duration', '60', '--start', '1000', '--seed', '0']) == 0
     return path
 
 
@@ -97,7 +102,15 @@ def test_calibrates_a_synthesized_bag_and_writes_a_config_the_nodes_load(calibra
     np.testing.assert_allclose(shown, model.anchors[1], atol=5e-4)
     # Everything else of the pump.yaml kept, comments too.
     source, written = yaml.safe_load(PUMP_YAML.read_text()), yaml.safe_load(out.read_text())
-    for name in ('anchor_positions', 'anchor_offsets', 'tag_offsets'):
+    # With each link's own offset, and what is left unknown for the estimator.
+    parameters = written['/**']['ros__parameters']
+    np.testing.assert_allclose(np.reshape(parameters['pair_offsets'], (5, 6)),
+                               printed['pair_offsets'], atol=1e-6)
+    for name in ('link_bias_std', 'common_bias_std'):
+        assert abs(parameters[name] - printed[name]) <= 1e-6
+        assert 0.0 < parameters[name] < 0.05
+    for name in ('anchor_positions', 'anchor_offsets', 'tag_offsets', 'pair_offsets',
+                 'link_bias_std', 'common_bias_std'):
         source['/**']['ros__parameters'].pop(name, None)
         written['/**']['ros__parameters'].pop(name)
     assert written == source
@@ -215,6 +228,12 @@ def test_update_pump_yaml_keeps_the_file_and_replaces_the_values(tmp_path):
         update_pump_yaml(text, {'anchor_offsets': [0.1]})
     with pytest.raises(ConfigError, match='unknown'):
         update_pump_yaml(text, {'anchors': [0.1]})
+    # The estimator's settings a calibration determines: numbers, replaced in place.
+    told = update_pump_yaml(text, {'link_bias_std': 0.0123, 'common_bias_std': 0.004})
+    assert set(told.splitlines()) - set(text.splitlines()) == {
+        '    link_bias_std: 0.0123', '    common_bias_std: 0.004'}
+    with pytest.raises(ConfigError, match='link_bias_std: must be a finite number >= 0'):
+        update_pump_yaml(text, {'link_bias_std': -0.1})
 
 
 def test_calibration_bench_runs_small():
@@ -236,12 +255,12 @@ def test_a_bag_without_anchor_ranges_says_so_and_calibrates_as_before(calibrated
 
 
 SURVEY_FIELD = 'offsets,anchors_moved,sigma_low'
-SURVEY_SECONDS = 20.0
+SURVEY_SECONDS = 60.0
 
 
 @pytest.fixture(scope='module')
 def surveyed_bag(tmp_path_factory):
-    """Write 20 s of a working cycle with anchor-anchor ranges (a start-up burst, then 1 Hz)."""
+    """Write 60 s of a working cycle with anchor-anchor ranges (a start-up burst, then 1 Hz)."""
     path = tmp_path_factory.mktemp('bags') / 'surveyed'
     assert bag_tool.main(['synth', str(path), '--field', SURVEY_FIELD, '--duration',
                           str(SURVEY_SECONDS), '--start', '1000', '--seed', '0',
@@ -293,8 +312,7 @@ def test_anchor_ranges_self_survey_the_anchors(surveyed_bag, tmp_path):
     from epp_ros.uwb.emulation import SURVEY_BURST
     rounds = SURVEY_BURST + int(SURVEY_SECONDS) - 1
     surveyed = calibrate_json(surveyed_bag, tmp_path / 'surveyed.yaml')
-    # 20 s hardly determine every link offset without the survey (see the --force test):
-    # written with --force, to compare.
+    # Written with --force without the survey, to compare.
     ignored = calibrate_json(surveyed_bag, tmp_path / 'ignored.yaml', '--no-survey', '--force')
     assert surveyed[0] == 0 and surveyed[1]['status'] == 'ok', surveyed[2][-3:]
     assert surveyed[1]['survey_rounds'] == rounds and ignored[1]['survey_rounds'] == 0

@@ -304,6 +304,11 @@ def test_device_offsets_are_optional_and_reach_the_model(tmp_path):
     values = shared_values()
     values.update(anchor_offsets=[], tag_offsets=[])        # ROS parameters' "none"
     assert not pump_config_from_parameters(values).model().has_offsets
+    # Each link's own offset, tag-major, as epp_calibrate writes it.
+    values.update(pair_offsets=[0.001 * index for index in range(30)])
+    model = pump_config_from_parameters(values).model()
+    np.testing.assert_allclose(model.pair_offsets, np.arange(30).reshape(5, 6) * 0.001)
+    np.testing.assert_allclose(model.link_offsets(), model.pair_offsets)
 
 
 @pytest.mark.parametrize('change, message', [
@@ -314,6 +319,8 @@ def test_device_offsets_are_optional_and_reach_the_model(tmp_path):
     ({'anchor_offsets': ['x'] * 6}, 'anchor_offsets: must be a list of numbers'),
     ({'anchor_offsets': [0.1] * 5 + [150.0]}, 'anchor_offsets: offsets must be within'),
     ({'tag_offsets': 0.1}, 'tag_offsets: must be a list'),
+    ({'pair_offsets': [0.01] * 29}, r'pair_offsets: needs one offset per entry of tag_names x '
+                                    r'anchor_names \(30\) or none, got 29'),
 ])
 def test_bad_offsets_give_one_line_naming_the_field(change, message):
     values = shared_values()

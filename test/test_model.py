@@ -94,6 +94,25 @@ def test_device_offsets_default_to_zero_and_add_to_the_measured_ranges():
     np.testing.assert_array_equal(calibrated.anchors, model.anchors)
 
 
+def test_links_own_offsets_add_to_the_devices_offsets():
+    pairs = [[0.01, -0.02, 0.03, 0.0], [0.0, 0.04, -0.01, 0.02]]
+    model = BoomModel([1.0, 2.0], [0.0, 0.0, 0.0], ANCHORS, anchor_offsets=[0.1, 0.2, 0.3, 0.4],
+                      tag_offsets=[-0.05, 0.05], pair_offsets=pairs)
+    joints = model.forward_kinematics(0.2, [0.5, -0.3])
+    np.testing.assert_allclose(model.measured_ranges(joints) - model.ranges(joints),
+                               np.array([[0.05, 0.15, 0.25, 0.35], [0.15, 0.25, 0.35, 0.45]])
+                               + pairs)
+    np.testing.assert_allclose(model.tag_link_offsets(), [[-0.1, 0.0], [0.0, 0.1]])  # devices'
+    assert model.has_offsets and 'pair_offsets=' in repr(model)
+    kept = model.with_calibration(tag_offsets=[0.0, 0.0])
+    np.testing.assert_array_equal(kept.pair_offsets, pairs)
+    assert BoomModel([1.0, 2.0], [0.0, 0.0, 0.0], ANCHORS, pair_offsets=pairs).has_offsets
+    with pytest.raises(ValueError, match='pair_offsets must hold 8 values'):
+        BoomModel([1.0, 2.0], [0.0, 0.0, 0.0], ANCHORS, pair_offsets=[0.1] * 6)
+    with pytest.raises(ValueError):
+        model.pair_offsets[0, 0] = 1.0
+
+
 @pytest.mark.parametrize('kwargs, message', [
     ({'anchor_offsets': [0.1, 0.2]}, 'anchor_offsets must hold 4 values'),
     ({'tag_offsets': [0.1, 0.2, 0.3]}, 'tag_offsets must hold 2 values'),

@@ -27,20 +27,22 @@ import numpy as np
 __all__ = ['normal_equations', 'eliminate', 'damped_step', 'least_squares']
 
 
-def normal_equations(angle, shared, slope, weights, pair_gradient=0.0, pair_information=0.0):
+def normal_equations(angle, shared, slope, weights, shared_gradient=0.0,
+                     shared_information=0.0):
     """
     Return the block-arrow normal equations: U (n, a, a), W (n, a, q), V, g_a, g_q.
 
-    The anchor-anchor ranges' gradient and information (shared parameters only) add to
-    ``g_q`` and ``V``.
+    The gradient and information of the terms of the shared parameters alone (anchor-anchor
+    ranges, priors) add to ``g_q`` and ``V``.
     """
-    weighted = angle * weights[..., None]
-    blocks = np.einsum('nla,nlb->nab', weighted, angle)
-    coupling = np.einsum('nla,nlq->naq', weighted, shared)
-    shared_block = np.einsum('nlq,nlr->qr', shared * weights[..., None], shared)
-    return (blocks, coupling, shared_block + pair_information,
-            np.einsum('nla,nl->na', angle, slope),
-            np.einsum('nlq,nl->q', shared, slope) + pair_gradient)
+    weighted = np.swapaxes(angle * weights[..., None], 1, 2)        # (n, a, l)
+    blocks = weighted @ angle
+    coupling = weighted @ shared
+    flat = shared.reshape(-1, shared.shape[-1])
+    shared_block = (flat * weights.reshape(-1, 1)).T @ flat
+    return (blocks, coupling, shared_block + shared_information,
+            (np.swapaxes(angle, 1, 2) @ slope[..., None])[..., 0],
+            flat.T @ slope.ravel() + shared_gradient)
 
 
 def eliminate(blocks, coupling, shared_block, pseudo=False):
@@ -52,7 +54,8 @@ def eliminate(blocks, coupling, shared_block, pseudo=False):
     """
     inverse = np.linalg.pinv(blocks, rcond=1e-10, hermitian=True) if pseudo \
         else np.linalg.inv(blocks)
-    reduced = shared_block - np.einsum('naq,nab,nbr->qr', coupling, inverse, coupling)
+    size = coupling.shape[-1]
+    reduced = shared_block - coupling.reshape(-1, size).T @ (inverse @ coupling).reshape(-1, size)
     return 0.5 * (reduced + reduced.T), inverse
 
 
@@ -67,9 +70,10 @@ def damped_step(normal, damping):
     damped = blocks + ridge[:, :, None] * np.eye(size)
     shared_damped = shared_block + damping * np.diag(np.diag(shared_block) + 1e-9)
     reduced, inverse = eliminate(damped, coupling, shared_damped)
-    right = gradient_q - np.einsum('naq,nab,nb->q', coupling, inverse, gradient_a)
+    eliminated = (inverse @ gradient_a[..., None])[..., 0]          # (n, a)
+    right = gradient_q - coupling.reshape(-1, coupling.shape[-1]).T @ eliminated.ravel()
     step_q = -np.linalg.solve(reduced, right)
-    step_a = -np.einsum('nab,nb->na', inverse, gradient_a + coupling @ step_q)
+    step_a = -(inverse @ (gradient_a + coupling @ step_q)[..., None])[..., 0]
     return step_a, step_q
 
 
@@ -79,7 +83,7 @@ def least_squares(problem, psi, q, frames, max_iter, tol):
 
     ``problem`` gives the frames' scaled residuals and Jacobian blocks (``evaluate``), their
     robust cost, slope and weights (``robust``) and the terms of ``q`` alone
-    (``anchor_terms``). Returns the angles, q, the cost, the iterations and whether it
+    (``shared_terms``). Returns the angles, q, the cost, the iterations and whether it
     converged.
     """
     mask = problem.mask[frames]
@@ -87,9 +91,9 @@ def least_squares(problem, psi, q, frames, max_iter, tol):
     def state(psi, q):
         scaled, angle, shared = problem.evaluate(psi, problem.x0 + problem.basis @ q, frames)
         cost, slope, weights, _ = problem.robust(scaled, mask, frames)
-        pair_cost, pair_gradient, pair_information, _ = problem.anchor_terms(q)
-        return (float(cost.sum()) + pair_cost,
-                (angle, shared, slope, weights, pair_gradient, pair_information))
+        shared_cost, shared_gradient, shared_information, _ = problem.shared_terms(q)
+        return (float(cost.sum()) + shared_cost,
+                (angle, shared, slope, weights, shared_gradient, shared_information))
 
     cost, parts = state(psi, q)
     damping, iterations, converged = 1e-6, 0, False

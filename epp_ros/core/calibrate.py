@@ -81,8 +81,9 @@ from scipy.special import expit
 
 from .block_arrow import eliminate, least_squares, normal_equations
 from .blockage import BlockageChain
-from .calibration_verdict import (link_offset_std, poorly_determined, scaled_covariance,
-                                  verdict)
+from .calibration_verdict import (common_offset_std, implausible,
+                                  integrated_autocorrelation, link_offset_std, misfit,
+                                  poorly_determined, scaled_covariance, verdict)
 from .chain import angles_from_joints, ChainMethod, SearchExhausted
 from .measurements import Measurements, Residuals
 from .model import ANCHOR_SEPARATION
@@ -108,6 +109,17 @@ SELECTION_ITERATIONS = 30
 #: half) below which the joint fit is not repeated for them.
 JUDGED_OTHERWISE = 1e-3
 
+#: Metres: the size of the links' own offsets the fit starts from when it learns it (the
+#: pair term of real two-way-ranging links is 4-8 cm RMS) ...
+LINK_STD_START = 0.05
+#: ... and the least it learns: smaller ones hide in the noise of any recording.
+LINK_STD_FLOOR = 0.01
+#: Most rounds of learning it (each a fit from the last; it stops at a 5 % change).
+LINK_ROUNDS = 6
+
+#: Metres: how far off a link offset the recording does not determine counts as.
+UNKNOWN_OFFSET = 1.0
+
 #: Robust cost (units of sigma squared) by which chain's angles must fit a frame better
 #: than the joint fit's to replace them: a fold, not the difference between the fit's
 #: weighting of the ranges and the mixture's.
@@ -124,17 +136,26 @@ class CalibrationResult:
     residual variance; zero for what the gauges fix.
     """
 
-    status: str                 #: ``"ok"``, ``"poorly_excited"`` or ``"not_converged"``
+    #: ``"ok"``, ``"poorly_excited"``, ``"misfit"`` (the model does not fit a tag, an anchor
+    #: or a link as it fits the others) or ``"not_converged"``
+    status: str
     message: str                #: the verdict, with what is poorly determined and why
     model: object               #: the calibrated BoomModel
     anchors: np.ndarray         #: (m, 3) metres
     anchor_offsets: np.ndarray  #: (m,) metres
     tag_offsets: np.ndarray     #: (p,) metres
-    link_offsets: np.ndarray    #: (p, m) metres, tag + anchor: what the ranges determine
+    #: (p, m) metres, tag + anchor + the link's own: what the ranges determine
+    link_offsets: np.ndarray
+    pair_offsets: np.ndarray    #: (p, m) metres, each link's own offset (zeros: none fitted)
+    link_std: float             #: metres, the prior size of the links' own offsets, or learned
+    #: frames, the residuals' integrated autocorrelation time: correlated frames weigh as
+    #: fewer independent ones in every standard deviation
+    correlation: float
     anchor_std: np.ndarray      #: (m, 3) metres per axis (0 for fixed anchors)
     anchor_offset_std: np.ndarray   #: (m,) metres (depends on the gauge)
     tag_offset_std: np.ndarray  #: (p,) metres (depends on the gauge)
     link_offset_std: np.ndarray     #: (p, m) metres
+    common_offset_std: float        #: metres, of the links' mean offset
     #: metres, RMS range residual of chain's fits with the model given (on the subsample
     #: the starts are chosen on, every ``N // SELECTION_FRAMES``-th frame)
     rms_before: float
@@ -148,7 +169,8 @@ class CalibrationResult:
     frames_used: np.ndarray = None  #: (N,) bool, the frames fitted
     postures: np.ndarray = None     #: (N, p + 1) radians, each frame's fit (NaN: unused)
     nlos: np.ndarray = None         #: (N, p, m) posterior NLOS probability of each link
-    covariance: np.ndarray = None   #: of (free anchors' xyz, tag offsets, anchor offsets)
+    #: of (free anchors' xyz, tag offsets, anchor offsets, the links' own offsets)
+    covariance: np.ndarray = None
     seconds: float = 0.0            #: computation time
     #: the anchor self-survey that started the fit (``core.survey.SurveyResult``), None
     #: without anchor-anchor ranges
@@ -161,6 +183,20 @@ class CalibrationResult:
     #: how long a blocked link stays blocked (seconds; frame periods without stamps), as
     #: given or learned; 0: every frame judged on its own
     nlos_duration: float = 0.0
+
+    @property
+    def bias_std(self):
+        """
+        Return what the calibration leaves unknown of the ranges' biases, metres.
+
+        (each link's own, RMS over the links; the part common to all): the estimator's
+        ``link_bias_std`` and ``common_bias_std`` for the calibrated model. A link offset
+        the recording does not determine counts as unknown to :data:`UNKNOWN_OFFSET`.
+        """
+        variance = np.where(np.isfinite(self.link_offset_std), self.link_offset_std,
+                            UNKNOWN_OFFSET) ** 2
+        return (float(np.sqrt(np.mean(variance))),
+                min(self.common_offset_std, UNKNOWN_OFFSET))
 
     @property
     def success(self):
@@ -209,7 +245,9 @@ class _Problem:
         self.p, self.m = p, m
         self.free = np.array([j for j in range(m) if j not in fixed], dtype=int)
         self.fixed = fixed
+        self.n_pairs = 0        # the links' own offsets: the model's, until enabled
         self.n_x = 3 * self.free.size + p + m
+        self.set_link_prior(0.0)
         self._rows(ranges, tag_ranges)
         self.pairs = pairs
         self.set_noise(settings)
@@ -247,6 +285,7 @@ class _Problem:
         self.offset_rows[np.arange(p * m), p + self.link_anchor] = 1.0
         self.offset_rows[p * m + np.arange(self.near.size), self.near] += 1.0
         self.offset_rows[p * m + np.arange(self.near.size), self.far] += 1.0
+        self.known_offsets = np.r_[self.model.pair_offsets.ravel(), np.zeros(self.near.size)]
 
     def set_noise(self, settings):
         """
@@ -265,6 +304,36 @@ class _Problem:
         self._losses = {}
         if self.pairs is not None:
             self.pairs.bind(self.mixture)
+
+    def enable_link_terms(self, link_std, q):
+        """
+        Fit each link's own offset from now on, under ``N(0, link_std^2)``; return q so.
+
+        They start from the model's (the known offsets until now), q's other parameters
+        stay as they are.
+        """
+        own = self.model.pair_offsets.ravel()
+        links = np.zeros((self.offset_rows.shape[0], own.size))
+        links[np.arange(own.size), np.arange(own.size)] = 1.0
+        self.offset_rows = np.hstack([self.offset_rows, links])
+        self.known_offsets = np.zeros(self.offset_rows.shape[0])
+        self.basis = np.block([[self.basis, np.zeros((self.n_x, own.size))],
+                               [np.zeros((own.size, self.basis.shape[1])), np.eye(own.size)]])
+        self.x_given, self.x0 = np.r_[self.x_given, own], np.r_[self.x0, own]
+        self.n_pairs, self.n_x = own.size, self.n_x + own.size
+        self.set_link_prior(link_std)
+        return np.r_[q, np.zeros(own.size)]
+
+    def set_link_prior(self, link_std, correlation=1.0):
+        """
+        Hold each link's own offset to ``N(0, link_std^2)`` from now on (metres).
+
+        ``correlation``: the residuals' integrated autocorrelation time, in frames; the
+        recording then weighs as many times less against the prior.
+        """
+        self.link_std = float(link_std)
+        self.correlation = float(correlation)
+        self.pair_weight = self.correlation / self.link_std ** 2 if self.n_pairs else 0.0
 
     def located(self, tip=False):
         """
@@ -302,7 +371,7 @@ class _Problem:
         if not split_measured:
             split = x[n_anchor:n_anchor + p].sum() - x[n_anchor + p:].sum()
             x[n_anchor:n_anchor + p] -= split / (p + m)
-            x[n_anchor + p:] += split / (p + m)
+            x[n_anchor + p:n_anchor + p + m] += split / (p + m)
         return x
 
     def _gauges(self, model, tag_tag, anchor_anchor):
@@ -348,12 +417,21 @@ class _Problem:
         anchors = self.model.anchors.copy()
         n_anchor = 3 * self.free.size
         anchors[self.free] = x[:n_anchor].reshape(-1, 3)
-        return anchors, x[n_anchor:n_anchor + self.p], x[n_anchor + self.p:]
+        return (anchors, x[n_anchor:n_anchor + self.p],
+                x[n_anchor + self.p:n_anchor + self.p + self.m])
+
+    def pair_offsets(self, x):
+        """Return each link's own offset (p, m) of ``x``: the model's without link terms."""
+        if not self.n_pairs:
+            return self.model.pair_offsets
+        return x[self.n_x - self.n_pairs:].reshape(self.p, self.m)
 
     def calibrated(self, q):
         """Return the model with the anchors and offsets of ``q``."""
-        anchors, tag_offsets, anchor_offsets = self.unpack(self.x0 + self.basis @ q)
-        return self.model.with_calibration(anchors, anchor_offsets, tag_offsets)
+        x = self.x0 + self.basis @ q
+        anchors, tag_offsets, anchor_offsets = self.unpack(x)
+        return self.model.with_calibration(anchors, anchor_offsets, tag_offsets,
+                                           self.pair_offsets(x))
 
     def evaluate(self, psi, x, frames, jacobian=True):
         """
@@ -367,12 +445,12 @@ class _Problem:
         shared_jacobian : ndarray, shape (n, rows, n_q)
 
         """
-        anchors, tag_offsets, anchor_offsets = self.unpack(x)
+        anchors = self.unpack(x)[0]
         joints = self.model.forward_kinematics(psi[:, 0], psi[:, 1:])      # (n, p, 3)
         vectors = np.concatenate([joints[:, self.link_tag] - anchors[self.link_anchor],
                                   joints[:, self.near] - joints[:, self.far]], axis=1)
         distances = np.linalg.norm(vectors, axis=-1)
-        offsets = self.offset_rows @ np.r_[tag_offsets, anchor_offsets]
+        offsets = self.offset_rows @ x[3 * self.free.size:] + self.known_offsets
         measured = self.measured[frames]
         mask = self.mask[frames]
         sigma = self.sigma[frames]
@@ -380,7 +458,7 @@ class _Problem:
         if not jacobian:
             return scaled, None, None
         units = vectors / np.maximum(distances, 1e-12)[..., None]
-        moved = np.stack([self.model.joint_jacobian(s[0], s[1:]) for s in psi])  # (n,p,3,p+1)
+        moved = self.model.joint_jacobian(psi[:, 0], psi[:, 1:])        # (n, p, 3, p + 1)
         links = self.n_links
         angle = np.empty(scaled.shape + (self.p + 1,))
         angle[:, :links] = np.einsum('nlc,nlcq->nlq', units[:, :links],
@@ -434,18 +512,43 @@ class _Problem:
         mask = self.mask[frames]
         return float(np.mean(np.abs(blocked - before)[mask] > 0.5)) if mask.any() else 0.0
 
-    def anchor_terms(self, q):
+    def shared_terms(self, q):
         """
-        Return the anchor-anchor ranges' cost, gradient (n_q,), information and parts.
+        Return the cost, gradient (n_q,) and information of the terms of ``q`` alone.
 
-        Zeros (and None parts) without them; see ``AnchorPairs.terms``.
+        The anchor-anchor ranges' (``AnchorPairs.terms``) and the links' own offsets'
+        prior (:meth:`set_link_prior`). Also the anchor-anchor ranges' parts (None without
+        them).
         """
+        size = self.basis.shape[1]
+        cost, gradient, information, parts = 0.0, np.zeros(size), np.zeros((size, size)), None
+        x = self.x0 + self.basis @ q
+        if self.pairs is not None:
+            anchors, _, anchor_offsets = self.unpack(x)
+            cost, gradient, information, parts = self.pairs.terms(
+                anchors, anchor_offsets, self.anchor_column, self.offset_column, self.basis)
+        if self.n_pairs:
+            prior = self.prior_terms(x, self.pair_weight)
+            cost, gradient, information = (cost + prior[0], gradient + prior[1],
+                                           information + prior[2])
+        return cost, gradient, information, parts
+
+    def anchor_pair_terms(self, q):
+        """Return the anchor-anchor ranges' information (n_q, n_q) and parts (None: none)."""
         if self.pairs is None:
             size = self.basis.shape[1]
-            return 0.0, np.zeros(size), np.zeros((size, size)), None
+            return np.zeros((size, size)), None
         anchors, _, anchor_offsets = self.unpack(self.x0 + self.basis @ q)
-        return self.pairs.terms(anchors, anchor_offsets, self.anchor_column,
-                                self.offset_column, self.basis)
+        _, _, information, parts = self.pairs.terms(
+            anchors, anchor_offsets, self.anchor_column, self.offset_column, self.basis)
+        return information, parts
+
+    def prior_terms(self, x, weight):
+        """Return the links' offsets prior's cost, gradient and information in q."""
+        link_offsets = x[self.n_x - self.n_pairs:]
+        pairs = self.basis[self.n_x - self.n_pairs:]        # (n_pairs, n_q)
+        return (0.5 * weight * float(link_offsets @ link_offsets),
+                weight * (pairs.T @ link_offsets), weight * (pairs.T @ pairs))
 
 
 def _solve(chain, model, data, frame, prior, warm):
@@ -799,16 +902,21 @@ def _uncertainty(problem, psi, q, frames):
     """
     Return the covariance of x, the condition, residual scale and the NLOS probabilities.
 
-    The information of the shared parameters with the angles eliminated (plus the
-    anchor-anchor ranges'), scaled by the residual variance; inf along what it misses.
+    The information of the shared parameters with the angles eliminated, divided by the
+    residuals' integrated autocorrelation time (``problem.correlation``: correlated
+    frames weigh as fewer independent ones), plus the anchor-anchor ranges' and the links'
+    offsets prior's; scaled by the residual variance; inf along what it misses.
     """
     p = problem.p
     x = problem.x0 + problem.basis @ q
     scaled, angle, shared = problem.evaluate(psi, x, frames)
     _, slope, weights, nlos_links = problem.robust(scaled, problem.mask[frames], frames)
     blocks, coupling, shared_block, _, _ = normal_equations(angle, shared, slope, weights)
-    _, _, pair_information, pair_parts = problem.anchor_terms(q)
-    information = eliminate(blocks, coupling, shared_block, pseudo=True)[0] + pair_information
+    pair_information, pair_parts = problem.anchor_pair_terms(q)
+    information = (eliminate(blocks, coupling, shared_block, pseudo=True)[0]
+                   / problem.correlation + pair_information)
+    if problem.n_pairs:
+        information += problem.prior_terms(x, 1.0 / problem.link_std ** 2)[2]
     squares, count = np.sum(weights * scaled ** 2), float(weights.sum())
     if pair_parts is not None:
         squares += np.sum(pair_parts[1] * pair_parts[0] ** 2)
@@ -816,12 +924,82 @@ def _uncertainty(problem, psi, q, frames):
     dof = max(count - frames.size * (p + 1) - q.size, 1.0)
     residual_scale = float(np.sqrt(squares / dof))
     covariance_q, condition = scaled_covariance(information, residual_scale)
+    if problem.n_pairs:     # how well the recording excites the devices' parameters
+        condition = scaled_covariance(_marginal(information, problem.n_pairs), 1.0)[1]
     with np.errstate(invalid='ignore'):
         covariance = problem.basis @ np.nan_to_num(covariance_q, posinf=0.0) @ problem.basis.T
     undetermined = problem.basis[:, np.isinf(np.diag(covariance_q))].any(axis=1)
     covariance[undetermined, :] = np.inf
     covariance[:, undetermined] = np.inf
     return covariance, condition, residual_scale, nlos_links
+
+
+def _residual_spread(problem, psi, q, frames):
+    """
+    Return each link's sum of squared scaled residuals and what it would be in a fit (p, m).
+
+    Over the clear tag-anchor ranges (IRLS weights); what a fit leaves is each range's
+    ``sigma^2 (1 - h)``, h its leverage on its frame's angles (the shared parameters'
+    is small beside it).
+    """
+    n = problem.n_links
+    scaled, angle, _ = problem.evaluate(psi, problem.x0 + problem.basis @ q, frames)
+    weights = problem.robust(scaled, problem.mask[frames], frames)[2]
+    blocks = np.einsum('nla,nlb->nab', angle * weights[..., None], angle)
+    inverse = np.linalg.pinv(blocks, rcond=1e-10, hermitian=True)
+    leverage = weights * np.einsum('nla,nab,nlb->nl', angle, inverse, angle)
+    squares = np.sum(weights * scaled ** 2, axis=0)[:n].reshape(problem.p, problem.m)
+    expected = np.sum(weights - leverage, axis=0)[:n].reshape(problem.p, problem.m)
+    return squares, np.maximum(expected, 0.0)
+
+
+def _marginal(information, trailing):
+    """Return the information of all but the ``trailing`` parameters, those eliminated."""
+    kept, own = information[:-trailing, :-trailing], information[-trailing:, -trailing:]
+    coupling = information[:-trailing, -trailing:]
+    return kept - coupling @ np.linalg.solve(own, coupling.T)
+
+
+def _correlation(problem, psi, q, frames):
+    """Return the clear tag-anchor residuals' integrated autocorrelation time, frames."""
+    n = problem.n_links
+    scaled = problem.evaluate(psi, problem.x0 + problem.basis @ q, frames, jacobian=False)[0]
+    weights = problem.robust(scaled, problem.mask[frames], frames)[2]
+    return integrated_autocorrelation(scaled[:, :n], weights[:, :n] > 0.5)
+
+
+def _link_terms(problem, psi, q, frames, settings, learn):
+    """
+    Fit with each link's own offset under its prior; with ``learn``, the prior's size too.
+
+    The residuals' autocorrelation sets how much the recording weighs against the prior;
+    the size is learned by expectation-maximisation (the mean of each link offset's
+    squared estimate plus its variance), at least :data:`LINK_STD_FLOOR`. Returns the
+    angles, q, the iterations and whether the last fit converged.
+    """
+    iterations, converged = 0, True
+    if not problem.n_pairs:
+        problem.set_link_prior(0.0, _correlation(problem, psi, q, frames))
+        return psi, q, iterations, converged
+    for _ in range(LINK_ROUNDS):
+        problem.set_link_prior(problem.link_std, _correlation(problem, psi, q, frames))
+        psi, q, _, more, converged = least_squares(problem, psi, q, frames, settings.max_iter,
+                                                   settings.tol)
+        iterations += more
+        if not learn:
+            break
+        covariance, _, scale, _ = _uncertainty(problem, psi, q, frames)
+        own = slice(problem.n_x - problem.n_pairs, problem.n_x)
+        x = problem.x0 + problem.basis @ q
+        # The posterior under the noise as told: a misfit's scale is not the links'.
+        variance = np.nan_to_num(np.diag(covariance)[own] / scale ** 2,
+                                 posinf=problem.link_std ** 2)
+        learned = max(float(np.sqrt(np.mean(x[own] ** 2 + variance))), LINK_STD_FLOOR)
+        change = abs(learned / problem.link_std - 1.0)
+        problem.set_link_prior(learned, problem.correlation)
+        if change < 0.05:
+            break
+    return psi, q, iterations, converged
 
 
 def _anchor_rms(problem, q):
@@ -839,7 +1017,7 @@ def calibrate(model, ranges, *, stamps=None, tag_ranges=None, anchor_ranges=None
               prior_sigma=0.5, nlos_fraction=0.1, nlos_gamma=1.0, nlos_duration=None,
               learn_noise=False, start=None, max_iter=100, tol=1e-10, refits=3,
               hypotheses=4, anchor_tolerance=ANCHOR_TOLERANCE,
-              offset_tolerance=OFFSET_TOLERANCE):
+              offset_tolerance=OFFSET_TOLERANCE, link_std=None):
     """
     Calibrate the free anchors' positions and the device range offsets from a recording.
 
@@ -909,6 +1087,13 @@ def calibrate(model, ranges, *, stamps=None, tag_ranges=None, anchor_ranges=None
     anchor_tolerance, offset_tolerance : float
         Metres: anchors (std along their worst direction) and link offsets (std) less
         certain than these are reported as poorly determined.
+    link_std : float, optional
+        Metres: real links have an offset of their own beyond their tag's and anchor's
+        (antenna orientations, the path between the two devices); each is fitted under
+        the prior ``N(0, link_std^2)`` (the result's ``pair_offsets``), so that what the
+        devices' offsets cannot explain is not pushed into the anchors. None: the size is
+        learned from the recording (from ``LINK_STD_START``); 0: the devices' offsets
+        alone.
 
     Returns
     -------
@@ -924,6 +1109,8 @@ def calibrate(model, ranges, *, stamps=None, tag_ranges=None, anchor_ranges=None
     """
     began = time.perf_counter()
     p, m = model.n_sections, model.n_anchors
+    if link_std is not None and not float(link_std) >= 0.0:
+        raise ValueError(f'link_std must be >= 0 metres or None, got {link_std}')
     count = len(ranges) if np.ndim(ranges) == 3 else 0
     ranges = _finite_ranges(ranges, (count, p, m), 'ranges')
     stamps = _stamps(stamps, count)
@@ -958,6 +1145,10 @@ def calibrate(model, ranges, *, stamps=None, tag_ranges=None, anchor_ranges=None
         psi, q, more, converged, blockage = _joint_fit(problem, data, psi, q, frames,
                                                        settings, refits)
         iterations += more
+    if link_std is None or link_std > 0:
+        q = problem.enable_link_terms(LINK_STD_START if link_std is None else link_std, q)
+    psi, q, more, converged = _link_terms(problem, psi, q, frames, settings, link_std is None)
+    iterations += more
     return _result(problem, psi, q, frames, count, survey, {
         'rms_before': rms_before, 'iterations': iterations, 'converged': converged,
         'began': began, 'max_iter': max_iter, 'anchor_tolerance': anchor_tolerance,
@@ -968,7 +1159,9 @@ def calibrate(model, ranges, *, stamps=None, tag_ranges=None, anchor_ranges=None
 def _result(problem, psi, q, frames, count, survey, facts):
     """Return the :class:`CalibrationResult` of the joint fit's solution."""
     p, m, model = problem.p, problem.m, problem.model
-    anchors, tag_offsets, anchor_offsets = problem.unpack(problem.x0 + problem.basis @ q)
+    x = problem.x0 + problem.basis @ q
+    anchors, tag_offsets, anchor_offsets = problem.unpack(x)
+    pair_offsets = problem.pair_offsets(x)
     covariance, condition, residual_scale, nlos_links = _uncertainty(problem, psi, q, frames)
     std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     n_anchor = 3 * problem.free.size
@@ -978,15 +1171,18 @@ def _result(problem, psi, q, frames, count, survey, facts):
                                        facts['anchor_tolerance'], facts['offset_tolerance'])
     wandered = False
     try:
-        calibrated = model.with_calibration(anchors, anchor_offsets, tag_offsets)
+        calibrated = model.with_calibration(anchors, anchor_offsets, tag_offsets, pair_offsets)
     except ValueError as exc:       # values no pump has: the recording did not pin them
         calibrated, wandered = model, True
         poorly = poorly + ['the recording']
         advice = advice + [f'the fit wandered to values no pump has ({exc}); record the '
                            'boom slewing and luffing every section']
     rms_after = _range_rms(problem, psi, problem.x0 + problem.basis @ q, frames)
+    misfits = (misfit(*_residual_spread(problem, psi, q, frames), problem.correlation)
+               + implausible(tag_offsets[:, None] + anchor_offsets + pair_offsets))
     status, message = verdict(wandered, facts['converged'], poorly, advice,
-                              facts['max_iter'], frames, facts['rms_before'], rms_after)
+                              facts['max_iter'], frames, facts['rms_before'], rms_after,
+                              misfits)
     postures = np.full((count, p + 1), np.nan)
     postures[frames] = psi
     nlos = np.zeros((count, p, m))
@@ -996,9 +1192,14 @@ def _result(problem, psi, q, frames, count, survey, facts):
     return CalibrationResult(
         status=status, message=message, model=calibrated, anchors=anchors,
         anchor_offsets=anchor_offsets, tag_offsets=tag_offsets,
-        link_offsets=tag_offsets[:, None] + anchor_offsets[None, :], anchor_std=anchor_std,
-        anchor_offset_std=std[n_anchor + p:], tag_offset_std=std[n_anchor:n_anchor + p],
-        link_offset_std=link_offset_std(problem, covariance), rms_before=facts['rms_before'],
+        link_offsets=tag_offsets[:, None] + anchor_offsets[None, :] + pair_offsets,
+        pair_offsets=pair_offsets, link_std=problem.link_std,
+        correlation=problem.correlation, anchor_std=anchor_std,
+        anchor_offset_std=std[n_anchor + p:n_anchor + p + m],
+        tag_offset_std=std[n_anchor:n_anchor + p],
+        link_offset_std=link_offset_std(problem, covariance),
+        common_offset_std=common_offset_std(problem, covariance),
+        rms_before=facts['rms_before'],
         rms_after=rms_after, residual_scale=residual_scale, condition=condition,
         poorly_determined=poorly, gauge=problem.gauge, converged=facts['converged'],
         iterations=facts['iterations'], frames_used=used, postures=postures, nlos=nlos,

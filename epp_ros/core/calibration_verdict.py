@@ -18,12 +18,23 @@ What a calibration determines: its covariance, the verdict, and the advice on th
 ``core.calibrate`` fits; this judges the fit: the covariance of the shared parameters from
 their information (inf along what the recording does not determine), which anchors and
 link offsets are known worse than their tolerances, which motion would determine them
-better, and the status and message of the result.
+better, whether the model fits every tag, anchor and link alike (and the likely cause
+where it does not), and the status and message of the result.
 """
 import numpy as np
 
-__all__ = ['CONDITION_LIMIT', 'scaled_covariance', 'poorly_determined', 'link_offset_std',
-           'verdict']
+__all__ = ['CONDITION_LIMIT', 'MISFIT_RATIO', 'MISFIT_Z', 'PLAUSIBLE_OFFSET',
+           'scaled_covariance', 'poorly_determined', 'link_offset_std', 'common_offset_std',
+           'implausible', 'integrated_autocorrelation', 'misfit', 'verdict']
+
+#: A tag's, an anchor's or a link's mean squared residual this many times the others' ...
+MISFIT_RATIO = 1.3
+#: ... and this many standard errors above them: the model does not fit it.
+MISFIT_Z = 5.0
+
+#: Metres: link offsets (antenna delays, real links' biases: +0.04 to +0.33 m at the 5th
+#: and 95th percentiles) beyond this are a length absorbed, not a delay.
+PLAUSIBLE_OFFSET = 0.6
 
 #: Condition number (of the shared parameters' information, normalised to unit diagonal)
 #: above which a recording is reported as poorly exciting, whatever its length.
@@ -96,23 +107,157 @@ def poorly_determined(problem, covariance, condition, anchor_tolerance, offset_t
     return poorly, advice
 
 
-def link_offset_std(problem, covariance):
-    """Return the standard deviation (p, m) of each link offset, metres."""
-    n_anchor = 3 * problem.free.size
+def _link_rows(problem, size):
+    """Return the matrix (p m, size) from the offsets (tags, anchors, links' own) to links."""
     p, m = problem.p, problem.m
-    offsets = covariance[n_anchor:, n_anchor:]
-    tags, anchors = np.meshgrid(np.arange(p), p + np.arange(m), indexing='ij')
-    with np.errstate(invalid='ignore'):
-        variance = (offsets[tags, tags] + offsets[anchors, anchors]
-                    + 2 * offsets[tags, anchors])
-    return np.sqrt(np.where(np.isnan(variance), np.inf, np.maximum(variance, 0.0)))
+    rows = np.zeros((p * m, size))
+    rows[np.arange(p * m), np.repeat(np.arange(p), m)] = 1.0
+    rows[np.arange(p * m), p + np.tile(np.arange(m), p)] = 1.0
+    if problem.n_pairs:
+        rows[np.arange(p * m), p + m + np.arange(p * m)] = 1.0
+    return rows
 
 
-def verdict(wandered, converged, poorly, advice, max_iter, frames, rms_before, rms_after):
+def _combined_variance(rows, covariance):
+    """Return the variance of each row's combination of the parameters (inf: unknown)."""
+    finite = np.isfinite(covariance).all(axis=0)
+    variance = np.full(len(rows), np.inf)
+    known = ~(rows[:, ~finite] != 0).any(axis=1)
+    used = rows[np.ix_(known, finite)]
+    variance[known] = np.einsum('li,ij,lj->l', used, covariance[np.ix_(finite, finite)], used)
+    return np.maximum(variance, 0.0)
+
+
+def link_offset_std(problem, covariance):
+    """Return the standard deviation (p, m) of each link's offset, metres (inf: unknown)."""
+    offsets = covariance[3 * problem.free.size:, 3 * problem.free.size:]
+    rows = _link_rows(problem, offsets.shape[0])
+    return np.sqrt(_combined_variance(rows, offsets)).reshape(problem.p, problem.m)
+
+
+def common_offset_std(problem, covariance):
+    """Return the standard deviation of the links' mean offset, metres (inf: unknown)."""
+    offsets = covariance[3 * problem.free.size:, 3 * problem.free.size:]
+    rows = _link_rows(problem, offsets.shape[0])
+    return float(np.sqrt(_combined_variance(rows.mean(axis=0, keepdims=True), offsets)[0]))
+
+
+def integrated_autocorrelation(residuals, mask, window=5.0):
+    """
+    Return the integrated autocorrelation time of residual series, in frames (>= 1).
+
+    ``residuals`` (n, links) in time order, ``mask`` (n, links) where they count; each
+    link's mean is taken off, the lags' correlations are pooled over the links, and the
+    sum stops at the first lag of at least ``window`` times the time so far (Sokal's
+    window). n frames of it weigh as n / time independent ones.
+    """
+    mask = np.asarray(mask, bool)
+    counts = np.maximum(mask.sum(axis=0), 1)
+    centred = np.where(mask, residuals - np.where(mask, residuals, 0.0).sum(axis=0) / counts,
+                       0.0)
+    variance = np.sum(centred ** 2) / max(mask.sum(), 1)
+    time = 1.0
+    if variance <= 0:
+        return time
+    for lag in range(1, len(centred) // 4):
+        both = mask[lag:] & mask[:-lag]
+        if not both.any():
+            break
+        time += 2.0 * np.sum(centred[lag:] * centred[:-lag]) / both.sum() / variance
+        if lag >= window * time:
+            break
+    return max(time, 1.0)
+
+
+def _mean_square(squares, expected):
+    """Return ``squares / expected``, 0 where nothing is expected (no clear range)."""
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return np.where(expected > 0, squares / expected, 0.0)
+
+
+def _worse(squares, expected, correlation):
+    """
+    Return how much worse each group fits than all (ratio of mean squares), and its z.
+
+    ``squares``, ``expected``: the group's sum of squared scaled residuals and what a fit
+    leaves of it; the z-score's spread counts ``correlation`` frames as one.
+    """
+    ratio = _mean_square(squares, expected) / max(_mean_square(squares.sum(),
+                                                              expected.sum()), 1e-300)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        z = np.where(expected > 0, (ratio - 1.0) / np.sqrt(2.0 * correlation / expected), 0.0)
+    return ratio, z
+
+
+def misfit(squares, expected, correlation):
+    """
+    Return the advice on what the calibrated model does not fit, and the likely cause.
+
+    ``squares``, ``expected`` (p, m): each link's sum of squared scaled residuals and what
+    a fit that explains the ranges leaves of it (its ranges' ``1 - leverage``);
+    ``correlation``: the residuals' integrated autocorrelation time, frames. A tag, an
+    anchor or a link whose residuals are :data:`MISFIT_RATIO` times the others' and
+    :data:`MISFIT_Z` standard errors above them is named with its likely cause; a tag or
+    an anchor only when more than one of its links makes it so.
+    """
+    advice, links = [], set()
+    pooled = squares.sum() / max(expected.sum(), 1e-300)
+    for axis, kind, cause in ((1, 'tag', _tag_cause), (0, 'anchor', _anchor_cause)):
+        ratio, z = _worse(squares.sum(axis=axis), expected.sum(axis=axis), correlation)
+        for index in np.flatnonzero((ratio > MISFIT_RATIO) & (z > MISFIT_Z)):
+            group = (index, slice(None)) if kind == 'tag' else (slice(None), index)
+            worst = np.argmax(_mean_square(squares[group], expected[group]))
+            rest = np.delete(np.arange(squares[group].size), worst)
+            if _mean_square(squares[group][rest].sum(), expected[group][rest].sum()) \
+                    > MISFIT_RATIO * pooled:
+                advice.append(f'the ranges of {kind} {index} fit {ratio[index]:.2g} times '
+                              f'worse than the others: {cause(index)}')
+            else:
+                links.add((index, worst) if kind == 'tag' else (worst, index))
+    ratio, z = _worse(squares, expected, correlation)
+    flagged = set(zip(*np.nonzero((ratio > MISFIT_RATIO) & (z > MISFIT_Z))))
+    for k, j in sorted(links | (flagged if not advice else set())):
+        advice.append(f'the link tag {k} - anchor {j} fits {ratio[k, j]:.2g} times worse '
+                      'than the others: its bias varies (a path blocked for long, an '
+                      'antenna that turns); check its mounting')
+    return advice
+
+
+def implausible(link_offsets):
+    """
+    Return the advice on tags whose links came out longer than UWB modules make them.
+
+    ``link_offsets`` (p, m), metres. A tag whose every link offset is beyond
+    :data:`PLAUSIBLE_OFFSET` (antenna delays and real links' biases stay well within it)
+    has most likely absorbed a length: the section's, or the tag's place on the boom, seen
+    along the lines of sight.
+    """
+    advice = []
+    for k in np.flatnonzero(np.all(np.abs(link_offsets) > PLAUSIBLE_OFFSET, axis=1)):
+        advice.append(f'the links of tag {k} came out {np.median(link_offsets[k]):+.2f} m '
+                      f'long, more than UWB modules add: {_tag_cause(k)}')
+    return advice
+
+
+def _tag_cause(k):
+    return (f'the length of section {k + 1} (arm_lengths[{k}]) or where tag {k} sits on the '
+            'boom is likely wrong, or the fit took a wrong fold of it')
+
+
+def _anchor_cause(j):
+    return (f'anchor {j} is likely not where the fit put it (a wrong start: check its '
+            'configured position) or its antenna is blocked')
+
+
+def verdict(wandered, converged, poorly, advice, max_iter, frames, rms_before, rms_after,
+            misfits=()):
     """Return the status and the message of the verdict."""
     if not converged and not wandered:
         return 'not_converged', (f'the joint fit did not converge in {max_iter} iterations: '
                                  'the result is not to be used')
+    if misfits and not wandered:
+        return 'misfit', ('the calibrated model does not fit the recording, the result is '
+                          'not to be used: ' + '; '.join(misfits))
     if poorly:
         return 'poorly_excited', ('the recording does not determine everything: '
                                   + '; '.join(advice))

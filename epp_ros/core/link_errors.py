@@ -118,6 +118,11 @@ class LinkErrors:
         effects = self.effects
         return min(effects.outlier_rate * effects.outlier_duration, 1.0)
 
+    def same_links_as(self, other):
+        """Give these links ``other``'s constants: their own offsets and orientation terms."""
+        self.link_offsets = other.link_offsets.copy()
+        self._orientation = other._orientation.copy()
+
     def step(self, elapsed):
         """Advance the correlated noise and the outlier states by ``elapsed`` seconds (> 0)."""
         effects, rng = self.effects, self.rng

@@ -120,6 +120,10 @@ class BoomModel:
         anchor_offsets[j]``, a tag-tag range ``... + tag_offsets[k] + tag_offsets[l]``.
         Known offsets are subtracted from the measurements (``Measurements.clean``) and
         leave the Cramér–Rao bound unchanged: a known constant carries no information.
+    pair_offsets : array_like, shape (p, m), optional
+        What each tag-anchor link adds beyond its tag's and its anchor's offsets, metres
+        (default zeros): real links have a bias of their own (antenna orientations, the
+        path between the two devices), which ``core.calibrate`` estimates.
 
     Raises
     ------
@@ -129,7 +133,7 @@ class BoomModel:
     """
 
     def __init__(self, arm_lengths, base, anchors, pivot_offset=0.0, anchor_offsets=None,
-                 tag_offsets=None):
+                 tag_offsets=None, pair_offsets=None):
         arm_lengths = _as_finite_array(arm_lengths, 'arm_lengths', 1)
         if arm_lengths.size < 1:
             raise ValueError('arm_lengths must hold at least one section, got []')
@@ -150,15 +154,19 @@ class BoomModel:
         _check_anchor_geometry(anchors)
         anchor_offsets = _offsets(anchor_offsets, 'anchor_offsets', anchors.shape[0])
         tag_offsets = _offsets(tag_offsets, 'tag_offsets', arm_lengths.size)
+        shape = (arm_lengths.size, anchors.shape[0])
+        pair_offsets = _offsets(None if pair_offsets is None else np.ravel(pair_offsets),
+                                'pair_offsets', shape[0] * shape[1]).reshape(shape)
         self.arm_lengths = arm_lengths
         self.base = base
         self.pivot_offset = pivot_offset
         self.anchors = anchors
         self.anchor_offsets = anchor_offsets
         self.tag_offsets = tag_offsets
+        self.pair_offsets = pair_offsets
         self._moves_with = np.tril(np.ones((arm_lengths.size, arm_lengths.size)))
         for array in (self.arm_lengths, self.base, self.anchors, self.anchor_offsets,
-                      self.tag_offsets):
+                      self.tag_offsets, self.pair_offsets):
             array.flags.writeable = False
 
     @property
@@ -231,41 +239,43 @@ class BoomModel:
 
         Parameters
         ----------
-        slew : float
+        slew : float or ndarray, shape (...)
             Radians.
-        pitches : ndarray, shape (p,)
+        pitches : ndarray, shape (..., p)
             Radians.
 
         Returns
         -------
-        jacobian : ndarray, shape (p, 3, p + 1)
+        jacobian : ndarray, shape (..., p, 3, p + 1)
             ``jacobian[k, :, 0] = dw_k/dslew``, ``jacobian[k, :, 1 + i] = dw_k/dpitch_i``
             (zero for sections beyond joint k).
 
         """
+        slew = np.asarray(slew, dtype=float)[..., None]
         pitches = np.asarray(pitches, dtype=float)
         p = self.n_sections
-        along = np.array([np.cos(slew), np.sin(slew), 0.0])
-        across = np.array([-np.sin(slew), np.cos(slew), 0.0])
-        reach = self.pivot_offset + np.cumsum(self.arm_lengths * np.cos(pitches))
+        cos, sin = np.cos(slew), np.sin(slew)
+        reach = self.pivot_offset + np.cumsum(self.arm_lengths * np.cos(pitches), axis=-1)
         # d/dpitch_i of section i's vector: L_i (-sin phi_i along + cos phi_i up).
-        section = np.empty((3, p))
-        section[:2] = -(self.arm_lengths * np.sin(pitches)) * along[:2, None]
-        section[2] = self.arm_lengths * np.cos(pitches)
-        jacobian = np.zeros((p, 3, p + 1))
-        jacobian[:, :, 0] = reach[:, None] * across
+        rise = self.arm_lengths * np.sin(pitches)
+        section = np.stack([-rise * cos, -rise * sin,
+                            self.arm_lengths * np.cos(pitches)], axis=-2)        # (..., 3, p)
+        jacobian = np.zeros(pitches.shape[:-1] + (p, 3, p + 1))
+        jacobian[..., 0, 0] = -reach * sin
+        jacobian[..., 1, 0] = reach * cos
         # Joint k moves with sections i <= k.
-        jacobian[:, :, 1:] = self._moves_with[:, None, :] * section[None, :, :]
+        jacobian[..., 1:] = self._moves_with[:, None, :] * section[..., None, :, :]
         return jacobian
 
     @property
     def has_offsets(self):
-        """Whether any device has a range offset."""
-        return bool(self.anchor_offsets.any() or self.tag_offsets.any())
+        """Whether any device or link has a range offset."""
+        return bool(self.anchor_offsets.any() or self.tag_offsets.any()
+                    or self.pair_offsets.any())
 
     def link_offsets(self):
         """Return what each tag-anchor range measures too long, shape (p, m), metres."""
-        return self.tag_offsets[:, None] + self.anchor_offsets[None, :]
+        return self.tag_offsets[:, None] + self.anchor_offsets[None, :] + self.pair_offsets
 
     def tag_link_offsets(self):
         """Return what each tag-tag range measures too long, shape (p, p), metres."""
@@ -286,12 +296,14 @@ class BoomModel:
         """Return what the modules report, shape (..., p, m): :meth:`ranges` plus offsets."""
         return self.ranges(joints) + self.link_offsets()
 
-    def with_calibration(self, anchors=None, anchor_offsets=None, tag_offsets=None):
+    def with_calibration(self, anchors=None, anchor_offsets=None, tag_offsets=None,
+                         pair_offsets=None):
         """Return the same boom with other anchors and offsets (None: keep these)."""
         return BoomModel(self.arm_lengths, self.base,
                          self.anchors if anchors is None else anchors, self.pivot_offset,
                          self.anchor_offsets if anchor_offsets is None else anchor_offsets,
-                         self.tag_offsets if tag_offsets is None else tag_offsets)
+                         self.tag_offsets if tag_offsets is None else tag_offsets,
+                         self.pair_offsets if pair_offsets is None else pair_offsets)
 
     def max_ranges(self):
         """Longest possible tag-anchor distances, shape (p, m): anchor to base plus reach."""
@@ -314,5 +326,7 @@ class BoomModel:
         if self.has_offsets:
             offset += (f', anchor_offsets={self.anchor_offsets.tolist()}, '
                        f'tag_offsets={self.tag_offsets.tolist()}')
+        if self.pair_offsets.any():
+            offset += f', pair_offsets={self.pair_offsets.tolist()}'
         return (f'BoomModel(arm_lengths={self.arm_lengths.tolist()}, base={self.base.tolist()}, '
                 f'anchors={self.anchors.tolist()}{offset})')

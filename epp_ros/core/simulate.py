@@ -863,6 +863,19 @@ class FieldSimulator:
         pairs = np.triu(link_rng.normal(0.0, effects.link_offset, (m, m)), 1)
         self.anchor_pair_offsets = pairs + pairs.T
 
+    def same_pump_as(self, other):
+        """
+        Make this pump ``other``'s: a second recording of the same set-up.
+
+        Its anchors' places, its devices' offsets and its links' constant biases; the
+        motion, the noise and the blockages stay this simulator's own.
+        """
+        self.true_anchors = other.true_anchors.copy()
+        self.tag_offsets = other.tag_offsets.copy()
+        self.anchor_offsets = other.anchor_offsets.copy()
+        self.links.same_links_as(other.links)
+        self.anchor_pair_offsets = other.anchor_pair_offsets.copy()
+
     def _moving_anchors(self, indices):
         m = self.model.n_anchors
         if indices is None:

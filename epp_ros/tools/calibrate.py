@@ -19,10 +19,13 @@ epp_calibrate: anchor positions and device range offsets from a recorded bag.
                       [--plot FILE.png] [--json] [--force] [--salvage] [--no-survey]
 
 Reads the bag's /uwb/ranges (as uwb_driver publishes them) recorded while the boom slews
-and luffs, fits the free anchors' positions and every tag's and anchor's range offset
-(epp_ros.core.calibrate), prints what changed with its standard deviation, and writes
---out: the --config file with anchor_positions, anchor_offsets and tag_offsets replaced
-and everything else kept, for the nodes to start from (--params-file). The fixed anchors
+and luffs, fits the free anchors' positions, every tag's and anchor's range offset and
+each link's own offset under a prior whose size it learns (epp_ros.core.calibrate), prints
+what changed with its standard deviation, and writes --out: the --config file with
+anchor_positions, anchor_offsets, tag_offsets and pair_offsets replaced, and with
+link_bias_std and common_bias_std set to what the calibration leaves unknown (the
+estimator weighs the ranges by them), everything else kept, for the nodes to start from
+(--params-file). The fixed anchors
 (--fixed-anchors, names or device ids, comma-separated) are those on the truck body
 (turret, cab): their configured positions define the truck frame; default: the first
 anchor. The range noise model is the config's range_sigma, nlos_fraction and nlos_gamma.
@@ -35,7 +38,9 @@ them is calibrated from /uwb/ranges alone.
 
 A recording that does not determine every parameter (too short, a parked boom, too little
 slewing or luffing) gets its verdict, what to move, and exit status 2, and nothing is
-written unless --force. Errors (no such bag, no /uwb/ranges, a bad config) are one line
+written unless --force; so does a model that fits a tag, an anchor or a link worse than
+the others (verdict misfit, naming the likely cause: a section length, an anchor's place,
+a link whose bias varies). Errors (no such bag, no /uwb/ranges, a bad config) are one line
 with exit status 2.
 """
 import argparse
@@ -351,7 +356,10 @@ def report_lines(config, before, result, fixed, survey=None):
         for label, a, b, s in zip(labels, old, new, std):
             lines.append(f'  {kind + " " + label:<{width}} {a:7.3f} -> {b:7.3f} +- {s:.3f}')
     lines.append(f'  (gauge: {result.gauge})')
-    lines.append('Link offsets (tag + anchor) [m], calibrated +- std:')
+    lines.append(f"Links' own offsets: {1000 * np.sqrt(np.mean(result.pair_offsets ** 2)):.0f} "
+                 f'mm RMS (their size learned: {1000 * result.link_std:.0f} mm); residuals '
+                 f'correlated over {result.correlation:.1f} frames')
+    lines.append('Link offsets (tag + anchor + own) [m], calibrated +- std:')
     cell = max(17, max(len(name) for name in names) + 2)
     lines.append('  ' + ' ' * width + ''.join(f'{name:>{cell}}' for name in names))
     for k, tag in enumerate(config.tag_names):
@@ -362,6 +370,9 @@ def report_lines(config, before, result, fixed, survey=None):
     lines.append(f'Range residual RMS: {result.rms_before:.3f} m -> {result.rms_after:.3f} m '
                  f'({used} frames, {result.iterations} iterations, condition '
                  f'{result.condition:.3g}, {result.seconds:.1f} s)')
+    link_bias, common_bias = result.bias_std
+    lines.append(f'Left unknown (written for the estimator): link_bias_std {link_bias:.3f} m, '
+                 f'common_bias_std {common_bias:.3f} m')
     lines.append(f'Verdict: {result.status}: {result.message}')
     return lines
 
@@ -386,6 +397,9 @@ def result_json(config, before, result, fixed, written, survey_rounds=0):
                         for k, name in enumerate(config.tag_names)},
         'link_offsets': result.link_offsets.tolist(),
         'link_offset_std': result.link_offset_std.tolist(),
+        'pair_offsets': result.pair_offsets.tolist(), 'link_std': result.link_std,
+        'correlation_frames': result.correlation,
+        'link_bias_std': result.bias_std[0], 'common_bias_std': result.bias_std[1],
         'rms_before_m': result.rms_before, 'rms_after_m': result.rms_after,
         'condition': result.condition, 'poorly_determined': list(result.poorly_determined),
         'gauge': result.gauge, 'frames_used': int(result.frames_used.sum()),
@@ -406,7 +420,9 @@ def write_config(path, source_text, result):
     text = update_pump_yaml(source_text, {
         'anchor_positions': result.anchors.ravel().tolist(),
         'anchor_offsets': result.anchor_offsets.tolist(),
-        'tag_offsets': result.tag_offsets.tolist()})
+        'tag_offsets': result.tag_offsets.tolist(),
+        'pair_offsets': result.pair_offsets.ravel().tolist(),
+        'link_bias_std': result.bias_std[0], 'common_bias_std': result.bias_std[1]})
     path = Path(path)
     handle, temporary = tempfile.mkstemp(prefix=f'.{path.name}.', dir=path.parent or '.')
     try:
@@ -571,10 +587,10 @@ def _written(args, source_text, result, out):
         raise CalibrationError(f'cannot write {args.out}: {exc}') from None
     print(f'wrote {args.out}: start the nodes with --params-file {args.out}', file=out)
     if not result.success:
-        print(f'epp_calibrate: warning: --force wrote {args.out} although the recording '
-              f'{result.status.replace("_", " ")}: its poorly determined parameters '
-              f'({", ".join(result.poorly_determined) or "all"}) may be further off than '
-              'if left as configured', file=sys.stderr)
+        doubtful = ', '.join(result.poorly_determined) or 'every value'
+        print(f'epp_calibrate: warning: --force wrote {args.out} although the verdict is '
+              f'{result.status}: {doubtful} may be further off than if left as configured',
+              file=sys.stderr)
     return str(args.out)
 
 
