@@ -182,8 +182,8 @@ def _worse(squares, expected, correlation):
     ``squares``, ``expected``: the group's sum of squared scaled residuals and what a fit
     leaves of it; the z-score's spread counts ``correlation`` frames as one.
     """
-    ratio = _mean_square(squares, expected) / max(_mean_square(squares.sum(),
-                                                              expected.sum()), 1e-300)
+    pooled = max(float(_mean_square(squares.sum(), expected.sum())), 1e-300)
+    ratio = _mean_square(squares, expected) / pooled
     with np.errstate(divide='ignore', invalid='ignore'):
         z = np.where(expected > 0, (ratio - 1.0) / np.sqrt(2.0 * correlation / expected), 0.0)
     return ratio, z
