@@ -238,6 +238,33 @@ def test_a_wrong_section_length_is_named_not_absorbed():
     assert 'arm_lengths[4]' in result.message and 'tag 4' in result.message
 
 
+def test_arm_lengths_are_fitted_as_well_as_the_recording_determines_them():
+    """The tip section 9.5 m long: lines of sight hardly tell it, tag-tag ranges do."""
+    model = truck_pump()
+    lengths = model.arm_lengths.copy()
+    lengths[-1] = 9.5
+    real = BoomModel(lengths, model.base, model.anchors)
+    simulator = FieldSimulator(real, FieldEffects(sigma=0.1, tag_offset=0.15,
+                                                  anchor_offset=0.15), np.random.default_rng(3))
+    motion = WorkingMotion(real, np.random.default_rng(3))
+    frames = [simulator.frame(motion, 0.1 * index) for index in range(600)]
+    ranges = np.array([frame.ranges for frame in frames])
+    joints = np.array([frame.joints for frame in frames])
+    tag_ranges = (np.linalg.norm(joints[:, :, None] - joints[:, None], axis=-1)
+                  + simulator.tag_offsets[:, None] + simulator.tag_offsets[None, :]
+                  + np.random.default_rng(4).normal(0.0, 0.1, (600, 5, 5)))
+    for tags in (None, tag_ranges):
+        result = calibrate(model, ranges, tag_ranges=tags, fixed_anchors=FIXED,
+                           learn_noise=True, fit_arm_lengths=True)
+        assert np.all(np.abs(result.arm_lengths - lengths) < 4.0 * result.arm_length_std)
+        np.testing.assert_allclose(result.model.arm_lengths, result.arm_lengths)
+        named = [k for k in range(5) if f'arm length {k}' in result.poorly_determined]
+        assert named == list(np.flatnonzero(result.arm_length_std > 0.05))
+    # Tag-tag ranges measure the sections between tags to millimetres (not the first: it
+    # starts at the pivot, where no tag is), and the tip to centimetres.
+    assert result.arm_length_std[1:-1].max() < 0.02 and result.arm_length_std[-1] < 0.1
+
+
 def test_misfit_names_the_tag_the_anchor_or_the_link_that_fits_worse():
     expected = np.full((5, 6), 1000.0)
     assert misfit(expected.copy(), expected, 1.0) == []

@@ -157,6 +157,13 @@ def test_a_poorly_exciting_recording_writes_only_with_force(tmp_path, capsys):
     assert tool.main(arguments + ['--force']) == 0
     assert 'warning: --force' in capsys.readouterr().err
     load_pump_config(out)
+    # The lengths too with --fit-arm-lengths, as well as 20 s determine them: written.
+    assert tool.main(arguments + ['--force', '--fit-arm-lengths', '--json']) == 0
+    printed = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    lengths = printed['arm_lengths']
+    assert all(std > 0 for std in lengths['std']) and lengths['before'] == [9, 7, 7, 9, 9]
+    np.testing.assert_allclose(load_pump_config(out).model().arm_lengths, lengths['after'],
+                               atol=1e-6)
 
 
 def test_a_short_recording_gives_one_line_and_writes_nothing(tmp_path):

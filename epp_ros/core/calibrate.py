@@ -151,6 +151,8 @@ class CalibrationResult:
     #: frames, the residuals' integrated autocorrelation time: correlated frames weigh as
     #: fewer independent ones in every standard deviation
     correlation: float
+    arm_lengths: np.ndarray     #: (p,) metres: fitted (``fit_arm_lengths``), or the model's
+    arm_length_std: np.ndarray  #: (p,) metres (0: not fitted)
     anchor_std: np.ndarray      #: (m, 3) metres per axis (0 for fixed anchors)
     anchor_offset_std: np.ndarray   #: (m,) metres (depends on the gauge)
     tag_offset_std: np.ndarray  #: (p,) metres (depends on the gauge)
@@ -247,6 +249,10 @@ class _Problem:
         self.fixed = fixed
         self.n_pairs = 0        # the links' own offsets: the model's, until enabled
         self.n_x = 3 * self.free.size + p + m
+        #: where x holds the offsets (tags', anchors', then the links' own once enabled)
+        self.offset_index = 3 * self.free.size + np.arange(p + m)
+        self.pair_index = np.zeros(0, dtype=int)
+        self.length_index = np.zeros(0, dtype=int)      # the arm lengths, once enabled
         self.set_link_prior(0.0)
         self._rows(ranges, tag_ranges)
         self.pairs = pairs
@@ -317,12 +323,31 @@ class _Problem:
         links[np.arange(own.size), np.arange(own.size)] = 1.0
         self.offset_rows = np.hstack([self.offset_rows, links])
         self.known_offsets = np.zeros(self.offset_rows.shape[0])
-        self.basis = np.block([[self.basis, np.zeros((self.n_x, own.size))],
-                               [np.zeros((own.size, self.basis.shape[1])), np.eye(own.size)]])
-        self.x_given, self.x0 = np.r_[self.x_given, own], np.r_[self.x0, own]
-        self.n_pairs, self.n_x = own.size, self.n_x + own.size
+        self.pair_index = self._append(own)
+        self.offset_index = np.r_[self.offset_index, self.pair_index]
+        self.n_pairs = own.size
         self.set_link_prior(link_std)
         return np.r_[q, np.zeros(own.size)]
+
+    def enable_arm_lengths(self, q):
+        """Fit the sections' lengths from now on, from the model's; return q so."""
+        self.length_index = self._append(self.model.arm_lengths)
+        return np.r_[q, np.zeros(self.p)]
+
+    def _append(self, start):
+        """Append parameters starting at ``start`` to x (and q); return their indices."""
+        size = len(start)
+        self.basis = np.block([[self.basis, np.zeros((self.n_x, size))],
+                               [np.zeros((size, self.basis.shape[1])), np.eye(size)]])
+        self.x_given, self.x0 = np.r_[self.x_given, start], np.r_[self.x0, start]
+        self.n_x += size
+        return np.arange(self.n_x - size, self.n_x)
+
+    def arm_lengths(self, x):
+        """Return the sections' lengths (p,) of ``x``: the model's unless fitted."""
+        if not self.length_index.size:
+            return self.model.arm_lengths
+        return np.maximum(x[self.length_index], 1e-3)     # a trial step may overshoot
 
     def set_link_prior(self, link_std, correlation=1.0):
         """
@@ -424,14 +449,14 @@ class _Problem:
         """Return each link's own offset (p, m) of ``x``: the model's without link terms."""
         if not self.n_pairs:
             return self.model.pair_offsets
-        return x[self.n_x - self.n_pairs:].reshape(self.p, self.m)
+        return x[self.pair_index].reshape(self.p, self.m)
 
     def calibrated(self, q):
         """Return the model with the anchors and offsets of ``q``."""
         x = self.x0 + self.basis @ q
         anchors, tag_offsets, anchor_offsets = self.unpack(x)
         return self.model.with_calibration(anchors, anchor_offsets, tag_offsets,
-                                           self.pair_offsets(x))
+                                           self.pair_offsets(x), self.arm_lengths(x))
 
     def evaluate(self, psi, x, frames, jacobian=True):
         """
@@ -446,11 +471,13 @@ class _Problem:
 
         """
         anchors = self.unpack(x)[0]
-        joints = self.model.forward_kinematics(psi[:, 0], psi[:, 1:])      # (n, p, 3)
+        model = self.model.with_calibration(arm_lengths=self.arm_lengths(x)) \
+            if self.length_index.size else self.model
+        joints = model.forward_kinematics(psi[:, 0], psi[:, 1:])           # (n, p, 3)
         vectors = np.concatenate([joints[:, self.link_tag] - anchors[self.link_anchor],
                                   joints[:, self.near] - joints[:, self.far]], axis=1)
         distances = np.linalg.norm(vectors, axis=-1)
-        offsets = self.offset_rows @ x[3 * self.free.size:] + self.known_offsets
+        offsets = self.offset_rows @ x[self.offset_index] + self.known_offsets
         measured = self.measured[frames]
         mask = self.mask[frames]
         sigma = self.sigma[frames]
@@ -458,7 +485,7 @@ class _Problem:
         if not jacobian:
             return scaled, None, None
         units = vectors / np.maximum(distances, 1e-12)[..., None]
-        moved = self.model.joint_jacobian(psi[:, 0], psi[:, 1:])        # (n, p, 3, p + 1)
+        moved = model.joint_jacobian(psi[:, 0], psi[:, 1:])             # (n, p, 3, p + 1)
         links = self.n_links
         angle = np.empty(scaled.shape + (self.p + 1,))
         angle[:, :links] = np.einsum('nlc,nlcq->nlq', units[:, :links],
@@ -470,10 +497,27 @@ class _Problem:
         for link in free_links:
             column = self.anchor_column[self.link_anchor[link]]
             shared[:, link, column:column + 3] = -units[:, link]
-        shared[:, :, 3 * self.free.size:] = self.offset_rows
+        shared[:, :, self.offset_index] = self.offset_rows
+        if self.length_index.size:
+            shared[:, :, self.length_index] = self._length_rows(psi, units)
         weight = mask / sigma
         return (scaled, angle * weight[..., None],
                 (shared * weight[..., None]) @ self.basis)
+
+    def _length_rows(self, psi, units):
+        """Return d(range)/d(arm lengths) (n, rows, p): along each section's direction."""
+        pitches = psi[:, 1:]
+        direction = np.stack([np.cos(pitches) * np.cos(psi[:, :1]),
+                              np.cos(pitches) * np.sin(psi[:, :1]), np.sin(pitches)],
+                             axis=-1)                                   # (n, p sections, 3)
+        # Joint k moves with the length of every section i <= k.
+        moved = np.tril(np.ones((self.p, self.p)))[None, :, :, None] * direction[:, None]
+        links = self.n_links
+        rows = np.empty(units.shape[:2] + (self.p,))
+        rows[:, :links] = np.einsum('nlc,nlic->nli', units[:, :links], moved[:, self.link_tag])
+        rows[:, links:] = np.einsum('nlc,nlic->nli', units[:, links:],
+                                    moved[:, self.near] - moved[:, self.far])
+        return rows
 
     def robust(self, scaled, mask, frames, judged=True):
         """
@@ -545,8 +589,8 @@ class _Problem:
 
     def prior_terms(self, x, weight):
         """Return the links' offsets prior's cost, gradient and information in q."""
-        link_offsets = x[self.n_x - self.n_pairs:]
-        pairs = self.basis[self.n_x - self.n_pairs:]        # (n_pairs, n_q)
+        link_offsets = x[self.pair_index]
+        pairs = self.basis[self.pair_index]                 # (n_pairs, n_q)
         return (0.5 * weight * float(link_offsets @ link_offsets),
                 weight * (pairs.T @ link_offsets), weight * (pairs.T @ pairs))
 
@@ -989,7 +1033,7 @@ def _link_terms(problem, psi, q, frames, settings, learn):
         if not learn:
             break
         covariance, _, scale, _ = _uncertainty(problem, psi, q, frames)
-        own = slice(problem.n_x - problem.n_pairs, problem.n_x)
+        own = problem.pair_index
         x = problem.x0 + problem.basis @ q
         # The posterior under the noise as told: a misfit's scale is not the links'.
         variance = np.nan_to_num(np.diag(covariance)[own] / scale ** 2,
@@ -1017,7 +1061,7 @@ def calibrate(model, ranges, *, stamps=None, tag_ranges=None, anchor_ranges=None
               prior_sigma=0.5, nlos_fraction=0.1, nlos_gamma=1.0, nlos_duration=None,
               learn_noise=False, start=None, max_iter=100, tol=1e-10, refits=3,
               hypotheses=4, anchor_tolerance=ANCHOR_TOLERANCE,
-              offset_tolerance=OFFSET_TOLERANCE, link_std=None):
+              offset_tolerance=OFFSET_TOLERANCE, link_std=None, fit_arm_lengths=False):
     """
     Calibrate the free anchors' positions and the device range offsets from a recording.
 
@@ -1094,6 +1138,12 @@ def calibrate(model, ranges, *, stamps=None, tag_ranges=None, anchor_ranges=None
         devices' offsets cannot explain is not pushed into the anchors. None: the size is
         learned from the recording (from ``LINK_STD_START``); 0: the devices' offsets
         alone.
+    fit_arm_lengths : bool
+        Fit the sections' lengths too, from the model's, once the rest has settled: for a
+        boom whose lengths are not known to centimetres (a misfit verdict that names a
+        section). Along the lines of sight a length looks like its tag's offset, so it
+        is determined only where the recording sees the section from several sides (the
+        result's ``arm_length_std``, and the verdict, say how well).
 
     Returns
     -------
@@ -1145,6 +1195,11 @@ def calibrate(model, ranges, *, stamps=None, tag_ranges=None, anchor_ranges=None
         psi, q, more, converged, blockage = _joint_fit(problem, data, psi, q, frames,
                                                        settings, refits)
         iterations += more
+    if fit_arm_lengths:
+        q = problem.enable_arm_lengths(q)
+        psi, q, more, converged, blockage = _joint_fit(problem, data, psi, q, frames,
+                                                       settings, refits)
+        iterations += more
     if link_std is None or link_std > 0:
         q = problem.enable_link_terms(LINK_STD_START if link_std is None else link_std, q)
     psi, q, more, converged = _link_terms(problem, psi, q, frames, settings, link_std is None)
@@ -1161,7 +1216,7 @@ def _result(problem, psi, q, frames, count, survey, facts):
     p, m, model = problem.p, problem.m, problem.model
     x = problem.x0 + problem.basis @ q
     anchors, tag_offsets, anchor_offsets = problem.unpack(x)
-    pair_offsets = problem.pair_offsets(x)
+    pair_offsets, arm_lengths = problem.pair_offsets(x), problem.arm_lengths(x)
     covariance, condition, residual_scale, nlos_links = _uncertainty(problem, psi, q, frames)
     std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     n_anchor = 3 * problem.free.size
@@ -1171,7 +1226,8 @@ def _result(problem, psi, q, frames, count, survey, facts):
                                        facts['anchor_tolerance'], facts['offset_tolerance'])
     wandered = False
     try:
-        calibrated = model.with_calibration(anchors, anchor_offsets, tag_offsets, pair_offsets)
+        calibrated = model.with_calibration(anchors, anchor_offsets, tag_offsets, pair_offsets,
+                                            arm_lengths)
     except ValueError as exc:       # values no pump has: the recording did not pin them
         calibrated, wandered = model, True
         poorly = poorly + ['the recording']
@@ -1194,7 +1250,9 @@ def _result(problem, psi, q, frames, count, survey, facts):
         anchor_offsets=anchor_offsets, tag_offsets=tag_offsets,
         link_offsets=tag_offsets[:, None] + anchor_offsets[None, :] + pair_offsets,
         pair_offsets=pair_offsets, link_std=problem.link_std,
-        correlation=problem.correlation, anchor_std=anchor_std,
+        correlation=problem.correlation, anchor_std=anchor_std, arm_lengths=arm_lengths,
+        arm_length_std=std[problem.length_index] if problem.length_index.size
+        else np.zeros(p),
         anchor_offset_std=std[n_anchor + p:n_anchor + p + m],
         tag_offset_std=std[n_anchor:n_anchor + p],
         link_offset_std=link_offset_std(problem, covariance),

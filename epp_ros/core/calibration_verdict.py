@@ -87,6 +87,13 @@ def poorly_determined(problem, covariance, condition, anchor_tolerance, offset_t
             advice.append(f'anchor {j} is located to +-{np.sqrt(values[-1]):.3g} m along '
                           f'({direction[0]:.2f}, {direction[1]:.2f}, {direction[2]:.2f}): '
                           f'{_motion_advice(direction)}')
+    for k in range(problem.p if problem.length_index.size else 0):
+        std = np.sqrt(covariance[problem.length_index[k], problem.length_index[k]])
+        if not std <= anchor_tolerance:
+            poorly.append(f'arm length {k}')
+            advice.append(f'the length of section {k + 1} is known to +-{std:.3g} m: luff it '
+                          'through a wider range and slew (along the lines of sight a length '
+                          "looks like its tag's offset)")
     link_std = link_offset_std(problem, covariance)
     poor = link_std > offset_tolerance
     for k in np.flatnonzero(poor.all(axis=1)):      # a tag whose every link is uncertain
@@ -130,14 +137,14 @@ def _combined_variance(rows, covariance):
 
 def link_offset_std(problem, covariance):
     """Return the standard deviation (p, m) of each link's offset, metres (inf: unknown)."""
-    offsets = covariance[3 * problem.free.size:, 3 * problem.free.size:]
+    offsets = covariance[np.ix_(problem.offset_index, problem.offset_index)]
     rows = _link_rows(problem, offsets.shape[0])
     return np.sqrt(_combined_variance(rows, offsets)).reshape(problem.p, problem.m)
 
 
 def common_offset_std(problem, covariance):
     """Return the standard deviation of the links' mean offset, metres (inf: unknown)."""
-    offsets = covariance[3 * problem.free.size:, 3 * problem.free.size:]
+    offsets = covariance[np.ix_(problem.offset_index, problem.offset_index)]
     rows = _link_rows(problem, offsets.shape[0])
     return float(np.sqrt(_combined_variance(rows.mean(axis=0, keepdims=True), offsets)[0]))
 
@@ -241,7 +248,8 @@ def implausible(link_offsets):
 
 def _tag_cause(k):
     return (f'the length of section {k + 1} (arm_lengths[{k}]) or where tag {k} sits on the '
-            'boom is likely wrong, or the fit took a wrong fold of it')
+            'boom is likely wrong (fit_arm_lengths, epp_calibrate --fit-arm-lengths, fits the '
+            'lengths), or the fit took a wrong fold of it')
 
 
 def _anchor_cause(j):

@@ -297,9 +297,9 @@ class BoomModel:
         return self.ranges(joints) + self.link_offsets()
 
     def with_calibration(self, anchors=None, anchor_offsets=None, tag_offsets=None,
-                         pair_offsets=None):
-        """Return the same boom with other anchors and offsets (None: keep these)."""
-        return BoomModel(self.arm_lengths, self.base,
+                         pair_offsets=None, arm_lengths=None):
+        """Return the same boom with other anchors, offsets or lengths (None: keep these)."""
+        return BoomModel(self.arm_lengths if arm_lengths is None else arm_lengths, self.base,
                          self.anchors if anchors is None else anchors, self.pivot_offset,
                          self.anchor_offsets if anchor_offsets is None else anchor_offsets,
                          self.tag_offsets if tag_offsets is None else tag_offsets,

@@ -17,6 +17,7 @@ epp_calibrate: anchor positions and device range offsets from a recorded bag.
 
     epp_calibrate BAG [--config pump.yaml] [--out calibrated.yaml] [--fixed-anchors NAMES]
                       [--plot FILE.png] [--json] [--force] [--salvage] [--no-survey]
+                      [--fit-arm-lengths]
 
 Reads the bag's /uwb/ranges (as uwb_driver publishes them) recorded while the boom slews
 and luffs, fits the free anchors' positions, every tag's and anchor's range offset and
@@ -40,8 +41,8 @@ A recording that does not determine every parameter (too short, a parked boom, t
 slewing or luffing) gets its verdict, what to move, and exit status 2, and nothing is
 written unless --force; so does a model that fits a tag, an anchor or a link worse than
 the others (verdict misfit, naming the likely cause: a section length, an anchor's place,
-a link whose bias varies). Errors (no such bag, no /uwb/ranges, a bad config) are one line
-with exit status 2.
+a link whose bias varies). --fit-arm-lengths fits the sections' lengths too and writes
+them. Errors (no such bag, no /uwb/ranges, a bad config) are one line with exit status 2.
 """
 import argparse
 import json
@@ -85,6 +86,10 @@ def parse_args(argv):
                         help='use what can be read of a damaged bag (default: refuse it)')
     parser.add_argument('--no-survey', action='store_true',
                         help="ignore the bag's /uwb/anchor_ranges (no anchor self-survey)")
+    parser.add_argument('--fit-arm-lengths', action='store_true',
+                        help="fit the sections' lengths too, and write them (the verdict "
+                             'says how well the recording determines them: tag-tag ranges '
+                             'measure them, lines of sight from the truck hardly do)')
     return parser.parse_args(argv)
 
 
@@ -347,6 +352,11 @@ def report_lines(config, before, result, fixed, survey=None):
                      f'{_vector(result.anchors[j], std)}  {moved:.3f}')
     if survey:
         lines.append(survey)
+    if result.arm_length_std.any():
+        lines.append('Arm lengths [m]: configured -> calibrated +- std')
+        for k, tag in enumerate(config.tag_names):
+            lines.append(f'  {"section " + str(k + 1):<{width}} {before.arm_lengths[k]:7.3f} -> '
+                         f'{result.arm_lengths[k]:7.3f} +- {result.arm_length_std[k]:.3f}')
     lines.append('Range offsets [m]: configured -> calibrated +- std')
     for kind, labels, old, new, std in (
             ('anchor', names, before.anchor_offsets, result.anchor_offsets,
@@ -400,6 +410,9 @@ def result_json(config, before, result, fixed, written, survey_rounds=0):
         'pair_offsets': result.pair_offsets.tolist(), 'link_std': result.link_std,
         'correlation_frames': result.correlation,
         'link_bias_std': result.bias_std[0], 'common_bias_std': result.bias_std[1],
+        'arm_lengths': {'before': before.arm_lengths.tolist(),
+                        'after': result.arm_lengths.tolist(),
+                        'std': result.arm_length_std.tolist()},
         'rms_before_m': result.rms_before, 'rms_after_m': result.rms_after,
         'condition': result.condition, 'poorly_determined': list(result.poorly_determined),
         'gauge': result.gauge, 'frames_used': int(result.frames_used.sum()),
@@ -417,12 +430,14 @@ def write_config(path, source_text, result):
 
     """
     from epp_ros.config import update_pump_yaml
-    text = update_pump_yaml(source_text, {
-        'anchor_positions': result.anchors.ravel().tolist(),
-        'anchor_offsets': result.anchor_offsets.tolist(),
-        'tag_offsets': result.tag_offsets.tolist(),
-        'pair_offsets': result.pair_offsets.ravel().tolist(),
-        'link_bias_std': result.bias_std[0], 'common_bias_std': result.bias_std[1]})
+    values = {'anchor_positions': result.anchors.ravel().tolist(),
+              'anchor_offsets': result.anchor_offsets.tolist(),
+              'tag_offsets': result.tag_offsets.tolist(),
+              'pair_offsets': result.pair_offsets.ravel().tolist(),
+              'link_bias_std': result.bias_std[0], 'common_bias_std': result.bias_std[1]}
+    if result.arm_length_std.any():         # fitted (--fit-arm-lengths)
+        values['arm_lengths'] = result.arm_lengths.tolist()
+    text = update_pump_yaml(source_text, values)
     path = Path(path)
     handle, temporary = tempfile.mkstemp(prefix=f'.{path.name}.', dir=path.parent or '.')
     try:
@@ -559,7 +574,7 @@ def _calibration(args, before, recording, fixed, settings):
         optional['tag_ranges'] = tag_ranges
     try:
         return calibrate(before, ranges, stamps=stamps, fixed_anchors=fixed, **optional,
-                         **settings)
+                         fit_arm_lengths=args.fit_arm_lengths, **settings)
     except ValueError as exc:
         text = str(exc).splitlines()[0]
         text = text if len(text) <= 120 else text[:117] + '...'
