@@ -125,6 +125,31 @@ def test_play_then_record_gives_identical_messages(tmp_path, processes):
                 assert a.poses == b.poses
 
 
+def test_record_stops_at_its_duration_and_on_sigterm_while_topics_flow(tmp_path, listener,
+                                                                       processes):
+    """It used to wait for the topics to fall silent before writing: never, at 10 Hz."""
+    source = tmp_path / 'long'
+    bags.synthesize(source, CONFIG, duration=300.0, sigma=0.1, seed=8)
+    player = processes([script('epp_bag'), 'play', str(source), '--topics', bags.RANGES,
+                        '--subscribers', '1'])
+    timed = tmp_path / 'timed'
+    recorder = processes([script('epp_bag'), 'record', str(timed), '--topics', bags.RANGES,
+                          '--duration', '3'])
+    assert recorder.wait(120) == 0, recorder.stderr.read()
+    assert player.poll() is None            # still playing: the topic never fell silent
+    assert bags.info(timed)['storage'] == 'mcap'
+    # Without a duration, SIGTERM ends it and it writes what it took: ranges that reached
+    # the listener after the recorder had subscribed reached the recorder too (reliable).
+    stopped = tmp_path / 'stopped'
+    recorder = processes([script('epp_bag'), 'record', str(stopped), '--topics', bags.RANGES])
+    assert listener.spin_until(lambda: listener.count_subscribers(bags.RANGES) >= 2, 60)
+    listener.ranges.clear()
+    assert listener.spin_until(lambda: len(listener.ranges) >= 5, 60)
+    recorder.send_signal(signal.SIGTERM)
+    assert recorder.wait(60) == 0, recorder.stderr.read()
+    assert bags.info(stopped)['messages'] >= 5
+
+
 def test_play_into_the_live_estimator_equals_eval(tmp_path, listener, processes):
     bag = tmp_path / 'cycle'
     bags.synthesize(bag, CONFIG, duration=6.0, sigma=0.1, drop=0.1, seed=6)

@@ -344,6 +344,10 @@ def _wait_for_acks(publishers, timeout=60.0):
         publisher.wait_for_all_acked(Duration(seconds=timeout))
 
 
+#: Seconds at most that epp_bag record takes what is queued after it stops.
+DRAIN_S = 1.0
+
+
 def run_record(args):
     import rclpy
     import rclpy.executors
@@ -374,13 +378,13 @@ def run_record(args):
                         subscribed[topic] = node.create_subscription(
                             _message_class(msgtype), topic, keep, qos, raw=True)
             executor.spin_once(timeout_sec=0.02)
-        # Lose nothing that arrived: drain until the topics are quiet.
-        count = -1
-        while count != len(received):
-            count = len(received)
-            deadline = time.monotonic() + 0.3
-            while time.monotonic() < deadline:
-                executor.spin_once(timeout_sec=0.01)
+        # Lose nothing that had arrived: take what is queued, until the topics are quiet
+        # or DRAIN_S have passed (topics that keep flowing are never quiet).
+        end, quiet_since, count = time.monotonic() + DRAIN_S, time.monotonic(), len(received)
+        while time.monotonic() < end and time.monotonic() - quiet_since < 0.3:
+            executor.spin_once(timeout_sec=0.01)
+            if len(received) != count:
+                quiet_since, count = time.monotonic(), len(received)
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
