@@ -125,8 +125,7 @@ def test_play_then_record_gives_identical_messages(tmp_path, processes):
                 assert a.poses == b.poses
 
 
-def test_record_stops_at_its_duration_and_on_sigterm_while_topics_flow(tmp_path, listener,
-                                                                       processes):
+def test_record_and_play_stop_when_told_while_topics_flow(tmp_path, listener, processes):
     """It used to wait for the topics to fall silent before writing: never, at 10 Hz."""
     source = tmp_path / 'long'
     bags.synthesize(source, CONFIG, duration=300.0, sigma=0.1, seed=8)
@@ -148,6 +147,10 @@ def test_record_stops_at_its_duration_and_on_sigterm_while_topics_flow(tmp_path,
     recorder.send_signal(signal.SIGTERM)
     assert recorder.wait(60) == 0, recorder.stderr.read()
     assert bags.info(stopped)['messages'] >= 5
+    # Ctrl-C stops the player, which is how a player is stopped: exit status 0.
+    player.send_signal(signal.SIGINT)
+    assert player.wait(60) == 0, player.stderr.read()
+    assert 'stopped playing' in player.stdout.read()
 
 
 def test_play_into_the_live_estimator_equals_eval(tmp_path, listener, processes):

@@ -73,6 +73,16 @@ def matched_errors(listener):
     return np.array(errors)
 
 
+def test_markers_expire_so_a_refused_boom_leaves_the_screen():
+    from epp_ros.nodes.common import MARKER_LIFETIME, posture_markers
+    joints = [[1.0, 0.0, 4.0], [2.0, 0.0, 5.0]]
+    markers = posture_markers([0.0, 0.0, 3.5], joints, 12.5, 'pump_base').markers
+    assert len(markers) == 3 and MARKER_LIFETIME == 1.0
+    for marker in markers:
+        assert (marker.lifetime.sec, marker.lifetime.nanosec) == (1, 0)
+        assert (marker.header.stamp.sec, marker.header.stamp.nanosec) == (12, 500000000)
+
+
 def test_postures_follow_the_truth(listener, processes, tmp_path):
     start_pump(processes, tmp_path)
     assert listener.spin_until(lambda: len(listener.postures) >= 30, 20)

@@ -19,7 +19,7 @@ import re
 import sys
 import tempfile
 
-from builtin_interfaces.msg import Time
+from builtin_interfaces.msg import Duration, Time
 from epp_ros import contract
 from epp_ros.config import ConfigError, pump_config_from_parameters, PUMP_PARAMETERS
 from epp_ros.nodes.stopping import ignore_signals, shutdown_on_signals
@@ -129,8 +129,17 @@ def posture_message(base, joints, stamp, frame_id):
     return message
 
 
+#: Seconds RViz shows a boom's markers: ten frames at 10 Hz. While frames are refused none
+#: are published, and the last boom must not stay on screen as if it were still valid.
+MARKER_LIFETIME = 1.0
+
+
 def posture_markers(base, joints, stamp, frame_id, namespace='boom'):
-    """Return a MarkerArray for RViz: the boom as a line strip, joint spheres, a tip label."""
+    """
+    Return a MarkerArray for RViz: the boom as a line strip, joint spheres, a tip label.
+
+    Each lives :data:`MARKER_LIFETIME` seconds unless the next frame's replaces it.
+    """
     header_stamp = _stamp(stamp)
     points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in [base, *joints]]
     strip = Marker(ns=namespace, id=0, type=Marker.LINE_STRIP, action=Marker.ADD,
@@ -147,10 +156,13 @@ def posture_markers(base, joints, stamp, frame_id, namespace='boom'):
     label.pose.orientation.w = 1.0
     label.scale.z = 0.8
     label.color.r = label.color.g = label.color.b = label.color.a = 1.0
+    lifetime = Duration(sec=int(MARKER_LIFETIME),
+                        nanosec=int(round(MARKER_LIFETIME % 1.0 * 1e9)))
     for marker in (strip, spheres, label):
         marker.header.stamp = header_stamp
         marker.header.frame_id = frame_id
         marker.pose.orientation.w = 1.0
+        marker.lifetime = lifetime
     return MarkerArray(markers=[strip, spheres, label])
 
 

@@ -269,12 +269,15 @@ def run_play(args):
         settle = time.monotonic() + 0.5
         while time.monotonic() < settle:
             rclpy.spin_once(node, timeout_sec=0.05)
-        while True:
-            _play_once(messages, publishers, args, clock)
-            if not args.loop:
-                break
-        time.sleep(0.5)                 # let the last messages leave
-        print(f'played {len(messages)} messages from {args.bag}')
+        try:
+            while True:
+                _play_once(messages, publishers, args, clock)
+                if not args.loop:
+                    break
+            time.sleep(0.5)                 # let the last messages leave
+            print(f'played {len(messages)} messages from {args.bag}')
+        except KeyboardInterrupt:           # Ctrl-C is how a player is stopped: not an error
+            print(f'stopped playing {args.bag}')
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
