@@ -206,6 +206,17 @@ def test_chain_fuses_boom_angles_and_tag_tag_ranges(listener, processes):
         listener.destroy_publisher(angles_publisher)
 
 
+def spin_all_until(nodes, condition, timeout):
+    """Spin every node until ``condition()`` or ``timeout`` seconds; return whether met."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for node in nodes:
+            rclpy.spin_once(node, timeout_sec=0.02)
+        if condition():
+            return True
+    return False
+
+
 def test_two_pumps_side_by_side_in_namespaces(processes, tmp_path):
     start_pump(processes, tmp_path, 'ttyPump1', '/pump1', seed=1)
     start_pump(processes, tmp_path, 'ttyPump2', '/pump2', seed=2)
@@ -223,6 +234,14 @@ def test_two_pumps_side_by_side_in_namespaces(processes, tmp_path):
         # Different seeds: the two booms are in different places.
         assert np.abs(poses_to_joints(pumps[0].postures[-1])
                       - poses_to_joints(pumps[1].postures[-1])).max() > 1.0
+        # On the one /diagnostics each pump's statuses say which pump they are.
+        for wanted in (('pump1/uwb_driver', 'pump2/uwb_driver'),
+                       ('posture_estimator: /pump1', 'posture_estimator: /pump2')):
+            assert spin_all_until(pumps, lambda: all(pumps[0].statuses(name)
+                                                     for name in wanted), 60)
+            ids = [pumps[0].statuses(name)[-1].hardware_id for name in wanted]
+            assert ids[0] != ids[1] and ids[0].startswith('pump1/pump_base')
+            assert ids[1].startswith('pump2/pump_base')
     finally:
         for pump in pumps:
             pump.destroy_node()

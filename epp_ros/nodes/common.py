@@ -97,6 +97,17 @@ def declare_pump_parameters(node):
         raise StartupError(f'bad pump configuration: {exc}') from None
 
 
+def pump_id(node, frame_id):
+    """
+    Return the hardware id of this pump in ``/diagnostics``: its namespace and frame.
+
+    ``pump7/pump_base`` under the namespace ``/pump7``, ``pump_base`` at the root: two
+    pumps' statuses on one ``/diagnostics`` stay apart.
+    """
+    namespace = node.get_namespace().strip('/')
+    return f'{namespace}/{frame_id}' if namespace else frame_id
+
+
 def to_time(seconds):
     """builtin_interfaces/Time from seconds since the epoch."""
     sec, nanosec = contract.stamp_parts(seconds)

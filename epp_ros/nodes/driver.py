@@ -35,8 +35,8 @@ import threading
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from epp_ros import contract
 from epp_ros.config import ConfigError, listen_address, normalise_device_id, PROTOCOLS, Source
-from epp_ros.nodes.common import (declare, declare_pump_parameters, qos, RANGES_QOS,
-                                  run_node, StartupError, to_time)
+from epp_ros.nodes.common import (declare, declare_pump_parameters, pump_id, qos,
+                                  RANGES_QOS, run_node, StartupError, to_time)
 from epp_ros.uwb.decoder import LineDecoder
 from epp_ros.uwb.formats import anchor_slot_problem
 from epp_ros.uwb.frames import FrameAssembler
@@ -166,8 +166,10 @@ class UwbDriver(Node):
             frames = self.assembler.frames
             anchor_ranges = self.assembler.anchor_ranges
         for source, decoder, reader in self.readers:
-            status = DiagnosticStatus(name=f'uwb_driver: {source.port}',
-                                      hardware_id=source.port)
+            # Named by node (its namespace too), the device by pump and port.
+            status = DiagnosticStatus(
+                name=f'{self.get_fully_qualified_name().lstrip("/")}: {source.port}',
+                hardware_id=f'{pump_id(self, self.config.frame_id)}:{source.port}')
             counts = {'lines': reader.counts['lines'], 'frames': frames}
             rates = {key: (value - self._previous_counts.get((source.port, key), value))
                      for key, value in counts.items()}

@@ -58,8 +58,8 @@ from epp_ros.core.estimators import ESTIMATOR_OPTIONS
 from epp_ros.core.integrity import IntegrityLimits, Thresholds
 from epp_ros.health import assess, grade
 from epp_ros.nodes.common import (declare, declare_pump_parameters, posture_markers,
-                                  posture_message, POSTURE_QOS, RANGES_INPUT_QOS, run_node,
-                                  StartupError, to_seconds, to_time)
+                                  posture_message, POSTURE_QOS, pump_id, RANGES_INPUT_QOS,
+                                  run_node, StartupError, to_seconds, to_time)
 from epp_ros.pipeline import RangePipeline
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, SetParametersResult
@@ -335,7 +335,7 @@ class PostureEstimatorNode(Node):
     def publish_diagnostics(self):
         diagnostics = self.estimator.last_diagnostics
         status = DiagnosticStatus(name=f'posture_estimator: {self.status_name}',
-                                  hardware_id=self.config.frame_id)
+                                  hardware_id=pump_id(self, self.config.frame_id))
         silent = (None if self.last_frame_time is None
                   else self._now() - self.last_frame_time)
         if not diagnostics:
