@@ -16,6 +16,7 @@
 Launch the UWB driver and the posture estimator of one pump, optionally with RViz.
 
     ros2 launch epp_ros epp.launch.py [config:=/path/pump.yaml] [namespace:=pump7] [rviz:=true]
+                                      [use_sim_time:=true]
 """
 import os
 
@@ -35,19 +36,22 @@ def rviz_installed():
     return True
 
 
-def rviz(share, namespace):
+def rviz(share, namespace, clock):
     """rviz2 with the boom view, in the pump's namespace (its topics are relative)."""
     wanted = IfCondition(LaunchConfiguration('rviz'))
     if not rviz_installed():     # the nodes still start; say why no window opens
         return LogInfo(msg='rviz:=true, but rviz2 is not installed', condition=wanted)
     return Node(package='rviz2', executable='rviz2', name='rviz2', namespace=namespace,
-                arguments=['-d', os.path.join(share, 'rviz', 'epp.rviz')], condition=wanted)
+                arguments=['-d', os.path.join(share, 'rviz', 'epp.rviz')], condition=wanted,
+                parameters=[clock])
 
 
 def generate_launch_description():
     share = get_package_share_directory('epp_ros')
     config = LaunchConfiguration('config')
     namespace = LaunchConfiguration('namespace')
+    # Every node on /clock or on wall time alike (a bag played with --clock).
+    clock = {'use_sim_time': LaunchConfiguration('use_sim_time')}
     return LaunchDescription([
         DeclareLaunchArgument('config', default_value=os.path.join(share, 'config',
                                                                    'pump.yaml'),
@@ -56,9 +60,11 @@ def generate_launch_description():
                               description='Namespace of this pump, e.g. pump7.'),
         DeclareLaunchArgument('rviz', default_value='false',
                               description='Also start rviz2 with the boom view.'),
+        DeclareLaunchArgument('use_sim_time', default_value='false',
+                              description='Run every node on /clock (epp_bag play --clock).'),
         Node(package='epp_ros', executable='uwb_driver', name='uwb_driver',
-             namespace=namespace, parameters=[config], output='screen'),
+             namespace=namespace, parameters=[config, clock], output='screen'),
         Node(package='epp_ros', executable='posture_estimator', name='posture_estimator',
-             namespace=namespace, parameters=[config], output='screen'),
-        rviz(share, namespace),
+             namespace=namespace, parameters=[config, clock], output='screen'),
+        rviz(share, namespace, clock),
     ])

@@ -152,6 +152,16 @@ def test_launch_file_names_what_exists(monkeypatch):
         assert Path(script(node['executable'])).exists()
 
 
+def test_launch_file_puts_every_node_on_sim_time_on_request(monkeypatch, tmp_path):
+    actions = load_launch_file(monkeypatch, rviz_share=str(tmp_path))
+    assert launch_arguments(actions)['use_sim_time'] == 'false'
+    nodes = [a.kwargs for a in actions if 'executable' in a.kwargs]
+    assert [n['executable'] for n in nodes] == ['uwb_driver', 'posture_estimator', 'rviz2']
+    for node in nodes:
+        told = [p['use_sim_time'] for p in node['parameters'] if isinstance(p, dict)]
+        assert len(told) == 1 and told[0].args == ('use_sim_time',)
+
+
 def rviz_condition(action):
     """Return the launch argument an action's IfCondition reads."""
     return action.kwargs['condition'].args[0].args[0]
