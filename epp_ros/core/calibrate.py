@@ -564,13 +564,8 @@ class _Problem:
         prior (:meth:`set_link_prior`). Also the anchor-anchor ranges' parts (None without
         them).
         """
-        size = self.basis.shape[1]
-        cost, gradient, information, parts = 0.0, np.zeros(size), np.zeros((size, size)), None
         x = self.x0 + self.basis @ q
-        if self.pairs is not None:
-            anchors, _, anchor_offsets = self.unpack(x)
-            cost, gradient, information, parts = self.pairs.terms(
-                anchors, anchor_offsets, self.anchor_column, self.offset_column, self.basis)
+        cost, gradient, information, parts = self._anchor_terms(x)
         if self.n_pairs:
             prior = self.prior_terms(x, self.pair_weight)
             cost, gradient, information = (cost + prior[0], gradient + prior[1],
@@ -579,13 +574,16 @@ class _Problem:
 
     def anchor_pair_terms(self, q):
         """Return the anchor-anchor ranges' information (n_q, n_q) and parts (None: none)."""
+        return self._anchor_terms(self.x0 + self.basis @ q)[2:]
+
+    def _anchor_terms(self, x):
+        """Return the anchor-anchor ranges' cost, gradient, information and parts of x."""
         if self.pairs is None:
             size = self.basis.shape[1]
-            return np.zeros((size, size)), None
-        anchors, _, anchor_offsets = self.unpack(self.x0 + self.basis @ q)
-        _, _, information, parts = self.pairs.terms(
-            anchors, anchor_offsets, self.anchor_column, self.offset_column, self.basis)
-        return information, parts
+            return 0.0, np.zeros(size), np.zeros((size, size)), None
+        anchors, _, anchor_offsets = self.unpack(x)
+        return self.pairs.terms(anchors, anchor_offsets, self.anchor_column,
+                                self.offset_column, self.basis)
 
     def prior_terms(self, x, weight):
         """Return the links' offsets prior's cost, gradient and information in q."""

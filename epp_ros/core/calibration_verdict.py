@@ -208,7 +208,7 @@ def misfit(squares, expected, correlation):
     an anchor only when more than one of its links makes it so.
     """
     advice, links = [], set()
-    pooled = squares.sum() / max(expected.sum(), 1e-300)
+    pooled = _mean_square(squares.sum(), expected.sum())
     for axis, kind, cause in ((1, 'tag', _tag_cause), (0, 'anchor', _anchor_cause)):
         ratio, z = _worse(squares.sum(axis=axis), expected.sum(axis=axis), correlation)
         for index in np.flatnonzero((ratio > MISFIT_RATIO) & (z > MISFIT_Z)):
