@@ -29,9 +29,12 @@ setup(
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/rviz', glob('rviz/*.rviz')),
     ],
-    install_requires=['setuptools', 'numpy', 'scipy', 'pyserial', 'PyYAML', 'rich'],
-    # epp_bench paper: the SDP baseline and the plots; never needed at runtime.
-    extras_require={'bench': ['cvxpy', 'matplotlib']},
+    install_requires=['setuptools', 'numpy', 'scipy', 'pyserial', 'PyYAML', 'rich', 'rosbags'],
+    # test: what colcon test looks for to run pytest (the ament_python template's
+    # tests_require, which setuptools 80 dropped). bench: epp_bench paper's SDP baseline
+    # and plots; never needed at runtime.
+    extras_require={'test': ['pytest', 'hypothesis', 'yourdfpy'],
+                    'bench': ['cvxpy', 'matplotlib']},
     zip_safe=True,
     maintainer='epp_ros developers',
     maintainer_email='dev@epp-ros.invalid',
@@ -46,6 +49,7 @@ setup(
             'epp_bench = epp_ros.tools.bench:main',
             'epp_bag = epp_ros.tools.bag:main',
             'epp_calibrate = epp_ros.tools.calibrate:main',
+            'epp_urdf = epp_ros.tools.urdf:main',
         ],
     },
 )

@@ -37,6 +37,9 @@ bag tools rosbags ones (``bags.py``), and decoding works on either kind of messa
   :func:`anchor_range_matrix`.
 - ``arm_posture`` and ``arm_posture/ground_truth`` (``geometry_msgs/PoseArray``): the base
   pivot, then joints 1..p, each pose's x-axis along its section (:func:`posture_poses`).
+- ``joint_states`` (``sensor_msgs/JointState``): the joint positions of each posture on
+  ``arm_posture``, same stamp, for robot_state_publisher and ``/tf``; ``robot_description``
+  (``std_msgs/String``, transient local): the pump's URDF (``epp_ros.robot_description``).
 - ``arm_posture/markers`` (``visualization_msgs/MarkerArray``), ``boom_angles``
   (``sensor_msgs/JointState``, radians), ``/diagnostics``, ``uwb/raw`` (``std_msgs/String``).
 
@@ -49,20 +52,27 @@ import math
 from epp_ros.core.poses import boom_quaternions
 import numpy as np
 
-__all__ = ['Topic', 'RANGES', 'RANGES_INPUT', 'ANGLES', 'POSTURE', 'MARKERS', 'TRUTH',
-           'DIAGNOSTICS', 'RAW', 'posture_poses', 'points_of', 'joints_of', 'stamp_parts',
-           'stamp_seconds', 'range_ages', 'ages_of', 'ANCHOR_RANGES', 'anchor_range_names',
-           'anchor_range_matrix']
+__all__ = ['Topic', 'RANGES', 'RANGES_INPUT', 'RANGES_SENSOR_DATA', 'ANGLES', 'POSTURE',
+           'MARKERS', 'TRUTH', 'DIAGNOSTICS', 'RAW', 'JOINT_STATES', 'ROBOT_DESCRIPTION',
+           'posture_poses',
+           'points_of', 'joints_of', 'stamp_parts', 'stamp_seconds', 'range_ages', 'ages_of',
+           'ANCHOR_RANGES', 'anchor_range_names', 'anchor_range_matrix']
 
 
 @dataclass(frozen=True)
 class Topic:
-    """A topic and the QoS it is used with: reliable, keep last ``depth`` (None: keep all)."""
+    """
+    A topic and the QoS it is used with.
+
+    Reliable, keep last ``depth`` (None: keep all); ``latched``: transient local, so a
+    subscriber that comes later still gets the last message (a robot description).
+    """
 
     name: str
     type: str  # noqa: A003 (public field mirroring a ROS topic's type; shadows nothing in scope)
     depth: int = 10
     reliable: bool = True
+    latched: bool = False
 
     @property
     def absolute(self):
@@ -76,6 +86,10 @@ RANGES = Topic('uwb/ranges', 'sensor_msgs/msg/JointState', depth=100)
 #: The estimator's subscription: keep all, so DDS never overwrites a frame the node has not
 #: taken (a slow node shows as latency, a fast replay is flow-controlled, nothing is lost).
 RANGES_INPUT = replace(RANGES, depth=None)
+#: The estimator's subscription with ``ranges_qos: sensor_data``: REP 2003's sensor-data
+#: profile (best effort, keep last 5), for publishers that offer nothing else; a frame DDS
+#: drops is then not counted anywhere.
+RANGES_SENSOR_DATA = replace(RANGES, depth=5, reliable=False)
 #: Reliable and deep, as ``uwb/ranges``: a start-up burst of rounds loses nothing.
 ANCHOR_RANGES = Topic('uwb/anchor_ranges', 'sensor_msgs/msg/JointState', depth=100)
 ANGLES = Topic('boom_angles', 'sensor_msgs/msg/JointState', depth=None)
@@ -83,6 +97,10 @@ POSTURE = Topic('arm_posture', 'geometry_msgs/msg/PoseArray')
 MARKERS = Topic('arm_posture/markers', 'visualization_msgs/msg/MarkerArray')
 TRUTH = Topic('arm_posture/ground_truth', 'geometry_msgs/msg/PoseArray')
 DIAGNOSTICS = Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray')
+#: The published postures' joint positions (``robot_description.joint_names``), radians.
+JOINT_STATES = Topic('joint_states', 'sensor_msgs/msg/JointState')
+#: The pump's URDF (``robot_description.urdf``), as robot_state_publisher offers it.
+ROBOT_DESCRIPTION = Topic('robot_description', 'std_msgs/msg/String', depth=1, latched=True)
 RAW = Topic('uwb/raw', 'std_msgs/msg/String', depth=100)
 
 

@@ -17,7 +17,8 @@ One range frame from message to posture: the steps the live node and ``epp_bag e
 
 A ``uwb/ranges`` message passes the stamp rules (``core.frame_policy``), is read into the
 pump's links (``PumpConfig.link_frame``), is solved (``PostureEstimator.update``), and is
-published only when the estimator judged it valid. Every frame that goes no further is
+published only when the estimator judged it valid, as the rigid boom at the estimate's joint
+angles. Every frame that goes no further is
 counted by its reason, under the same names in the node's ``/diagnostics`` (``frames
 <key>``) and in the bag tools' reports, so both decide alike by construction. No ROS
 imports: the node passes a message's fields, the bag tools a rosbags message's.
@@ -25,6 +26,7 @@ imports: the node passes a message's fields, the bag tools a rosbags message's.
 from collections import Counter
 from typing import NamedTuple, Optional
 
+from epp_ros.core.chain import angles_from_joints
 from epp_ros.core.frame_policy import ADMIT, CLOCK_JUMP, FramePolicy, MALFORMED, OUT_OF_ORDER
 import numpy as np
 
@@ -41,6 +43,8 @@ class Step(NamedTuple):
     joints: Optional[np.ndarray]
     #: The estimator's ``last_diagnostics`` of the frame; None when it never reached it.
     diagnostics: Optional[dict]
+    #: The slew (radians) and the pitches ((p,) radians) of ``joints``; None with them.
+    angles: Optional[tuple] = None
 
 
 class RangePipeline:
@@ -108,7 +112,14 @@ class RangePipeline:
                                        pitches=pitches, slew=slew, stamp=stamp,
                                        range_stamps=links.range_stamps(stamp))
         diagnostics = self.estimator.last_diagnostics
-        return Step(joints if self._judged(diagnostics) else None, diagnostics)
+        if not self._judged(diagnostics):
+            return Step(None, diagnostics)
+        # The boom is rigid: what is published is the boom at the estimate's angles, so
+        # that the joint angles and the positions agree exactly (a method that does not
+        # hold the lengths, epp1 and epp2, moves by the errors its diagnostics report).
+        model = self.estimator.model
+        slew, pitches = angles_from_joints(model, joints)
+        return Step(model.forward_kinematics(slew, pitches), diagnostics, (slew, pitches))
 
     def _judged(self, diagnostics):
         """Count the estimator's decision on a frame; True when it may be published."""

@@ -39,11 +39,29 @@ UNBIASED_ARGS = ('-p', 'link_bias_std:=0.0', '-p', 'common_bias_std:=0.0', '-p',
 BIN = Path(sys.executable).parent
 
 
+def _executables():
+    """
+    Where this package's executables are.
+
+    Where ``ros2 run`` finds them when a colcon install is on the ament index (``colcon
+    test``), else beside this Python (``python3 dev.py test``: the venv's console scripts).
+    """
+    try:
+        from ament_index_python.packages import get_package_prefix, PackageNotFoundError
+        return Path(get_package_prefix('epp_ros')) / 'lib' / 'epp_ros'
+    except (ImportError, PackageNotFoundError):
+        return BIN
+
+
+EXECUTABLES = _executables()
+
+
 def script(name):
-    """Path of an installed console script of this package."""
-    path = BIN / name
+    """Path of an installed executable of this package."""
+    path = EXECUTABLES / name
     if not path.exists():
-        pytest.fail(f'{name} is not installed in {BIN}: run `python3 dev.py test`')
+        pytest.fail(f'{name} is not installed in {EXECUTABLES}: run `python3 dev.py test` '
+                    'or `colcon build` first')
     return str(path)
 
 
@@ -83,9 +101,9 @@ class Processes:
     def __init__(self):
         self.started = []
 
-    def __call__(self, args):
+    def __call__(self, args, env=None):
         process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                   text=True)
+                                   text=True, env=env)
         self.started.append(process)
         return process
 

@@ -115,6 +115,14 @@ HAORU_RECORDS = records(*((str(i), '0', v / 1000) for i, v in enumerate(
      (RangeRecord(None, 1.23, rx_power_dbm=-78.32),), 0),
     ('bare', 'DIST: 1.23 m\r\n', (RangeRecord(None, 1.23),), 0),
     ('bare', 'Range: 1.23 m\t RX power: ovf dBm', (RangeRecord(None, 1.23),), 1),
+    # DW1000-ng RTLS anchors: the tag's bytes run together, the anchor's EUI bytes with a colon
+    ('ng_rtls', 'Range: 9.04 m\t RX power: -82.30 dBm distance between anchor/tag:40 from '
+                'Anchor 00:01', (RangeRecord('00:01', 9.04, '40', rx_power_dbm=-82.3),), 0),
+    ('ng_rtls', 'Range: 1.23 m      RX power: -45.67 dBm distance between anchor/tag:01:01 '
+                'from Anchor 00:03\r\n', (RangeRecord('00:03', 1.23, '01:01',
+                                                      rx_power_dbm=-45.67),), 0),
+    ('ng_rtls', 'Range: 0.00 m\t RX power: inf dBm distance between anchor/tag:11 from Anchor '
+                '00:02', (RangeRecord('00:02', 0.0, '11'),), 1),
     # thotro and Makerfabs sketches print unpadded addresses too
     ('arduino', 'from: B82\t Range: 2.34 m\t RX power: -78.32 dBm',
      (RangeRecord('B82', 2.34, rx_power_dbm=-78.32),), 0),
@@ -142,6 +150,9 @@ def test_firmware_lines(name, line, expected, errors):
     ('jremington', '1782,2.34,5'),
     ('jremington', 'POS,1.0'),
     ('bare', 'from: 1782\t Range: 2.34 m'),
+    ('bare', FORMATS['ng_rtls'].example),
+    ('ng_rtls', 'Range: 1.23 m\t RX power: -78.32 dBm\t Sampling: 5.00 Hz'),
+    ('ng_rtls', 'Range: 1.23 m distance between anchor/tag:40 from Anchor 00:01:'),
     ('bare', 'Range: nan m'),
 ])
 def test_lines_of_other_formats_or_without_a_range_give_none(name, line):
@@ -370,3 +381,15 @@ def test_positional_formats_refuse_anchors_beyond_their_fields():
     assert anchor_slot_problem(six, ['trek', 'haoru']) is None      # eight fields carry them
     assert anchor_slot_problem(six, ['json']) is None               # names its anchors
     assert anchor_slot_problem(six, ['auto']) is None               # not known until read
+
+
+def test_a_line_naming_both_devices_keeps_them_under_auto():
+    """The real DW1000-ng RTLS anchor line: auto-detection must not read it as bare."""
+    line = ('Range: 9.04 m\t RX power: -82.30 dBm distance between anchor/tag:40 from '
+            'Anchor 00:01')
+    decoder = LineDecoder('auto')
+    records = [record for _ in range(4) for record in decoder.decode(line)]
+    assert decoder.protocol == 'ng_rtls'
+    assert {(r.tag, r.anchor, r.range_m) for r in records} == {('40', '00:01', 9.04)}
+    assert device_number('00:01') == device_number('0001') == 1
+    assert device_number('0B:82') == 0xB82 and device_number('01:01') == 0x101

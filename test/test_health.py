@@ -89,11 +89,16 @@ def test_levels_follow_the_thresholds():
         WARN, 'solver stopped before converging')
 
 
-def test_thresholds_are_finite_positive_and_ordered():
+def test_thresholds_are_finite_positive_and_a_warn_above_its_error_never_warns():
     for bad in ({'residual_warn': float('nan')}, {'arm_length_error': -1.0},
-                {'predicted_rmse_error': float('inf')}, {'residual_warn': 3.0}):
+                {'predicted_rmse_error': float('inf')}):
         with pytest.raises(ValueError, match=list(bad)[0].rsplit('_', 1)[0]):
             Thresholds(**bad)
+    rmse = diagnostics_of('cepp', MODEL.ranges(JOINTS))['predicted_rmse']
+    for error, level in ((0.5 * rmse, ERROR), (0.8 * rmse, ERROR), (1.2 * rmse, OK)):
+        thresholds = Thresholds(predicted_rmse_warn=1.5 * error, predicted_rmse_error=error)
+        diagnostics = diagnostics_of('cepp', MODEL.ranges(JOINTS), thresholds=thresholds)
+        assert assess(diagnostics, MODEL.arm_lengths)[0] == level
 
 
 def test_epp1_is_judged_on_the_lengths_it_does_not_hold():

@@ -17,11 +17,23 @@ import ast
 import configparser
 from pathlib import Path
 import re
+import sys
 import xml.etree.ElementTree as ET
 
 ROOT = Path(__file__).resolve().parents[1]
 CONSOLE_SCRIPTS = {'uwb_driver', 'posture_estimator', 'uwb_emulator', 'epp_demo', 'epp_bench',
-                   'epp_bag', 'epp_calibrate'}
+                   'epp_bag', 'epp_calibrate', 'epp_urdf'}
+#: Python modules from PyPI: their pip name and rosdep key (None: a pip extra only). The
+#: keys are rosdistro's python.yaml: python3-rosbags-pip from ros/rosdistro#37795,
+#: python3-rich from #43386, python3-yourdfpy-pip from #41102, python3-hypothesis from
+#: #23334.
+THIRD_PARTY = {'numpy': ('numpy', 'python3-numpy'), 'scipy': ('scipy', 'python3-scipy'),
+               'serial': ('pyserial', 'python3-serial'), 'yaml': ('PyYAML', 'python3-yaml'),
+               'rich': ('rich', 'python3-rich'), 'rosbags': ('rosbags', 'python3-rosbags-pip'),
+               'pytest': ('pytest', 'python3-pytest'),
+               'hypothesis': ('hypothesis', 'python3-hypothesis'),
+               'yourdfpy': ('yourdfpy', 'python3-yourdfpy-pip'),
+               'cvxpy': ('cvxpy', None), 'matplotlib': ('matplotlib', None)}
 
 
 def test_core_imports_no_ros():
@@ -60,3 +72,64 @@ def test_console_scripts_are_declared_and_importable():
     for target in declared.values():
         module, function = target.split(':')
         assert callable(getattr(__import__(module, fromlist=[function]), function))
+
+
+def imported_modules(paths):
+    """Top-level modules imported anywhere in these files (also inside functions)."""
+    found = set()
+    for path in paths:
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                found.update(alias.name.split('.')[0] for alias in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.level == 0:
+                found.add(node.module.split('.')[0])
+    local = {'epp_ros', *(path.stem for path in (ROOT / 'test').glob('*.py'))}
+    return found - set(sys.stdlib_module_names) - local
+
+
+def declared():
+    """package.xml's keys by kind, and setup.py's requirements by group."""
+    root = ET.parse(ROOT / 'package.xml').getroot()
+    keys = {kind: {e.text for e in root.iter(kind)}
+            for kind in ('depend', 'exec_depend', 'test_depend')}
+    tree = ast.parse((ROOT / 'setup.py').read_text())
+    setup = next(node for node in ast.walk(tree) if isinstance(node, ast.Call)
+                 and getattr(node.func, 'id', '') == 'setup')
+    arguments = {k.arg: ast.literal_eval(k.value) for k in setup.keywords
+                 if k.arg in ('install_requires', 'extras_require')}
+    return keys, arguments['install_requires'], arguments['extras_require']
+
+
+def test_every_import_is_declared_for_rosdep_and_pip():
+    """What the package imports is a run dependency; what its tests import, a test one."""
+    keys, install_requires, extras = declared()
+    run_keys = keys['depend'] | keys['exec_depend']
+    package = imported_modules([*(ROOT / 'epp_ros').rglob('*.py'),
+                                *(ROOT / 'launch').glob('*.py')])
+    tests = imported_modules((ROOT / 'test').glob('*.py')) - package
+    for module in sorted(package | tests):
+        if module not in THIRD_PARTY:       # a ROS package: its key is its name
+            wanted = run_keys if module in package else run_keys | keys['test_depend']
+            assert module in wanted, f'{module}: not in package.xml'
+            continue
+        pip, key = THIRD_PARTY[module]
+        if key is None:                     # optional: the benchmarks' extra
+            assert pip in extras['bench'], f'{module}: not in extras_require bench'
+        elif module in package:
+            assert key in keys['exec_depend'], f'{module}: {key} not an exec_depend'
+            assert pip in install_requires, f'{module}: {pip} not in install_requires'
+        else:
+            assert key in keys['test_depend'], f'{module}: {key} not a test_depend'
+            assert pip in extras['test'], f'{module}: {pip} not in extras_require test'
+
+
+def test_scripts_are_where_ros2_run_finds_them_when_installed():
+    """Under colcon test (the install on the ament index) the tests run what it installed."""
+    from ament_index_python.packages import get_package_prefix, PackageNotFoundError
+    from system import BIN, EXECUTABLES, script
+    try:
+        installed = Path(get_package_prefix('epp_ros')) / 'lib' / 'epp_ros'
+    except PackageNotFoundError:
+        installed = None
+    assert EXECUTABLES == (installed or BIN)
+    assert Path(script('posture_estimator')).parent == EXECUTABLES

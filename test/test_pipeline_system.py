@@ -397,7 +397,7 @@ def test_parameters_are_applied_live_or_refused(listener, processes):
         assert listener.spin_until(lambda: len(listener.postures) >= 1, 10)
         before = float(reported('predicted RMSE [m]'))
         refused = {'method': 'nonsense', 'range_sigma': -1.0, 'reset_after_failures': 0,
-                   'residual_warn': 5.0, 'arm_lengths': [1.0] * 5, 'slew_name': 'turret'}
+                   'angle_max_age': 0.0, 'arm_lengths': [1.0] * 5, 'slew_name': 'turret'}
         for name, value in refused.items():
             [(successful, reason)] = set_parameters(listener, '/posture_estimator',
                                                     **{name: value})
@@ -414,3 +414,34 @@ def test_parameters_are_applied_live_or_refused(listener, processes):
         np.testing.assert_allclose(poses_to_joints(listener.postures[-1]), joints, atol=1e-4)
     finally:
         listener.destroy_publisher(publisher)
+
+
+def test_a_best_effort_publisher_reaches_an_estimator_told_sensor_data(listener, processes):
+    """``ranges_qos: sensor_data`` (read-only); silence then reads as ERROR, never STALE."""
+    from rclpy.qos import qos_profile_sensor_data
+    processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML),
+               '-p', 'ranges_qos:=sensor_data', *UNBIASED_ARGS])
+    publisher = listener.create_publisher(JointState, 'uwb/ranges', qos_profile_sensor_data)
+    model = CONFIG.model()
+    joints = model.forward_kinematics(0.3, np.radians([50.0, 20.0, 0.0, -20.0, -40.0]))
+    sent = [time.time()]
+
+    def publish():
+        sent[0] += 0.1
+        message = JointState(name=CONFIG.link_names,
+                             position=[float(v) for v in model.ranges(joints).ravel()])
+        message.header.stamp = to_time(sent[0])
+        publisher.publish(message)
+        return False
+    try:
+        assert listener.spin_until(lambda: publish() or len(listener.postures) >= 3, 60)
+        np.testing.assert_allclose(poses_to_joints(listener.postures[-1]), joints, atol=1e-4)
+    finally:
+        listener.destroy_publisher(publisher)
+    assert set_parameters(listener, '/posture_estimator', ranges_qos='reliable')[0][0] is False
+    silent = lambda: any(s.level == DiagnosticStatus.ERROR  # noqa: E731
+                         and s.message.startswith('no uwb/ranges for')
+                         for s in listener.statuses('posture_estimator'))
+    assert listener.spin_until(silent, 30)
+    assert not any(s.level == DiagnosticStatus.STALE
+                   for s in listener.statuses('posture_estimator'))

@@ -19,6 +19,7 @@ from pathlib import Path
 import subprocess
 import sys
 import types
+import xml.etree.ElementTree as ET
 
 import pytest
 import rclpy
@@ -69,7 +70,7 @@ def test_install_layout(install):
     assert (prefix / 'share/epp_ros/launch/epp.launch.py').exists()
     assert (prefix / 'share/epp_ros/rviz/epp.rviz').exists()
     for executable in ('uwb_driver', 'posture_estimator', 'uwb_emulator', 'epp_demo',
-                       'epp_bench', 'epp_bag', 'epp_calibrate'):
+                       'epp_bench', 'epp_bag', 'epp_calibrate', 'epp_urdf'):
         assert os.access(prefix / 'lib/epp_ros' / executable, os.X_OK)
 
 
@@ -97,6 +98,47 @@ def test_installed_nodes_run_with_the_installed_config(install, tmp_path):
         rclpy.shutdown()
 
 
+def test_installed_epp_urdf_writes_the_installed_pumps_urdf(install):
+    """The command the launch file gives robot_state_publisher, as installed."""
+    from epp_ros.config import load_pump_config
+    from epp_ros.robot_description import urdf
+    env = installed_env(install)
+    config = install / 'epp_ros/share/epp_ros/config/pump.yaml'
+    result = subprocess.run([str(ros2_run_path(install, 'epp_urdf', env)), str(config)],
+                            env=env, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout == urdf(load_pump_config(config), 0.35)
+
+
+#: What ``colcon test`` runs here: real processes, a real parameters file, the lint, and the
+#: test that the installed executables are the ones run (the whole suite takes too long).
+COLCON_SUBSET = ('test_scripts_are_where_ros2_run_finds_them_when_installed or '
+                 'test_unparsable_parameters_file_gives_one_line or test_package_xml or '
+                 'test_levels_follow_the_thresholds')
+
+
+def test_colcon_test_runs_the_packages_tests(install):
+    """``colcon test`` after ``source install/setup.bash``: pytest, on what was installed."""
+    workspace = install.parent
+    results = workspace / 'test_results'
+    result = subprocess.run(
+        [str(PYTHON.parent / 'colcon'), '--log-base', str(workspace / 'log'), 'test',
+         '--base-paths', str(ROOT), '--build-base', str(workspace / 'build'),
+         '--install-base', str(install), '--test-result-base', str(results),
+         '--return-code-on-test-failure', '--pytest-args', '-k', COLCON_SUBSET, '-p',
+         'no:cacheprovider'], cwd=workspace, env=installed_env(install), capture_output=True,
+        text=True, timeout=900)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    suite = ET.parse(results / 'epp_ros' / 'pytest.xml').getroot()
+    suite = suite if suite.tag == 'testsuite' else suite.find('testsuite')
+    cases = {case.get('name').split('[')[0] for case in suite.iter('testcase')}
+    assert 'test_scripts_are_where_ros2_run_finds_them_when_installed' in cases
+    assert 'test_unparsable_parameters_file_gives_one_line' in cases
+    assert int(suite.get('tests')) >= 14
+    assert int(suite.get('failures')) == int(suite.get('errors')) == 0
+    assert int(suite.get('skipped')) == 0
+
+
 class _Recorder:
     """Stands in for a launch class: remembers its arguments."""
 
@@ -104,20 +146,34 @@ class _Recorder:
         self.args, self.kwargs = args, kwargs
 
 
-def load_launch_file(monkeypatch, rviz_share):
+#: Where the stand-in ament index says epp_ros is installed.
+EPP_PREFIX = '/opt/epp'
+
+
+def prefix(name):
+    """Stand-in get_package_prefix: only epp_ros is installed."""
+    if name != 'epp_ros':
+        raise LookupError(name)
+    return EPP_PREFIX
+
+
+def load_launch_file(monkeypatch, rviz_share, others=()):
     """
     Load the launch file under stand-ins (launch and launch_ros are not installable here).
 
-    ``rviz_share`` is where get_package_share_directory finds rviz2, None: not installed.
+    ``rviz_share`` is where get_package_share_directory finds rviz2, None: not installed;
+    ``others``: other packages installed there too (robot_state_publisher).
     """
     modules = {
         'launch': types.SimpleNamespace(LaunchDescription=_Recorder),
         'launch.actions': types.SimpleNamespace(DeclareLaunchArgument=_Recorder,
                                                 LogInfo=_Recorder),
         'launch.conditions': types.SimpleNamespace(IfCondition=_Recorder),
-        'launch.substitutions': types.SimpleNamespace(LaunchConfiguration=_Recorder),
+        'launch.substitutions': types.SimpleNamespace(LaunchConfiguration=_Recorder,
+                                                      Command=_Recorder),
         'launch_ros': types.SimpleNamespace(),
         'launch_ros.actions': types.SimpleNamespace(Node=_Recorder),
+        'launch_ros.parameter_descriptions': types.SimpleNamespace(ParameterValue=_Recorder),
     }
     for name, module in modules.items():
         monkeypatch.setitem(sys.modules, name, module)
@@ -126,10 +182,11 @@ def load_launch_file(monkeypatch, rviz_share):
     def share(name):
         if name == 'epp_ros':
             return str(ROOT)
-        if name == 'rviz2' and rviz_share is not None:
+        if name in ('rviz2', *others) and rviz_share is not None:
             return rviz_share
         raise packages.PackageNotFoundError(name)
     monkeypatch.setattr(packages, 'get_package_share_directory', share)
+    monkeypatch.setattr(packages, 'get_package_prefix', prefix)
     spec = importlib.util.spec_from_file_location('epp_launch', ROOT / 'launch/epp.launch.py')
     launch_file = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(launch_file)
@@ -153,12 +210,15 @@ def test_launch_file_names_what_exists(monkeypatch):
 
 
 def test_launch_file_puts_every_node_on_sim_time_on_request(monkeypatch, tmp_path):
-    actions = load_launch_file(monkeypatch, rviz_share=str(tmp_path))
+    actions = load_launch_file(monkeypatch, rviz_share=str(tmp_path),
+                               others=('robot_state_publisher',))
     assert launch_arguments(actions)['use_sim_time'] == 'false'
     nodes = [a.kwargs for a in actions if 'executable' in a.kwargs]
-    assert [n['executable'] for n in nodes] == ['uwb_driver', 'posture_estimator', 'rviz2']
+    assert [n['executable'] for n in nodes] == ['uwb_driver', 'posture_estimator',
+                                                'robot_state_publisher', 'rviz2']
     for node in nodes:
-        told = [p['use_sim_time'] for p in node['parameters'] if isinstance(p, dict)]
+        told = [p['use_sim_time'] for p in node['parameters']
+                if isinstance(p, dict) and 'use_sim_time' in p]
         assert len(told) == 1 and told[0].args == ('use_sim_time',)
 
 
@@ -186,6 +246,29 @@ def test_launch_file_works_without_rviz(monkeypatch):
     """rviz2 is not installed here: rviz:=true says so, the nodes start all the same."""
     actions = load_launch_file(monkeypatch, rviz_share=None)
     assert not any(a.kwargs.get('executable') == 'rviz2' for a in actions)
-    notes = [a for a in actions if 'msg' in a.kwargs]
+    notes = [a for a in actions if 'msg' in a.kwargs and 'rviz2' in a.kwargs['msg']]
     assert len(notes) == 1 and 'rviz2 is not installed' in notes[0].kwargs['msg']
     assert rviz_condition(notes[0]) == 'rviz'
+
+
+def test_launch_file_starts_robot_state_publisher_with_the_configs_urdf(
+        monkeypatch, tmp_path):
+    actions = load_launch_file(monkeypatch, rviz_share=str(tmp_path),
+                               others=('robot_state_publisher',))
+    [publisher] = [a.kwargs for a in actions
+                   if a.kwargs.get('executable') == 'robot_state_publisher']
+    assert 'condition' not in publisher          # whenever it is installed
+    [description] = [p['robot_description'] for p in publisher['parameters']
+                     if 'robot_description' in p]
+    assert description.kwargs == {'value_type': str}
+    [command] = description.args
+    executable, space, config = command.args[0]
+    assert executable == f'{EPP_PREFIX}/lib/epp_ros/epp_urdf' and space == ' '
+    assert config.args == ('config',)        # the same pump.yaml as the nodes'
+
+
+def test_launch_file_says_when_robot_state_publisher_is_missing(monkeypatch, tmp_path):
+    actions = load_launch_file(monkeypatch, rviz_share=str(tmp_path))
+    assert not any(a.kwargs.get('executable') == 'robot_state_publisher' for a in actions)
+    notes = [a.kwargs['msg'] for a in actions if 'msg' in a.kwargs]
+    assert any('robot_state_publisher is not installed' in note for note in notes)

@@ -105,8 +105,7 @@ def test_emulator_and_driver_stamp_with_sim_time(listener, processes, tmp_path):
     enough = lambda: len(listener.ranges) >= 10 and len(listener.truth) >= 10  # noqa: E731
     assert listener.spin_until(lambda: clock.tick() or enough(), 60), \
         driver.stderr.read() if driver.poll() is not None else 'no frames'
-    # The first frames can be stamped 0 (the clock not yet received), never in wall time.
-    ranges = [m.header.stamp for m in listener.ranges[3:]]
+    ranges = [m.header.stamp for m in listener.ranges]
     assert all(simulated(stamp) for stamp in ranges), [to_seconds(s) for s in ranges]
     truth = [m.header.stamp for m in listener.truth[3:]]
     assert all(simulated(stamp) for stamp in truth), [to_seconds(s) for s in truth]
@@ -115,3 +114,27 @@ def test_emulator_and_driver_stamp_with_sim_time(listener, processes, tmp_path):
     assert listener.spin_until(lambda: clock.tick() or any(
         simulated(a.header.stamp) for a in listener.diagnostics
         if any(s.name.startswith('uwb_driver') for s in a.status)), 30), driver_statuses
+
+
+def test_driver_stamps_nothing_before_the_first_clock(listener, processes, tmp_path):
+    """Lines read before any /clock are counted as dropped, never stamped 0 + 1 us, ..."""
+    link = str(tmp_path / 'ttyUWB')
+    start_emulator(processes, 'json', ['--pty', '--link', link])      # on wall time
+    driver = processes([script('uwb_driver'), '--ros-args', '--params-file', str(PUMP_YAML),
+                        '-p', f'port:={link}', '-p', 'protocol:=json',
+                        '-p', 'use_sim_time:=true'])
+    assert listener.spin_until(lambda: listener.count_publishers('uwb/ranges') >= 1, 60), \
+        driver.stderr.read() if driver.poll() is not None else 'no driver'
+    seen = len(listener.truth)          # the emulator's cycles: lines the driver reads
+    assert listener.spin_until(lambda: len(listener.truth) >= seen + 20, 60)
+    clock = SimClock(listener)
+    assert listener.spin_until(lambda: clock.tick() or len(listener.ranges) >= 10, 60)
+
+    def dropped():
+        statuses = [s for a in listener.diagnostics for s in a.status
+                    if s.name.startswith('uwb_driver')]
+        values = {kv.key: kv.value for kv in statuses[-1].values} if statuses else {}
+        return int(values.get('dropped before /clock', 0))
+    stamps = [m.header.stamp for m in listener.ranges]
+    assert all(simulated(stamp) for stamp in stamps), [to_seconds(s) for s in stamps]
+    assert listener.spin_until(lambda: clock.tick() or dropped() > 0, 30)

@@ -100,7 +100,13 @@ def _check_positive(instance):
 
 @dataclass(frozen=True)
 class Thresholds:
-    """Limits of a good estimate, metres: above ``*_warn`` WARN, above ``*_error`` ERROR."""
+    """
+    Limits of a good estimate, metres: above ``*_error`` ERROR, else above ``*_warn`` WARN.
+
+    A ``*_warn`` above its ``*_error`` is allowed and means that quantity never warns: a
+    pair is not required to be ordered, so ``ros2 param load``, which sets one parameter at
+    a time in the file's order, reaches any pair a start-up could.
+    """
 
     arm_length_warn: float = 0.05       #: worst section-length error
     arm_length_error: float = 0.5
@@ -111,10 +117,6 @@ class Thresholds:
 
     def __post_init__(self):
         _check_positive(self)
-        for name in ('arm_length', 'residual', 'predicted_rmse'):
-            warn, error = getattr(self, f'{name}_warn'), getattr(self, f'{name}_error')
-            if warn > error:
-                raise ValueError(f'{name}_warn ({warn}) must not exceed {name}_error ({error})')
 
 
 @dataclass(frozen=True)

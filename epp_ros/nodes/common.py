@@ -29,7 +29,8 @@ import rclpy
 from rclpy.exceptions import InvalidHandle, ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from visualization_msgs.msg import Marker, MarkerArray
 import yaml
@@ -39,15 +40,21 @@ def qos(topic):
     """Return the rclpy QoS profile of a :class:`epp_ros.contract.Topic`."""
     reliability = ReliabilityPolicy.RELIABLE if topic.reliable else \
         ReliabilityPolicy.BEST_EFFORT
+    durability = DurabilityPolicy.TRANSIENT_LOCAL if topic.latched else \
+        DurabilityPolicy.VOLATILE
     if topic.depth is None:
-        return QoSProfile(reliability=reliability, history=HistoryPolicy.KEEP_ALL)
-    return QoSProfile(reliability=reliability, history=HistoryPolicy.KEEP_LAST,
-                      depth=topic.depth)
+        return QoSProfile(reliability=reliability, durability=durability,
+                          history=HistoryPolicy.KEEP_ALL)
+    return QoSProfile(reliability=reliability, durability=durability,
+                      history=HistoryPolicy.KEEP_LAST, depth=topic.depth)
 
 
 #: The profiles of the message contract (``epp_ros.contract``), by use.
 RANGES_QOS = qos(contract.RANGES)
 RANGES_INPUT_QOS = qos(contract.RANGES_INPUT)
+#: The estimator's choice of input profile (its read-only ``ranges_qos`` parameter).
+RANGES_INPUT_PROFILES = {'reliable': RANGES_INPUT_QOS,
+                         'sensor_data': qos(contract.RANGES_SENSOR_DATA)}
 POSTURE_QOS = qos(contract.POSTURE)
 
 #: rclpy's error type for a failed rcl call (not exported under a public name).
@@ -70,12 +77,27 @@ def declare(node, name, default, description, **descriptor):
         When the value given does not fit the parameter (e.g. an integer for a float).
 
     """
+    empty = _empty_list_given(node, name, default)
     try:
-        node.declare_parameter(name, default,
-                               ParameterDescriptor(description=description, **descriptor))
+        node.declare_parameter(name, [] if empty else default,
+                               ParameterDescriptor(description=description, **descriptor),
+                               ignore_override=empty)
     except ParameterException as exc:
         raise StartupError(f'{name}: {exc}') from None
     return node.get_parameter(name).value
+
+
+def _empty_list_given(node, name, default):
+    """
+    Tell whether a list parameter was given as an empty list.
+
+    rcl reads ``[]`` in a parameters file, which ``ros2 param dump`` writes for an empty
+    list, as "no value"; for a list parameter that can only mean the empty list. rclpy
+    keeps the overrides in a private attribute only.
+    """
+    given = node._parameter_overrides.get(name)     # noqa: SLF001 - no public accessor
+    return (isinstance(default, list) and given is not None
+            and given.type_ == Parameter.Type.NOT_SET)
 
 
 def declare_pump_parameters(node):

@@ -26,7 +26,9 @@ Anchor-anchor ranges (TREK1000 ``ma`` lines) go to ``uwb/anchor_ranges``, one me
 line: ``name[i] = "<anchor>:<anchor>"`` (measuring anchor first), ``position[i]`` metres,
 stamped with the line's receive time; implausible ones and unknown anchors are dropped and
 counted. Diagnostics at 1 Hz on ``/diagnostics``. Stamps, frame timing and ages are read
-from the node's clock, so ``use_sim_time`` (with ``/clock``) is followed.
+from the node's clock, so ``use_sim_time`` (with ``/clock``) is followed; lines read on
+simulated time before the first ``/clock`` have no time to be stamped with, and are dropped
+and counted (``dropped before /clock``).
 """
 import functools
 import sys
@@ -85,6 +87,7 @@ class UwbDriver(Node):
         self._last_frame = self._now()
         self._previous_counts = {}
         self._newest_line = {}          # port -> node-clock time of its newest line, s
+        self._before_clock = 0          # lines read on simulated time before any /clock
         self._closed = False
         self.readers = []
         for source in sources:
@@ -120,6 +123,10 @@ class UwbDriver(Node):
         def on_line(line, _wall_received):
             # The source stamps lines with wall time; the node's clock is what ROS time is.
             received = self._now()
+            if received == 0.0:     # use_sim_time before the first /clock: no time to stamp
+                with self._lock:
+                    self._before_clock += 1
+                return
             self._newest_line[source.port] = received
             records = decoder.decode(line)
             if not records:
@@ -165,6 +172,7 @@ class UwbDriver(Node):
             dropped = dict(self.assembler.dropped)
             frames = self.assembler.frames
             anchor_ranges = self.assembler.anchor_ranges
+            before_clock = self._before_clock
         for source, decoder, reader in self.readers:
             # Named by node (its namespace too), the device by pump and port.
             status = DiagnosticStatus(
@@ -207,6 +215,7 @@ class UwbDriver(Node):
                 'dropped without anchor': dropped.get('no_anchor', 0)
                 + dropped.get('anchor_range', 0),
                 'anchor-anchor ranges published': anchor_ranges,
+                'dropped before /clock': before_clock,
                 'raw ranges (corrected ones used)': dropped.get('raw_range', 0),
                 'overlong lines': reader.overlong,
                 'reconnects': reader.counts['reconnects'],

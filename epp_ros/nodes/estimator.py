@@ -16,7 +16,8 @@
 posture_estimator: uwb/ranges -> arm_posture, every frame, with diagnostics and markers.
 
 Subscribes to ``uwb/ranges`` (``sensor_msgs/JointState`` from uwb_driver; reliable, keep
-all, so no frame is lost silently: a node that lags shows it as latency), arranges the
+all, so no frame is lost silently: a node that lags shows it as latency; ``ranges_qos:
+sensor_data`` for a best-effort publisher), arranges the
 ``"<tag>:<anchor>"`` ranges as the configured (p, m) matrix (and ``"<tag>:<tag>"`` ones as
 tag-tag ranges) and runs :class:`epp_ros.core.PostureEstimator`, warm-started from the
 previous pose. With a method that fuses angle sensors (chain), it also subscribes to
@@ -27,10 +28,12 @@ the range frame's stamp:
 - ``arm_posture`` (``geometry_msgs/PoseArray``): the base pivot, then joints 1..p; pose k's
   x-axis along section k, z-axis up in the boom's vertical plane;
 - ``arm_posture/markers`` (``visualization_msgs/MarkerArray``) for RViz;
+- ``joint_states`` (``sensor_msgs/JointState``): the posture's joint positions, named as
+  the pump's URDF, which goes once to ``robot_description`` (transient local);
 - ``/diagnostics`` at 1 Hz: section lengths and errors, range residual and chi-square,
   predicted uncertainty, iterations, solve time, missing links, counters (frames rejected,
-  by reason); level: the worst frame's since the last report, STALE when no frame came for
-  1 s.
+  by reason); level: the worst frame's since the last report, ERROR when no frame came for
+  1 s (a diagnostic aggregator marks a silent node STALE).
 
 What is published is the estimator's decision (``core.integrity``): a frame that cannot be
 solved, whose residuals the configured noise cannot explain, whose posture it does not
@@ -52,23 +55,29 @@ import sys
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from epp_ros.angles import AngleSamples
 from epp_ros.config import PUMP_PARAMETERS
-from epp_ros.contract import ANGLES, DIAGNOSTICS, MARKERS, POSTURE, RANGES
+from epp_ros.contract import (ANGLES, DIAGNOSTICS, JOINT_STATES, MARKERS, POSTURE, RANGES,
+                              ROBOT_DESCRIPTION)
 from epp_ros.core import METHODS, PostureEstimator, RANGE_METHODS
 from epp_ros.core.estimators import ESTIMATOR_OPTIONS
 from epp_ros.core.integrity import IntegrityLimits, Thresholds
 from epp_ros.health import assess, grade
 from epp_ros.nodes.common import (declare, declare_pump_parameters, posture_markers,
-                                  posture_message, POSTURE_QOS, pump_id, RANGES_INPUT_QOS,
-                                  run_node, StartupError, to_seconds, to_time)
+                                  posture_message, POSTURE_QOS, pump_id, qos,
+                                  RANGES_INPUT_PROFILES, RANGES_INPUT_QOS, run_node,
+                                  StartupError, to_seconds, to_time)
 from epp_ros.pipeline import RangePipeline
+from epp_ros.robot_description import joint_names, joint_positions, urdf
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 LEVELS = {0: DiagnosticStatus.OK, 1: DiagnosticStatus.WARN, 2: DiagnosticStatus.ERROR}
-STALE_AFTER = 1.0           # s without a frame: the diagnostics say STALE
+#: Seconds without a frame after which the diagnostics say ERROR (a diagnostic aggregator,
+#: not the node, marks a silent node STALE).
+SILENT_AFTER = 1.0
 
 
 @dataclass(frozen=True)
@@ -149,6 +158,9 @@ SETTINGS = {
                                '(default pitch1..pitchp).', False),
     'angle_max_age': Setting(0.2, 'Largest stamp difference between a range frame and its '
                                   'angles, s.', True, 1e-3, 60.0),
+    'ranges_qos': Setting('reliable', 'QoS of the uwb/ranges subscription: reliable (keep '
+                          'all: no frame lost unseen) or sensor_data (best effort, REP 2003, '
+                          'for publishers that offer only that).', False),
 }
 #: Estimator options told by parameters of another name.
 OPTION_OF = {'range_sigma': 'sigma', 'nlos_fraction': 'nlos_fraction',
@@ -210,10 +222,18 @@ class PostureEstimatorNode(Node):
             raise StartupError(_parameter_name(str(exc))) from None
         self.posture = self.create_publisher(PoseArray, POSTURE.name, POSTURE_QOS)
         self.markers = self.create_publisher(MarkerArray, MARKERS.name, POSTURE_QOS)
+        self.joint_states = self.create_publisher(JointState, JOINT_STATES.name,
+                                                  qos(JOINT_STATES))
+        self.joint_names = joint_names(self.model.n_sections)
+        self.description = self.create_publisher(String, ROBOT_DESCRIPTION.name,
+                                                 qos(ROBOT_DESCRIPTION))
+        self._publish_description()
         self.diagnostics = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name,
                                                  DIAGNOSTICS.depth)
-        self.create_subscription(JointState, RANGES.name, self.on_ranges, RANGES_INPUT_QOS)
+        self.create_subscription(JointState, RANGES.name, self.on_ranges,
+                                 self._ranges_profile(self.values['ranges_qos']))
         self.angles_subscription = None
+        self.next_estimator = None      # built by the check of a change of method
         self._subscribe_angles()
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -233,6 +253,13 @@ class PostureEstimatorNode(Node):
     def counts(self):
         """Return the frames by what became of them (``RangePipeline.counts``)."""
         return self.pipeline.counts
+
+    @staticmethod
+    def _ranges_profile(name):
+        if name not in RANGES_INPUT_PROFILES:
+            raise StartupError(f'ranges_qos: {name!r} is not one of '
+                               f'{list(RANGES_INPUT_PROFILES)}')
+        return RANGES_INPUT_PROFILES[name]
 
     def _default(self, name):
         if name == 'pitch_names':
@@ -268,8 +295,14 @@ class PostureEstimatorNode(Node):
             if parameter.name in SETTINGS:
                 values[parameter.name] = parameter.value
         try:
-            estimator_settings(values)
+            settings = estimator_settings(values)
             self._angle_samples(values)
+            # A new method is built here, where a failure can still refuse the change (the
+            # SDP baseline needs cvxpy); the change, once accepted, takes it.
+            self.next_estimator = (None if settings['method'] == self.estimator.method
+                                   else PostureEstimator(self.model, **settings))
+        except ImportError as exc:
+            return SetParametersResult(successful=False, reason=f'method: {exc}')
         except ValueError as exc:
             return SetParametersResult(successful=False, reason=_parameter_name(str(exc)))
         return SetParametersResult(successful=True)
@@ -283,14 +316,21 @@ class PostureEstimatorNode(Node):
         settings = estimator_settings(self.values)
         method = settings.pop('method')
         if method != self.estimator.method:
-            self.pipeline.estimator = PostureEstimator(self.model, method, **settings)
+            self.pipeline.estimator = self.next_estimator
             self.counts['method_changes'] += 1
             self.get_logger().info(f'method changed to {method}: starting cold')
         else:
             self.estimator.reconfigure(**settings)
         if 'angle_max_age' in changed:
             self.angle_samples = self._angle_samples(self.values)
+        if 'max_angular_rate' in changed:           # the URDF's velocity limits
+            self._publish_description()
         self._subscribe_angles()
+
+    def _publish_description(self):
+        """Publish the pump's URDF (latched), its joints' velocity limit the one in use."""
+        text = urdf(self.config, self.values['max_angular_rate'])
+        self.description.publish(String(data=text))
 
     # -- frames ---------------------------------------------------------------------------
     def on_angles(self, message):
@@ -317,8 +357,12 @@ class PostureEstimatorNode(Node):
             return
         frame_id = message.header.frame_id or self.config.frame_id
         stamp = message.header.stamp                 # the frame's, exactly
-        pivot = self.model.pivot_of(step.joints)
+        slew, pitches = step.angles
+        pivot = self.model.pivot(slew)
         self.posture.publish(posture_message(pivot, step.joints, stamp, frame_id))
+        self.joint_states.publish(JointState(
+            header=message.header, name=self.joint_names,
+            position=[float(v) for v in joint_positions(slew, pitches)]))
         if self.values['publish_markers']:
             self.markers.publish(posture_markers(pivot, step.joints, stamp, frame_id))
 
@@ -343,8 +387,8 @@ class PostureEstimatorNode(Node):
             values = {'method': self.estimator.method}
         else:
             level, message, values = assess(diagnostics, self.lengths)
-            if silent is not None and silent > STALE_AFTER:
-                status.level = DiagnosticStatus.STALE
+            if silent is not None and silent > SILENT_AFTER:
+                status.level = DiagnosticStatus.ERROR
                 status.message = f'no uwb/ranges for {silent:.1f} s'
             else:                           # the worst frame since the last report
                 level, status.message = self.worst or (level, message)

@@ -23,7 +23,7 @@ auto-detection, the emulator, the configuration check, the driver, the bag tool 
 :data:`FORMATS`, so a new format is a new module, one line below, and its tests.
 """
 from epp_ros.uwb.formats import (arduino, bare, haoru, jremington, json_links, lec, les, mauwb,
-                                 mauwb_json, nrng, trek)
+                                 mauwb_json, ng_rtls, nrng, trek)
 from epp_ros.uwb.formats.base import (Cycle, device_number, LineFormat, ParseResult, RangeRecord,
                                       slot_of)
 
@@ -32,7 +32,8 @@ __all__ = ['FORMATS', 'LineFormat', 'Cycle', 'ParseResult', 'RangeRecord', 'devi
 
 #: name -> LineFormat. The order breaks ties in auto-detection: older, stricter formats first.
 FORMATS = {module.FORMAT.name: module.FORMAT for module in (
-    trek, lec, arduino, json_links, les, haoru, nrng, mauwb, mauwb_json, jremington, bare)}
+    trek, lec, arduino, json_links, les, haoru, nrng, mauwb, mauwb_json, jremington, ng_rtls,
+    bare)}
 
 
 def detect_format(lines, names=None):

@@ -24,8 +24,8 @@ The DW1000-ng ``TwoWayRangingInitiator``/``Responder`` examples print ``Range: <
 optionally the RX power and the sampling rate; the DW3000 ``ss_twr_initiator`` examples
 print ``DIST: <m> m``. Neither names a device: the tag and the anchor come from the source's
 ``source_tags`` and ``source_anchors`` entries (one source per pair). A ``from:`` before the
-range makes it an arduino-dw1000 line, not this format. A malformed RX power is one error
-(the range is still returned).
+range makes it an arduino-dw1000 line, a ``from Anchor`` after it an ``ng_rtls`` one, not
+this format. A malformed RX power is one error (the range is still returned).
 """
 import math
 import re
@@ -45,7 +45,7 @@ def parse_bare(line):
     """Return the record (anchor and tag None) of a ``Range: ... m`` or ``DIST: ... m`` line."""
     text = line_text(line)
     match = _RANGE.search(text) if text else None
-    if match is None or 'from:' in text[:match.start()]:
+    if match is None or 'from:' in text[:match.start()] or 'from Anchor' in text[match.end():]:
         return None
     value = metres(match.group('range'))
     if value is None:

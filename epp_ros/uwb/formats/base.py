@@ -126,7 +126,9 @@ class LineFormat:
 
 # --- device ids -------------------------------------------------------------------------
 
-_ID_NUMBER = re.compile(r'(?:0[xX])?([0-9A-Fa-f]{1,16})', re.ASCII)
+# Hex digits, or bytes separated by colons as EUIs are printed (``00:01``).
+_ID_NUMBER = re.compile(r'(?:0[xX])?([0-9A-Fa-f]{1,16})'
+                        r'|([0-9A-Fa-f]{1,2}(?::[0-9A-Fa-f]{1,2}){1,7})', re.ASCII)
 
 
 def device_number(value):
@@ -134,7 +136,8 @@ def device_number(value):
     Return the number a device id spells in hexadecimal, or None if it is not one.
 
     Case-insensitive, with or without ``0x``, any zero padding: ``'0B82'``, ``'b82'`` and
-    ``'0x0b82'`` are all 0xB82. Integers are taken by their decimal digits (``17`` is
+    ``'0x0b82'`` are all 0xB82; bytes printed with colons are read as one number, the first
+    byte highest (``'0B:82'``). Integers are taken by their decimal digits (``17`` is
     ``'17'``), as JSON bridges print them.
     """
     if isinstance(value, bool):
@@ -144,7 +147,14 @@ def device_number(value):
     if not isinstance(value, str):
         return None
     match = _ID_NUMBER.fullmatch(value.strip())
-    return int(match.group(1), 16) if match else None
+    if match is None:
+        return None
+    if match.group(1) is not None:
+        return int(match.group(1), 16)
+    number = 0
+    for byte in match.group(2).split(':'):
+        number = number << 8 | int(byte, 16)
+    return number
 
 
 def printed_number(value, maximum=None):
