@@ -80,13 +80,23 @@ def _header(stamp_ns, frame_id):
         frame_id=frame_id)
 
 
-def _ranges_message(stamp_ns, frame_id, names, ranges, ages=None):
-    """Return a ``uwb/ranges`` message; ``ages`` (s, as ``ranges``) fill ``effort``."""
+def _ranges_message(stamp_ns, frame_id, names, ranges, ages=None, number=None):
+    """
+    Return a ``uwb/ranges`` message as the driver publishes it.
+
+    ``ages`` (s, as ``ranges``) fill ``effort``; ``number`` is the frame's, carried last
+    (``contract.FRAME_NUMBER``).
+    """
     empty = np.zeros(0, dtype=np.float64)
+    names, position = list(names), np.asarray(ranges, dtype=np.float64).ravel()
     effort = empty if ages is None else np.asarray(ages, dtype=np.float64).ravel()
+    if number is not None:
+        names.append(contract.FRAME_NUMBER)
+        position = np.append(position, float(number))
+        effort = effort if ages is None else np.append(effort, 0.0)
     return TYPESTORE.types[TYPES[RANGES]](
-        header=_header(stamp_ns, frame_id), name=list(names),
-        position=np.asarray(ranges, dtype=np.float64).ravel(), velocity=empty, effort=effort)
+        header=_header(stamp_ns, frame_id), name=names, position=position, velocity=empty,
+        effort=effort)
 
 
 def _anchor_ranges_message(stamp_ns, config, ranges):
@@ -194,7 +204,7 @@ def write_cycles(path, config, cycles, storage='mcap', raw_protocol=None, anchor
         for cycle, (stamp, ranges, joints, ages) in enumerate(cycles):
             messages = _anchor_messages(config, stamp, cycle, anchor_rounds, raw_protocol)
             messages += [(RANGES, _ranges_message(stamp, config.frame_id, config.link_names,
-                                                  ranges, ages)),
+                                                  ranges, ages, number=cycle + 1)),
                          (TRUTH, _posture_message(stamp, config.frame_id,
                                                   model.pivot_of(joints), joints))]
             if raw_protocol:
@@ -252,10 +262,10 @@ def write_frames(path, config, frames, storage='mcap', ages=None):
         else ((*frame, age) for frame, age in zip(frames, ages, strict=True))
     with _BagWriter(path, storage) as bag:
         for stamp_ns, ranges, frame_ages in per_frame:
-            message = _ranges_message(stamp_ns, config.frame_id, config.link_names, ranges,
-                                      frame_ages)
-            bag.write(RANGES, stamp_ns, _serialize(message))
             count += 1
+            message = _ranges_message(stamp_ns, config.frame_id, config.link_names, ranges,
+                                      frame_ages, number=count)
+            bag.write(RANGES, stamp_ns, _serialize(message))
     return count
 
 

@@ -224,7 +224,8 @@ class PumpConfig:
         Parameters
         ----------
         names : sequence of str
-            ``"<tag>:<anchor>"`` and ``"<tag>:<tag>"`` labels, in any order.
+            ``"<tag>:<anchor>"`` and ``"<tag>:<tag>"`` labels, in any order (a
+            ``contract.FRAME_NUMBER`` entry is not a link).
         values : sequence of float
             The ranges, metres (NaN for missing).
         ages : sequence of float, optional
@@ -251,6 +252,8 @@ class PumpConfig:
         ages_by_link = np.full((p, m), np.nan)
         unknown = 0
         for i, (name, value) in enumerate(zip(names, values)):
+            if name == contract.FRAME_NUMBER:
+                continue
             position = links.get(name)
             if position is not None:
                 ranges.flat[position] = value

@@ -27,7 +27,9 @@ bag tools rosbags ones (``bags.py``), and decoding works on either kind of messa
   mixes instants, and a moving boom needs each range's time; only common_interfaces
   messages are used and JointState has no per-entry stamp, hence ``effort``. An empty
   ``effort`` (older bags, other publishers) means every range was measured at the stamp;
-  ``velocity`` stays empty.
+  ``velocity`` stays empty. The last entry, ``"frame"`` (:data:`FRAME_NUMBER`), numbers
+  the driver's frames 1, 2, 3, ... in ``position`` (age 0): a receiver counts a gap as
+  frames lost on the way (:class:`FrameNumbers`); messages without it are not numbered.
 - ``uwb/anchor_ranges`` (``sensor_msgs/JointState``): anchor-anchor ranges, as the anchors
   measure them to survey themselves (TREK1000 ``ma`` lines, DWM1001 anchors ranging each
   other): ``name[i] = "<anchor>:<anchor>"``, the measuring anchor first (the pump's anchor
@@ -56,7 +58,8 @@ __all__ = ['Topic', 'RANGES', 'RANGES_INPUT', 'RANGES_SENSOR_DATA', 'ANGLES', 'P
            'MARKERS', 'TRUTH', 'DIAGNOSTICS', 'RAW', 'JOINT_STATES', 'ROBOT_DESCRIPTION',
            'posture_poses',
            'points_of', 'joints_of', 'stamp_parts', 'stamp_seconds', 'range_ages', 'ages_of',
-           'ANCHOR_RANGES', 'anchor_range_names', 'anchor_range_matrix']
+           'ANCHOR_RANGES', 'anchor_range_names', 'anchor_range_matrix', 'FRAME_NUMBER',
+           'frame_number', 'FrameNumbers']
 
 
 @dataclass(frozen=True)
@@ -80,15 +83,17 @@ class Topic:
         return self.name if self.name.startswith('/') else '/' + self.name
 
 
-#: Reliable and deep: serves reliable and best-effort subscribers, and a fast bag replay
-#: loses nothing.
+#: Reliable and deep: serves reliable and best-effort subscribers. The writer keeps the
+#: newest 100 frames for a reader that has not acknowledged them, so a driver never waits
+#: for a stalled reader: a reader more than 100 frames behind loses the older ones, and
+#: counts them from the frames' numbers (:class:`FrameNumbers`).
 RANGES = Topic('uwb/ranges', 'sensor_msgs/msg/JointState', depth=100)
-#: The estimator's subscription: keep all, so DDS never overwrites a frame the node has not
-#: taken (a slow node shows as latency, a fast replay is flow-controlled, nothing is lost).
+#: The estimator's subscription: keep all, so its own queue never overwrites a frame it has
+#: not taken (a slow node shows as latency; what the writer could not keep is counted lost).
 RANGES_INPUT = replace(RANGES, depth=None)
 #: The estimator's subscription with ``ranges_qos: sensor_data``: REP 2003's sensor-data
-#: profile (best effort, keep last 5), for publishers that offer nothing else; a frame DDS
-#: drops is then not counted anywhere.
+#: profile (best effort, keep last 5), for publishers that offer nothing else; frames DDS
+#: drops are counted lost, from the numbers, as above.
 RANGES_SENSOR_DATA = replace(RANGES, depth=5, reliable=False)
 #: Reliable and deep, as ``uwb/ranges``: a start-up burst of rounds loses nothing.
 ANCHOR_RANGES = Topic('uwb/anchor_ranges', 'sensor_msgs/msg/JointState', depth=100)
@@ -102,6 +107,61 @@ JOINT_STATES = Topic('joint_states', 'sensor_msgs/msg/JointState')
 #: The pump's URDF (``robot_description.urdf``), as robot_state_publisher offers it.
 ROBOT_DESCRIPTION = Topic('robot_description', 'std_msgs/msg/String', depth=1, latched=True)
 RAW = Topic('uwb/raw', 'std_msgs/msg/String', depth=100)
+
+
+#: The ``uwb/ranges`` entry that numbers the driver's frames (link names have a colon).
+FRAME_NUMBER = 'frame'
+
+
+def frame_number(names, positions):
+    """
+    Return a ``uwb/ranges`` message's frame number, None when it carries none.
+
+    Parameters
+    ----------
+    names, positions : sequence
+        The message's ``name`` and ``position``.
+
+    """
+    names = list(names)
+    if not names or names[-1] != FRAME_NUMBER or len(positions) != len(names):
+        return None
+    number = float(positions[-1])
+    return int(number) if math.isfinite(number) and number >= 1 and number.is_integer() \
+        else None
+
+
+class FrameNumbers:
+    """
+    Counts the frames a receiver never got, from the numbers of those it got.
+
+    Attributes
+    ----------
+    lost : int
+        Frames numbered between two received ones: lost on the way (a receiver that fell
+        behind a writer's history, a network that dropped them).
+    before_first : int
+        Frames the sender numbered before the first one received (published before this
+        receiver was listening), and before the first of each restart of the sender.
+    restarts : int
+        Times the numbers started again (a restarted driver).
+
+    """
+
+    def __init__(self):
+        self.last = None
+        self.lost = self.before_first = self.restarts = 0
+
+    def add(self, number):
+        """Take the number of a received frame (None: not numbered, nothing counted)."""
+        if number is None:
+            return
+        if self.last is None or number <= self.last:
+            self.restarts += self.last is not None
+            self.before_first += number - 1
+        else:
+            self.lost += number - self.last - 1
+        self.last = number
 
 
 def posture_poses(base, joints):

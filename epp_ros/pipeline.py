@@ -26,6 +26,7 @@ imports: the node passes a message's fields, the bag tools a rosbags message's.
 from collections import Counter
 from typing import NamedTuple, Optional
 
+from epp_ros.contract import frame_number, FrameNumbers
 from epp_ros.core.chain import angles_from_joints
 from epp_ros.core.frame_policy import ADMIT, CLOCK_JUMP, FramePolicy, MALFORMED, OUT_OF_ORDER
 import numpy as np
@@ -63,8 +64,10 @@ class RangePipeline:
     counts : collections.Counter
         ``received``, ``published``; frames going no further by reason: the stamp rules'
         (``out_of_order``, ``malformed``), an unreadable message (``malformed``), refused
-        by the estimator (``unsolved``, and ``rejected <status>``); and events:
-        ``clock_jumps``, ``unknown_links``, ``cold_restarts``, ``reacquired``.
+        by the estimator (``unsolved``, and ``rejected <status>``); frames that never came,
+        from the driver's numbers: ``lost`` on the way, ``before_first`` (published before
+        this receiver listened), and ``sender_restarts``; and events: ``clock_jumps``,
+        ``unknown_links``, ``cold_restarts``, ``reacquired``.
 
     """
 
@@ -72,6 +75,7 @@ class RangePipeline:
         self.config = config
         self.estimator = estimator
         self.policy = FramePolicy()
+        self.numbers = FrameNumbers()
         self.counts = Counter()
 
     def step(self, stamp, names, positions, ages=(), slew=None, pitches=None):
@@ -95,6 +99,7 @@ class RangePipeline:
 
         """
         self.counts['received'] += 1
+        self._count_numbers(frame_number(names, positions))
         decision = self.policy.admit(stamp)
         if decision not in (ADMIT, CLOCK_JUMP):
             self.counts[decision] += 1
@@ -120,6 +125,13 @@ class RangePipeline:
         model = self.estimator.model
         slew, pitches = angles_from_joints(model, joints)
         return Step(model.forward_kinematics(slew, pitches), diagnostics, (slew, pitches))
+
+    def _count_numbers(self, number):
+        """Count the frames the driver numbered that never came (``contract.FrameNumbers``)."""
+        self.numbers.add(number)
+        self.counts['lost'] = self.numbers.lost
+        self.counts['before_first'] = self.numbers.before_first
+        self.counts['sender_restarts'] = self.numbers.restarts
 
     def _judged(self, diagnostics):
         """Count the estimator's decision on a frame; True when it may be published."""

@@ -19,7 +19,7 @@ import signal
 import subprocess
 import time
 
-from epp_ros import bags
+from epp_ros import bags, contract
 from epp_ros.config import load_pump_config
 from epp_ros.core import METHODS
 from epp_ros.nodes.common import to_seconds
@@ -178,21 +178,37 @@ def test_play_into_the_live_estimator_equals_eval(tmp_path, listener, processes)
     assert to_seconds(listener.postures[-1].header.stamp) > 0
 
 
+def last_chunk(content):
+    """Return the offset of the last chunk record of an MCAP file (opcode 0x06)."""
+    import struct
+    at, found = 8, None                             # after the magic
+    while at + 9 <= len(content):
+        opcode, length = content[at], struct.unpack_from('<Q', content, at + 1)[0]
+        found = at if opcode == 0x06 else found
+        at += 9 + length
+    return found
+
+
 def damaged_copy(source, target, where, data):
-    """Copy a bag and write ``data`` over its storage file at fraction ``where``."""
+    """
+    Copy a bag and write ``data`` over its storage file at fraction ``where``.
+
+    ``where='last chunk'``: over the last chunk's header. The chunks carry no CRC here, so
+    zeros over a range's bytes are a valid range: damage is found where it breaks structure.
+    """
     import shutil
     shutil.copytree(source, target)
     storage = next(path for path in target.iterdir() if path.suffix == '.mcap')
     content = bytearray(storage.read_bytes())
-    at = int(len(content) * where)
+    at = last_chunk(content) if where == 'last chunk' else int(len(content) * where)
     content[at:at + len(data)] = data
     storage.write_bytes(bytes(content))
     return target
 
 
 @pytest.mark.parametrize('where, data', [
-    (0.5, np.random.default_rng(0).bytes(4096)), (0.3, bytes(64)), (0.9, bytes(64))],
-    ids=['random-4k-middle', 'zeros-30%', 'zeros-90%'])
+    (0.5, np.random.default_rng(0).bytes(4096)), (0.3, bytes(64)), ('last chunk', bytes(64))],
+    ids=['random-4k-middle', 'zeros-30%', 'zeros-last-chunk'])
 def test_a_damaged_bag_is_refused_unless_salvaged(where, data, tmp_path):
     clean = tmp_path / 'clean'
     bags.synthesize(clean, CONFIG, duration=60.0, seed=4)
@@ -256,7 +272,9 @@ def test_eval_gives_the_estimator_each_tags_measurement_time(with_ages, monkeypa
     bag = tmp_path / 'aged'
     bags.write_frames(bag, CONFIG, frames, ages=ages if with_ages else None)
     stored = decoded(bag, bags.RANGES)
-    assert [len(m.effort) for m in stored] == [30 if with_ages else 0] * len(frames)
+    assert [len(m.effort) for m in stored] == [31 if with_ages else 0] * len(frames)
+    assert [contract.frame_number(m.name, m.position) for m in stored] == \
+        list(range(1, len(frames) + 1))
     monkeypatch.setattr(SpyEstimator, 'calls', [])
     monkeypatch.setattr(bags, 'PostureEstimator', SpyEstimator)
     result = bags.evaluate(bag, CONFIG, 'chain')

@@ -20,6 +20,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from epp_ros.config import load_pump_config
+from epp_ros.contract import FRAME_NUMBER
 from epp_ros.nodes.common import to_seconds
 import numpy as np
 import pytest
@@ -61,10 +62,10 @@ def check_ranges_against_truth(listener, config, since, tolerance):
     assert len(frames) >= 3
     for frame in frames:
         check_range_ages(frame)
-        assert list(frame.name) == config.link_names
+        assert list(frame.name) == [*config.link_names, FRAME_NUMBER]
         assert frame.header.frame_id == config.frame_id
         assert abs(to_seconds(frame.header.stamp) - time.time()) < 30
-        measured = np.array(frame.position).reshape(model.n_sections, model.n_anchors)
+        measured = np.array(frame.position[:-1]).reshape(model.n_sections, model.n_anchors)
         assert np.isfinite(measured).any()
         for row in np.flatnonzero(np.isfinite(measured).any(axis=1)):
             reported = np.isfinite(measured[row])
@@ -76,6 +77,9 @@ def check_range_ages(frame, frame_period=0.1, slack=0.1):
     """Check one age (``effort``, s) per range: finite, >= 0 and within a cycle where it is."""
     ranges, ages = np.array(frame.position), np.array(frame.effort)
     assert ages.shape == ranges.shape
+    if frame.name[-1] == FRAME_NUMBER:          # the frame's number, not a range
+        assert ages[-1] == 0.0
+        ranges, ages = ranges[:-1], ages[:-1]
     reported = np.isfinite(ranges)
     assert np.isfinite(ages[reported]).all() and np.isnan(ages[~reported]).all()
     assert (ages[reported] >= 0).all() and (ages[reported] < frame_period + slack).all()
@@ -308,6 +312,58 @@ def test_a_wifi_tag_that_connects_to_us_is_read_without_newlines(listener, proce
                    for v in values())
     finally:
         tag.close()
+    assert driver.poll() is None
+
+
+def connect_when_listening(port, driver, timeout=20):
+    """Connect to the driver's listening port once it is bound."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            return socket.create_connection(('127.0.0.1', port), timeout=2)
+        except OSError:
+            assert time.monotonic() < deadline and driver.poll() is None
+            time.sleep(0.2)
+
+
+def test_a_listening_port_is_never_locked_by_silent_or_stray_clients(listener, processes):
+    """
+    A stray arduino client talks first and seven more connect and say nothing.
+
+    The real JSON tag, ninth, still gets in (the silent longest makes room) and is decoded
+    as JSON (each client detects its own protocol).
+    """
+    port = free_port()
+    driver = processes([script('uwb_driver'), '--ros-args', '--params-file', str(PUMP_YAML),
+                        '-p', f'port:=tcp-listen://127.0.0.1:{port}', '-p', 'protocol:=auto',
+                        '-p', "tag:='01'"])
+    others = [connect_when_listening(port, driver)]
+    try:
+        others[0].sendall(b'from: 1782\t Range: 9.99 m\t RX power: -78.32 dBm\n' * 5)
+        others += [socket.create_connection(('127.0.0.1', port), timeout=5) for _ in range(7)]
+        name = f'uwb_driver: tcp-listen://127.0.0.1:{port}'
+        assert listener.spin_until(lambda: any(
+            kv.key == 'clients' and kv.value == '8' for status in listener.statuses(name)
+            for kv in status.values), 30)
+        message = ('{"links":[' + ','.join(f'{{"A":"{a}","R":"{2 + i}.5"}}' for i, a in
+                                           enumerate(['1782', '1783', '1784', '1785', '1786',
+                                                      '1787'])) + ']}').encode()
+        with socket.create_connection(('127.0.0.1', port), timeout=5) as tag:
+            since = len(listener.ranges)
+            deadline = time.monotonic() + 30
+            while len(listener.ranges) < since + 3 and time.monotonic() < deadline:
+                tag.sendall(message)
+                listener.spin_until(lambda: False, 0.1)
+            assert len(listener.ranges) >= since + 3
+            assert list(listener.ranges[-1].position[:6]) == [2.5, 3.5, 4.5, 5.5, 6.5, 7.5]
+            values = lambda: {kv.key: kv.value  # noqa: E731
+                              for kv in listener.statuses(name)[-1].values}
+            assert listener.spin_until(
+                lambda: int(values()['clients evicted by a newcomer']) >= 1
+                and 'json' in values()['protocol'], 30), values()
+    finally:
+        for client in others:
+            client.close()
     assert driver.poll() is None
 
 

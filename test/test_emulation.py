@@ -264,7 +264,9 @@ def test_synth_writes_a_field_bag_with_its_truth(tmp_path):
         assert t_ns == 1000 * 10 ** 9 + index * 10 ** 8
         np.testing.assert_allclose(contract.joints_of(message), motion.joints(index / 10.0),
                                    atol=1e-9)
-    ranges = np.array([message.position for _, message in by_topic[bags.RANGES]])
+    assert [contract.frame_number(m.name, m.position) for _, m in by_topic[bags.RANGES]] == \
+        list(range(1, 21))                          # numbered as the driver numbers them
+    ranges = np.array([message.position[:-1] for _, message in by_topic[bags.RANGES]])
     assert ranges.shape == (20, 30) and np.isfinite(ranges).any()
 
 

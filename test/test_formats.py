@@ -393,3 +393,22 @@ def test_a_line_naming_both_devices_keeps_them_under_auto():
     assert {(r.tag, r.anchor, r.range_m) for r in records} == {('40', '00:01', 9.04)}
     assert device_number('00:01') == device_number('0001') == 1
     assert device_number('0B:82') == 0xB82 and device_number('01:01') == 0x101
+
+
+def test_each_client_of_a_port_detects_its_own_protocol():
+    """A stray client's five arduino lines must not lock the port against a JSON tag."""
+    from epp_ros.uwb.decoder import PeerDecoders
+    decoders = PeerDecoders('auto')
+    stray, tag = 1, 2
+    for _ in range(5):
+        assert decoders.decoder(stray).decode(FORMATS['arduino'].example)
+    json_line = '{"tag":"1","links":[{"A":"1782","R":"2.3"}]}'
+    for _ in range(4):
+        [record] = decoders.decoder(tag).decode(json_line)
+        assert (record.tag, record.anchor, record.range_m) == ('1', '1782', 2.3)
+    assert decoders.protocol == 'arduino, json'
+    decoders.forget(stray)
+    assert decoders.protocol == 'json'
+    assert decoders.counts['parsed'] == 9 and decoders.counts['lines'] == 9
+    with pytest.raises(ValueError):
+        PeerDecoders('morse')

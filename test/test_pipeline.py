@@ -14,6 +14,7 @@
 
 """The frame steps node and bag tools share: what is published, and every other frame counted."""
 from epp_ros.config import load_pump_config
+from epp_ros.contract import FRAME_NUMBER, frame_number, FrameNumbers
 from epp_ros.core import PostureEstimator
 from epp_ros.core.simulate import random_posture
 from epp_ros.pipeline import RangePipeline
@@ -65,3 +66,45 @@ def test_the_ranges_ages_reach_the_estimator():
         # Without ages (an empty effort) every range is at the stamp: nothing to ignore.
         assert 'range_stamps' not in pipeline.step(20.1, names, exact).diagnostics[
             'ignored_inputs']
+
+
+def numbered(ranges, number):
+    """Return a message's name, position and effort with the driver's frame number last."""
+    names, values = message_of(ranges)
+    return ([*names, FRAME_NUMBER], [*values, float(number)],
+            [0.0] * len(values) + [0.0])
+
+
+def test_frames_the_driver_numbered_but_never_came_are_counted():
+    joints = random_posture(MODEL, np.random.default_rng(3))[2]
+    pipeline = RangePipeline(CONFIG, PostureEstimator(MODEL, 'chain'))
+    # Heard from frame 4 on (1-3 went out before it listened); 6, 7 and 10 lost; then the
+    # driver restarts and 1 is lost; an unnumbered message (an older bag) counts nothing.
+    for stamp, number in enumerate([4, 5, 8, 9, 11, 2, 3, None], start=1):
+        if number is None:
+            names, values = message_of(MODEL.ranges(joints))
+            ages = ()
+        else:
+            names, values, ages = numbered(MODEL.ranges(joints), number)
+        step = pipeline.step(float(stamp), names, values, ages)
+        assert step.joints is not None               # the number is not a link
+        np.testing.assert_allclose(step.joints, joints, atol=1e-5)
+    counts = pipeline.counts
+    assert counts['lost'] == 3 and counts['before_first'] == 3 + 1
+    assert counts['sender_restarts'] == 1 and counts['unknown_links'] == 0
+    assert counts['received'] == 8 and counts['published'] == 8
+
+
+def test_frame_numbers_are_read_only_where_the_contract_puts_them():
+    names, values, _ = numbered(MODEL.ranges(random_posture(MODEL, np.random.default_rng(4))[2]),
+                                7)
+    assert frame_number(names, values) == 7
+    for bad in (float('nan'), 0.0, -3.0, 2.5, float('inf')):
+        assert frame_number(names, [*values[:-1], bad]) is None
+    assert frame_number(names[:-1], values[:-1]) is None          # not numbered
+    assert frame_number(names, values[:-1]) is None               # fields that do not match
+    assert frame_number([], []) is None
+    counted = FrameNumbers()
+    for number in (1, 2, None, 5, 5):
+        counted.add(number)
+    assert (counted.lost, counted.before_first, counted.restarts) == (2, 4, 1)

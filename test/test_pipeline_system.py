@@ -13,6 +13,7 @@
 # limitations under the License.
 
 """emulator -> driver -> posture_estimator -> /arm_posture, as separate processes over DDS."""
+import signal
 import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -445,3 +446,46 @@ def test_a_best_effort_publisher_reaches_an_estimator_told_sensor_data(listener,
     assert listener.spin_until(silent, 30)
     assert not any(s.level == DiagnosticStatus.STALE
                    for s in listener.statuses('posture_estimator'))
+
+
+def latest_values(listener, prefix):
+    """Return the newest status values of a node's diagnostics, as a dict (empty: none)."""
+    statuses = listener.statuses(prefix)
+    return {kv.key: kv.value for kv in statuses[-1].values} if statuses else {}
+
+
+def test_frames_lost_while_the_estimator_lags_are_counted_exactly(
+        listener, processes, tmp_path):
+    """
+    Stop the estimator while the driver publishes 300 frames at 50 Hz, then let it go on.
+
+    The driver's writer keeps the newest 100 frames for a reader that is behind: the rest
+    are lost on the way, and the estimator counts them from the frames' numbers. Every
+    frame the driver published is one the estimator received, lost or never listened for.
+    """
+    emulator, driver, estimator = start_pump(processes, tmp_path, extra=['--rate', '50'])
+    assert listener.spin_until(lambda: len(listener.postures) >= 5, 60), \
+        estimator.stderr.read() if estimator.poll() is not None else 'no postures'
+    estimator.send_signal(signal.SIGSTOP)
+    try:
+        seen = len(listener.ranges)
+        assert listener.spin_until(lambda: len(listener.ranges) >= seen + 300, 120)
+    finally:
+        estimator.send_signal(signal.SIGCONT)
+    emulator.send_signal(signal.SIGINT)
+    emulator.wait(30)
+    stopped = time.monotonic()
+
+    def balanced():
+        frames, counts = latest_values(listener, 'uwb_driver'), latest_values(
+            listener, 'posture_estimator')
+        if time.monotonic() < stopped + 3 or not frames or not counts:
+            return False            # reports made after the last frame
+        heard = sum(int(counts[f'frames {key}']) for key in ('received', 'lost',
+                                                             'before_first'))
+        return heard == int(frames['frames'])
+    assert listener.spin_until(balanced, 120), (latest_values(listener, 'uwb_driver'),
+                                                latest_values(listener, 'posture_estimator'))
+    counts = latest_values(listener, 'posture_estimator')
+    assert int(counts['frames lost']) > 0, counts       # the lag did lose frames
+    assert int(counts['frames sender_restarts']) == 0

@@ -138,3 +138,33 @@ def test_driver_stamps_nothing_before_the_first_clock(listener, processes, tmp_p
     stamps = [m.header.stamp for m in listener.ranges]
     assert all(simulated(stamp) for stamp in stamps), [to_seconds(s) for s in stamps]
     assert listener.spin_until(lambda: clock.tick() or dropped() > 0, 30)
+
+
+@pytest.mark.parametrize('clock_type', ['rosgraph_msgs/msg/Clock', 'std_msgs/msg/String'])
+def test_play_with_clock_puts_one_clock_on_clock(listener, processes, sim_bag, tmp_path,
+                                                 clock_type):
+    """A bag's own /clock (here 5000 s, or not even a Clock) is not played beside ours."""
+    from epp_ros import bags
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    message = (bags.TYPESTORE.types[clock_type](clock=bags.TYPESTORE.types[
+        'builtin_interfaces/msg/Time'](sec=5000, nanosec=0))
+               if clock_type.endswith('Clock') else
+               bags.TYPESTORE.types[clock_type](data='tick'))
+    own = [('/clock', clock_type, int((SIM_START + k * 0.5) * 1e9), bags._serialize(message),
+            None) for k in range(16)]
+    bag = tmp_path / 'with_clock'
+    bags.write_raw(bag, bags.read_all(sim_bag, topics=['/uwb/ranges'])[0] + own)
+    heard = []
+    subscription = listener.create_subscription(
+        Clock, '/clock', heard.append,
+        QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT))
+    try:
+        player = processes([script('epp_bag'), 'play', str(bag), '--clock', '--subscribers',
+                            '1'])
+        assert listener.spin_until(lambda: player.poll() is not None, 120)
+        assert player.returncode == 0, player.stderr.read()
+        said = player.stderr.read()
+        assert said.count('\n') == 1 and "the bag's own /clock (16 messages" in said, said
+        assert heard and all(simulated(m.clock, SIM_START + BAG_SECONDS) for m in heard)
+    finally:
+        listener.destroy_subscription(subscription)

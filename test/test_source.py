@@ -48,9 +48,13 @@ def test_splitter_replaces_bad_bytes_and_bounds_lines():
     assert splitter.feed(b'z' * 17 + b'\n') == [] and splitter.overlong == 2
 
 
+def ignore(line, stamp, peer):
+    """Take a line and do nothing with it."""
+
+
 def collect():
     lines = []
-    return lines, lambda line, stamp: lines.append((line, stamp))
+    return lines, lambda line, stamp, peer: lines.append((line, stamp))
 
 
 def test_reads_a_pseudo_terminal_and_reconnects_after_unplugging(tmp_path):
@@ -144,7 +148,7 @@ def test_a_failing_line_handler_does_not_stop_reading():
     tty.setraw(slave)
     seen = []
 
-    def handler(line, stamp):
+    def handler(line, stamp, peer):
         seen.append(line)
         if line == 'bad':
             raise RuntimeError('consumer bug')
@@ -163,7 +167,7 @@ def test_a_failing_line_handler_does_not_stop_reading():
 
 @pytest.mark.parametrize('port', ['/dev/does-not-exist', 'socket://127.0.0.1:1'])
 def test_missing_devices_are_retried_without_raising(port):
-    source = LineSource(port, lambda line, stamp: None, backoff=0.1).start()
+    source = LineSource(port, ignore, backoff=0.1).start()
     try:
         assert wait_for(lambda: source.counts['io_errors'] >= 3)
         assert source.state == 'disconnected' and source.last_error
@@ -237,17 +241,65 @@ def test_a_listening_source_serves_several_tags_that_write_json_without_newlines
         socket.create_connection(('127.0.0.1', port), timeout=1).close()
 
 
+def free_local_port():
+    with socket.socket() as probe:
+        probe.bind(('127.0.0.1', 0))
+        return probe.getsockname()[1]
+
+
+def test_silent_clients_never_lock_a_listening_port_out():
+    """8 half-open clients: a tag that reconnects takes the place of the silent longest."""
+    from epp_ros.uwb.source import ListenSource
+    port = free_local_port()
+    peers, closed = [], []
+    source = ListenSource(f'tcp-listen://127.0.0.1:{port}',
+                          lambda line, stamp, peer: peers.append((peer, line)),
+                          max_clients=8, on_closed=closed.append).start()
+    silent = []
+    try:
+        assert wait_for(lambda: source.state == 'listening')
+        for _ in range(8):
+            silent.append(socket.create_connection(('127.0.0.1', port), timeout=5))
+        assert wait_for(lambda: source.clients == 8)
+        with socket.create_connection(('127.0.0.1', port), timeout=5) as tag:
+            tag.sendall(b'back again\n')
+            assert wait_for(lambda: [line for _, line in peers] == ['back again'])
+            assert source.counts['evicted'] == 1 and source.clients == 8
+            assert closed == [1]                 # the first, silent longest, made room
+            assert peers[0][0] == 9              # the newcomer's own name
+    finally:
+        for client in silent:
+            client.close()
+        source.stop()
+
+
+def test_a_client_silent_for_the_idle_timeout_is_closed():
+    from epp_ros.uwb.source import ListenSource
+    port = free_local_port()
+    closed = []
+    source = ListenSource(f'tcp-listen://127.0.0.1:{port}', ignore, idle_timeout=0.5,
+                          on_closed=closed.append).start()
+    try:
+        assert wait_for(lambda: source.state == 'listening')
+        with socket.create_connection(('127.0.0.1', port), timeout=5) as quiet:
+            assert wait_for(lambda: source.counts['idle_closed'] == 1, 10)
+            assert closed == [1] and source.clients == 0 and source.state == 'listening'
+            assert quiet.recv(16) == b''          # closed on our side
+    finally:
+        source.stop()
+
+
 def test_a_listening_source_binds_to_the_given_address_only():
     from epp_ros.uwb.source import ListenSource
     with socket.socket() as probe:
         probe.bind(('127.0.0.1', 0))
         port = probe.getsockname()[1]
-    source = ListenSource(f'tcp-listen://127.0.0.1:{port}', lambda line, stamp: None).start()
+    source = ListenSource(f'tcp-listen://127.0.0.1:{port}', ignore).start()
     try:
         assert wait_for(lambda: source.state == 'listening')
         with socket.socket() as other:        # the same port on another address is free
             other.bind(('127.0.0.2', port))
-        blocker = ListenSource(f'tcp-listen://127.0.0.1:{port}', lambda line, stamp: None,
+        blocker = ListenSource(f'tcp-listen://127.0.0.1:{port}', ignore,
                                backoff=0.1).start()
         assert wait_for(lambda: blocker.counts['io_errors'] >= 2)
         assert blocker.state == 'disconnected' and blocker.last_error
@@ -255,7 +307,7 @@ def test_a_listening_source_binds_to_the_given_address_only():
     finally:
         source.stop()
     with pytest.raises(ValueError):
-        ListenSource('tcp-listen://:80', lambda line, stamp: None)
+        ListenSource('tcp-listen://:80', ignore)
 
 
 def test_tcp_reads_take_what_the_socket_holds_and_report_the_backlog():

@@ -21,7 +21,9 @@ message per ranging cycle, as a stamped, labelled range array: ``name[i] = "<tag
 cycle, then ``"<tag>:<tag>"`` for each tag-tag range reported this cycle (a record whose
 anchor id is another configured tag's), ``header.stamp`` the receive time of the newest
 range, ``effort[i]`` how long before the stamp range i was received (s, NaN where missing),
-``velocity`` empty (``epp_ros.contract``). It never publishes on ``joint_states``.
+``velocity`` empty, and last the frame's number (``"frame"``: 1, 2, 3, ... since the
+driver started, as its diagnostics' ``frames`` count them), from which a receiver counts
+what it lost (``epp_ros.contract``). It never publishes on ``joint_states``.
 Anchor-anchor ranges (TREK1000 ``ma`` lines) go to ``uwb/anchor_ranges``, one message per
 line: ``name[i] = "<anchor>:<anchor>"`` (measuring anchor first), ``position[i]`` metres,
 stamped with the line's receive time; implausible ones and unknown anchors are dropped and
@@ -39,7 +41,7 @@ from epp_ros import contract
 from epp_ros.config import ConfigError, listen_address, normalise_device_id, PROTOCOLS, Source
 from epp_ros.nodes.common import (declare, declare_pump_parameters, pump_id, qos,
                                   RANGES_QOS, run_node, StartupError, to_time)
-from epp_ros.uwb.decoder import LineDecoder
+from epp_ros.uwb.decoder import PeerDecoders
 from epp_ros.uwb.formats import anchor_slot_problem
 from epp_ros.uwb.frames import FrameAssembler
 from epp_ros.uwb.source import open_source
@@ -88,13 +90,14 @@ class UwbDriver(Node):
         self._previous_counts = {}
         self._newest_line = {}          # port -> node-clock time of its newest line, s
         self._before_clock = 0          # lines read on simulated time before any /clock
+        self._frame_number = 0          # frames published, each numbered on uwb/ranges
         self._closed = False
         self.readers = []
         for source in sources:
-            decoder = LineDecoder(source.protocol)
-            reader = open_source(source.port, self._handler(source, decoder), baud=baud,
-                                 max_line=max_line)
-            self.readers.append((source, decoder, reader))
+            decoders = PeerDecoders(source.protocol)     # each client of a port its own
+            reader = open_source(source.port, self._handler(source, decoders), baud=baud,
+                                 max_line=max_line, on_closed=decoders.forget)
+            self.readers.append((source, decoders, reader))
         for _, _, reader in self.readers:
             reader.start()
         self.create_timer(min(frame_period / 4, 0.05), self._close_stale_frames)
@@ -119,8 +122,8 @@ class UwbDriver(Node):
         """Return the node's clock, seconds: system time, or simulated time with use_sim_time."""
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def _handler(self, source, decoder):
-        def on_line(line, _wall_received):
+    def _handler(self, source, decoders):
+        def on_line(line, _wall_received, peer):
             # The source stamps lines with wall time; the node's clock is what ROS time is.
             received = self._now()
             if received == 0.0:     # use_sim_time before the first /clock: no time to stamp
@@ -128,6 +131,7 @@ class UwbDriver(Node):
                     self._before_clock += 1
                 return
             self._newest_line[source.port] = received
+            decoder = decoders.decoder(peer)
             records = decoder.decode(line)
             if not records:
                 return
@@ -149,7 +153,9 @@ class UwbDriver(Node):
         message = JointState()
         message.header.stamp = to_time(frame.stamp)
         message.header.frame_id = self.config.frame_id
-        message.name, message.position, message.effort = frame.labelled(self.config)
+        self._frame_number += 1
+        message.name, message.position, message.effort = frame.labelled(self.config,
+                                                                        self._frame_number)
         self.publisher.publish(message)
         self._last_frame = self._now()
 
@@ -170,14 +176,15 @@ class UwbDriver(Node):
         silent = now - self._last_frame
         with self._lock:
             dropped = dict(self.assembler.dropped)
-            frames = self.assembler.frames
+            frames = self._frame_number     # published: the last frame's number
             anchor_ranges = self.assembler.anchor_ranges
             before_clock = self._before_clock
-        for source, decoder, reader in self.readers:
+        for source, decoders, reader in self.readers:
             # Named by node (its namespace too), the device by pump and port.
             status = DiagnosticStatus(
                 name=f'{self.get_fully_qualified_name().lstrip("/")}: {source.port}',
                 hardware_id=f'{pump_id(self, self.config.frame_id)}:{source.port}')
+            decoded = decoders.counts
             counts = {'lines': reader.counts['lines'], 'frames': frames}
             rates = {key: (value - self._previous_counts.get((source.port, key), value))
                      for key, value in counts.items()}
@@ -196,18 +203,20 @@ class UwbDriver(Node):
                 status.level = DiagnosticStatus.OK
                 status.message = 'ranging'
             values = {
-                'connection': reader.state, 'protocol': decoder.protocol or 'detecting',
+                'connection': reader.state, 'protocol': decoders.protocol or 'detecting',
                 'lines/s': rates['lines'], 'frames/s': rates['frames'],
                 'lines': reader.counts['lines'], 'frames': frames,
-                'unparsed lines': decoder.counts['unparsed'],
-                'parse errors': decoder.counts['errors'],
-                'position lines': decoder.counts['position'],
-                'preamble lines': decoder.counts['preamble'],
+                'unparsed lines': decoded['unparsed'],
+                'parse errors': decoded['errors'],
+                'position lines': decoded['position'],
+                'preamble lines': decoded['preamble'],
                 'input backlog (bytes)': reader.backlog,
                 'newest line age (s)': ('none' if source.port not in self._newest_line
                                         else f'{now - self._newest_line[source.port]:.3f}'),
                 'clients': reader.clients,
                 'connections': reader.counts['connections'],
+                'clients closed idle': reader.counts['idle_closed'],
+                'clients evicted by a newcomer': reader.counts['evicted'],
                 'dropped implausible': dropped.get('implausible', 0),
                 'dropped unknown device': dropped.get('unknown_tag', 0)
                 + dropped.get('unknown_anchor', 0),

@@ -57,6 +57,7 @@ import numpy as np
 DEFAULT_RECORD = [bags.RANGES, bags.ANCHOR_RANGES, bags.POSTURE, bags.TRUTH,
                   contract.DIAGNOSTICS.absolute]
 CLOCK_HZ = 40.0         # /clock rate of `play --clock`, as ros2 bag play's default
+CLOCK_TOPIC = '/clock'
 #: synth's noise options' defaults (None when parsed: --field refuses them when given).
 NOISE_DEFAULTS = {'sigma': 0.1, 'nlos': 0.0, 'drop': 0.0}
 NLOS_GAMMA = 2.0        # metres, mean NLOS excess of --nlos, as bags.synthesize's
@@ -109,7 +110,8 @@ def parse_args(argv):
                       const=CLOCK_HZ, metavar='HZ',
                       help="also publish the bag's time on /clock (rosgraph_msgs/Clock), "
                            f'at HZ (default {CLOCK_HZ:g}) and with every message, for nodes '
-                           'started with use_sim_time:=true')
+                           'started with use_sim_time:=true; a /clock in the bag is then '
+                           'not played')
     play.add_argument('--subscribers', type=integer(1, 1000), metavar='N',
                       help='wait up to 10 s until every topic has N subscribers (without: '
                            'up to 2 s for one)')
@@ -247,6 +249,15 @@ def run_play(args):
         print(f'epp_bag: salvaged {args.bag}: {damage.describe()}', file=sys.stderr)
     if not messages:
         raise bags.BagError(f'{args.bag}: nothing to play')
+    if args.clock:                  # one clock on /clock: ours, from the bag's time
+        own = [m for m in messages if m[0] == CLOCK_TOPIC]
+        messages = [m for m in messages if m[0] != CLOCK_TOPIC]
+        if own:
+            print(f"epp_bag: --clock: the bag's own {CLOCK_TOPIC} ({len(own)} messages, "
+                  f'{own[0][1]}) is not played; {CLOCK_TOPIC} follows the bag time',
+                  file=sys.stderr)
+        if not messages:
+            raise bags.BagError(f'{args.bag}: nothing to play but {CLOCK_TOPIC}')
     rclpy.init()
     node = rclpy.create_node('epp_bag_player')
     publishers = {}
@@ -292,7 +303,8 @@ class _Clock:
         self.message = Clock
         # Best effort, depth 1, as rclpy's TimeSource subscribes (and rosbag2 publishes).
         self.publisher = node.create_publisher(
-            Clock, '/clock', QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
+            Clock, CLOCK_TOPIC,
+            QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
         self.period = 1.0 / hz
 
     def publish(self, t_ns):

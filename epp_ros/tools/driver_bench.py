@@ -93,7 +93,7 @@ def measure_reading(transport='tcp', count=20000, line=DEFAULT_LINE, protocol='j
     decoder = LineDecoder(protocol)
     done = threading.Event()
 
-    def on_line(text, stamp):
+    def on_line(text, stamp, _peer):
         decoder.decode(text)
         if decoder.counts['lines'] >= count:
             done.set()

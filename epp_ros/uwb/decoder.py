@@ -19,13 +19,15 @@ With ``protocol="auto"`` every format's parser is tried on each line until one f
 parsed ``lock_after`` lines; from then on only that parser runs. Records parsed while
 detecting are kept, not dropped. Lines that give no range but that a format knows (a
 DWM1001 position, a WiFi tag's HTTP preamble) are counted under their label, not as
-unparsed.
+unparsed. On a port several devices connect to, each client gets its own decoder
+(:class:`PeerDecoders`): a stray client cannot decide the protocol of the others.
 """
 from collections import Counter
+import threading
 
 from epp_ros.uwb.formats import FORMATS, recognised
 
-__all__ = ['LineDecoder']
+__all__ = ['LineDecoder', 'PeerDecoders']
 
 
 class LineDecoder:
@@ -82,3 +84,60 @@ class LineDecoder:
         self.counts['errors'] += result.errors
         self.counts['records'] += len(result.records)
         return result.records
+
+
+class PeerDecoders:
+    """
+    One :class:`LineDecoder` per client of a source, each detecting its own protocol.
+
+    Parameters
+    ----------
+    protocol, lock_after
+        As for :class:`LineDecoder`, for every client.
+
+    Attributes
+    ----------
+    counts : collections.Counter
+        The sum over every client, closed ones included.
+    protocol : str or None
+        The protocols the connected clients settled on, comma-separated (None: none yet).
+
+    """
+
+    def __init__(self, protocol='auto', lock_after=3):
+        LineDecoder(protocol, lock_after)           # refuse a bad name here, not per client
+        self._settings = (protocol, lock_after)
+        self._decoders = {}                         # peer -> LineDecoder
+        self._closed = Counter()
+        self._lock = threading.Lock()
+
+    def decoder(self, peer=None):
+        """Return the decoder of a client (``peer`` as the source names it)."""
+        with self._lock:
+            found = self._decoders.get(peer)
+            if found is None:
+                found = self._decoders[peer] = LineDecoder(*self._settings)
+            return found
+
+    def forget(self, peer):
+        """Drop a closed client's decoder, keeping its counts."""
+        with self._lock:
+            gone = self._decoders.pop(peer, None)
+            if gone is not None:
+                self._closed.update(gone.counts)
+
+    @property
+    def counts(self):
+        """Return the counts of every client's decoder, summed."""
+        with self._lock:
+            total = Counter(self._closed)
+            for decoder in self._decoders.values():
+                total.update(decoder.counts)
+        return total
+
+    @property
+    def protocol(self):
+        """Return the protocols the connected clients use, or None."""
+        with self._lock:
+            names = sorted({d.protocol for d in self._decoders.values() if d.protocol})
+        return ', '.join(names) or None

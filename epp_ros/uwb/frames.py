@@ -58,7 +58,7 @@ class Frame:
     #: (p, p) receive time of each tag-tag range, seconds, NaN where none
     tag_received: np.ndarray
 
-    def labelled(self, config):
+    def labelled(self, config, number=None):
         """
         Return the frame as ``uwb/ranges`` carries it (``epp_ros.contract``).
 
@@ -66,16 +66,20 @@ class Frame:
         ----------
         config : epp_ros.config.PumpConfig
             The pump: the names of the links.
+        number : int, optional
+            The frame's number (1, 2, 3, ... from the driver's start), carried last as
+            ``contract.FRAME_NUMBER``; None: not numbered.
 
         Returns
         -------
         names : list of str
             Every ``"<tag>:<anchor>"`` pair, tag-major, then ``"<tag>:<tag>"`` for each
-            tag-tag range reported.
+            tag-tag range reported, then the number.
         ranges : list of float
-            Metres, NaN where a pair did not report.
+            Metres, NaN where a pair did not report; then the number.
         ages : list of float
-            Seconds before ``stamp`` each range was received, NaN where it is missing.
+            Seconds before ``stamp`` each range was received, NaN where it is missing;
+            then 0.
 
         """
         rows, columns = np.nonzero(np.isfinite(self.tag_ranges))
@@ -83,7 +87,11 @@ class Frame:
                                      for row, column in zip(rows, columns)]
         ranges = np.concatenate([self.ranges.ravel(), self.tag_ranges[rows, columns]])
         received = np.concatenate([self.received.ravel(), self.tag_received[rows, columns]])
-        return names, ranges.tolist(), contract.range_ages(self.stamp, received).tolist()
+        ages = contract.range_ages(self.stamp, received).tolist()
+        if number is None:
+            return names, ranges.tolist(), ages
+        return ([*names, contract.FRAME_NUMBER], [*ranges.tolist(), float(number)],
+                [*ages, 0.0])
 
 
 @dataclass

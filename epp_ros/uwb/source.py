@@ -23,7 +23,10 @@ Three kinds of port:
   TCP port) and read the socket itself, whatever it holds, up to 64 KiB a call;
 - ``tcp-listen://address:port``: devices connect to us (the Makerfabs ESP32 UWB tag is a TCP
   client); bound to exactly the address given, several clients at once, each framed on its
-  own.
+  own and named to the line handler (``peer``), so that each is decoded on its own. A
+  client silent for ``idle_timeout`` is closed, TCP keepalive finds half-open ones, and
+  when every place is taken a newcomer takes the place of the client silent longest: a
+  tag that drops off WiFi and reconnects always gets back in.
 
 :class:`LineSplitter` frames bytes into lines: at newlines, and between JSON objects written
 back to back with no newline (``{...}{...}``), so that a device that never ends a line is
@@ -48,6 +51,12 @@ __all__ = ['LineSplitter', 'LineSource', 'ListenSource', 'open_source', 'READ_SI
 READ_SIZE = 65536
 #: Seconds a read waits for data (bounds how late a stop request is seen).
 READ_TIMEOUT = 0.05
+#: Seconds a listening port's client may send nothing before it is closed (tags send lines
+#: at 1-50 Hz; one that stops has gone, or reconnected on another socket).
+IDLE_TIMEOUT = 10.0
+#: TCP keepalive of accepted clients, s: first probe after this much silence, then probes
+#: this often, this many unanswered before the connection is dropped.
+KEEPALIVE = (5, 2, 3)
 
 _TOKENS = re.compile(rb'[{}"\\]')
 _CONCATENATED = re.compile(rb'\}\s*\{')
@@ -246,9 +255,9 @@ class LineSource:
     ----------
     port : str
         Device path, pyserial URL, or ``socket://host:port``.
-    on_line : callable(str, float)
-        Called from the reader thread with each line and its receive time
-        (``time.time()``, seconds).
+    on_line : callable(str, float, peer)
+        Called from the reader thread with each line, its receive time (``time.time()``,
+        seconds) and the client it came from (None for a port with one peer).
     baud : int
         For serial devices.
     max_line : int
@@ -361,7 +370,7 @@ class LineSource:
                 self.backlog = stream.backlog()
                 self._deliver(data)
 
-    def _deliver(self, data):
+    def _deliver(self, data, peer=None):
         received = time.time()
         self.counts['bytes'] += len(data)
         self.counts['reads'] += 1
@@ -369,7 +378,7 @@ class LineSource:
             self.counts['lines'] += 1
             self.newest_line = received
             try:
-                self.on_line(line, received)
+                self.on_line(line, received, peer)
             except Exception as exc:  # noqa: BLE001 - a consumer's bug must not stop I/O
                 self.counts['handler_errors'] += 1
                 self.last_error = f'line handler: {exc!r}'
@@ -392,6 +401,15 @@ def listen_url_address(url):
     return match.group(1).strip('[]'), int(match.group(2))
 
 
+class _Client:
+    """A client of a listening port: its framing, its name for the handler, when it spoke."""
+
+    def __init__(self, peer, max_line):
+        self.peer = peer
+        self.splitter = LineSplitter(max_line)
+        self.heard = time.monotonic()
+
+
 class ListenSource(LineSource):
     """
     Accept devices that connect to us, read each client's lines, listen again if it fails.
@@ -400,12 +418,19 @@ class ListenSource(LineSource):
     ----------
     port : str
         ``tcp-listen://address:port``; bound to exactly that address.
-    on_line : callable(str, float)
-        As for :class:`LineSource`; lines of all clients, each client framed on its own.
+    on_line : callable(str, float, int)
+        As for :class:`LineSource`; lines of all clients, each client framed on its own and
+        named by a number (``peer``) that is never reused.
     max_line, backoff
         As for :class:`LineSource`.
     max_clients : int
-        Clients served at once; further connections are closed and counted as ``refused``.
+        Clients served at once; a newcomer beyond them takes the place of the client that
+        has been silent longest (counted ``evicted``).
+    idle_timeout : float
+        Seconds a client may send nothing before it is closed (counted ``idle_closed``).
+    on_closed : callable(int), optional
+        Called from the reader thread with the ``peer`` of each client closed, for any
+        reason.
 
     Attributes
     ----------
@@ -413,22 +438,27 @@ class ListenSource(LineSource):
         ``connecting``, ``listening`` (bound, no client), ``connected`` (one client or
         more) or ``disconnected`` (cannot bind).
     counts : collections.Counter
-        As :class:`LineSource`, plus ``disconnects`` and ``refused``; ``connections``
-        counts accepted clients.
+        As :class:`LineSource`, plus ``disconnects``, ``idle_closed`` and ``evicted``;
+        ``connections`` counts accepted clients.
 
     """
 
-    def __init__(self, port, on_line, max_line=4096, backoff=1.0, max_clients=8, **_):
+    def __init__(self, port, on_line, max_line=4096, backoff=1.0, max_clients=8,
+                 idle_timeout=IDLE_TIMEOUT, on_closed=None, **_):
         super().__init__(port, on_line, max_line=max_line, backoff=backoff)
         self.address = listen_url_address(port)
         self.max_clients = int(max_clients)
         self.max_line = int(max_line)
-        self._clients = {}          # socket -> LineSplitter
+        self.idle_timeout = float(idle_timeout)
+        self.on_closed = on_closed
+        self._clients = {}          # socket -> _Client
         self._overlong_closed = 0
+        self._peers = 0
 
     @property
     def overlong(self):
-        return self._overlong_closed + sum(s.overlong for s in list(self._clients.values()))
+        return self._overlong_closed + sum(c.splitter.overlong
+                                           for c in list(self._clients.values()))
 
     @property
     def clients(self):
@@ -465,6 +495,7 @@ class ListenSource(LineSource):
                         self._accept(server, selector)
                     else:
                         self._read_client(key.fileobj, selector)
+                self._close_idle(selector)
 
     def _accept(self, server, selector):
         try:
@@ -472,15 +503,25 @@ class ListenSource(LineSource):
         except OSError as exc:
             self._note_failure(exc)
             return
-        if len(self._clients) >= self.max_clients:
-            self.counts['refused'] += 1
-            _close_quietly(client)
-            return
+        if len(self._clients) >= self.max_clients:     # newest wins: a tag that came back
+            silent = min(self._clients, key=lambda c: self._clients[c].heard)
+            self.counts['evicted'] += 1
+            self._close(silent, selector)
         client.setblocking(False)
-        self._clients[client] = LineSplitter(self.max_line)
+        _keep_alive(client)
+        self._peers += 1
+        self._clients[client] = _Client(self._peers, self.max_line)
         selector.register(client, selectors.EVENT_READ)
         self.counts['connections'] += 1
         self.state = 'connected'
+
+    def _close_idle(self, selector):
+        """Close the clients that have sent nothing for ``idle_timeout``."""
+        now = time.monotonic()
+        for client, state in list(self._clients.items()):
+            if now - state.heard > self.idle_timeout:
+                self.counts['idle_closed'] += 1
+                self._close(client, selector)
 
     def _read_client(self, client, selector):
         try:
@@ -491,27 +532,52 @@ class ListenSource(LineSource):
             self.last_error = str(exc) or type(exc).__name__
             data = b''
         if not data:
-            selector.unregister(client)
-            self._drop(client)
+            self._close(client, selector)
             return
-        self.splitter = self._clients[client]
+        state = self._clients[client]
+        state.heard = time.monotonic()
+        self.splitter = state.splitter
         self.backlog = sum(_fionread(c.fileno()) for c in self._clients)
-        self._deliver(data)
+        self._deliver(data, state.peer)
+
+    def _close(self, client, selector):
+        selector.unregister(client)
+        self._drop(client)
 
     def _drop(self, client):
-        splitter = self._clients.pop(client, None)
-        if splitter is not None:
-            self._overlong_closed += splitter.overlong
-            self.counts['disconnects'] += 1
+        state = self._clients.pop(client, None)
         _close_quietly(client)
+        if state is not None:
+            self._overlong_closed += state.splitter.overlong
+            self.counts['disconnects'] += 1
+            if self.on_closed is not None:
+                try:
+                    self.on_closed(state.peer)
+                except Exception as exc:  # noqa: BLE001 - a consumer's bug must not stop I/O
+                    self.counts['handler_errors'] += 1
+                    self.last_error = f'close handler: {exc!r}'
         if not self._clients and self.state == 'connected':
             self.state = 'listening'
 
 
-def open_source(port, on_line, **options):
-    """Return a started-later reader for ``port``: :class:`ListenSource` or :class:`LineSource`."""
+def _keep_alive(client):
+    """Turn on TCP keepalive (``KEEPALIVE``), so that a half-open client is found."""
+    idle, interval, count = KEEPALIVE
+    client.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
+    for option, value in (('TCP_KEEPIDLE', idle), ('TCP_KEEPINTVL', interval),
+                          ('TCP_KEEPCNT', count)):
+        if hasattr(socket, option):             # Linux; elsewhere the system's defaults
+            client.setsockopt(socket.IPPROTO_TCP, getattr(socket, option), value)
+
+
+def open_source(port, on_line, on_closed=None, **options):
+    """
+    Return a started-later reader for ``port``: :class:`ListenSource` or :class:`LineSource`.
+
+    ``on_closed`` is a listening port's (a port with one peer names it None, and keeps it).
+    """
     if port.startswith('tcp-listen://'):
-        return ListenSource(port, on_line, **options)
+        return ListenSource(port, on_line, on_closed=on_closed, **options)
     return LineSource(port, on_line, **options)
 
 
