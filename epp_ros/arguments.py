@@ -22,7 +22,7 @@ import argparse
 import math
 
 __all__ = ['Parser', 'number', 'integer', 'host_port', 'field_names', 'add_field_options',
-           'settle_noise_options']
+           'settle_noise_options', 'RATE_HZ', 'NOISE_M', 'FRACTION', 'DURATION_S', 'SEED']
 
 
 class Parser(argparse.ArgumentParser):
@@ -82,6 +82,15 @@ def integer(low, high):
         return value
     parse.__name__ = 'integer'
     return parse
+
+
+#: The simulated pump's options, one range each, for every tool that runs it (the emulator
+#: and the demo, which passes them on).
+RATE_HZ = number(0, 1000, low_open=True)
+NOISE_M = number(0, 100)
+FRACTION = number(0, 1)
+DURATION_S = number(0, 1e7, low_open=True)
+SEED = integer(0, 2 ** 63 - 1)
 
 
 def host_port(text):

@@ -39,12 +39,12 @@ from epp_ros.uwb.emulation import anchor_lines, cycle_lines
 import numpy as np
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 from rosbags.interfaces import QosTime
-from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer, WriterError
 from rosbags.typesys import get_typestore, Stores
 
 __all__ = ['BagError', 'RANGES', 'TRUTH', 'POSTURE', 'RAW', 'ANCHOR_RANGES', 'TYPES',
            'synthesize', 'info', 'write_frames', 'evaluate', 'check', 'Damage', 'qos_profile',
-           'read_all', 'write_raw', 'read_anchor_ranges']
+           'read_all', 'write_raw', 'read_anchor_ranges', 'BagWriter']
 
 _TOPICS = (contract.RANGES, contract.TRUTH, contract.POSTURE, contract.RAW,
            contract.ANCHOR_RANGES)
@@ -123,19 +123,29 @@ def _serialize(message):
     return TYPESTORE.serialize_cdr(message, message.__msgtype__)
 
 
-class _BagWriter:
-    """A rosbag2 writer with one connection per topic, created on first use."""
+class BagWriter:
+    """
+    A rosbag2 writer with one connection per topic, created on first use.
+
+    Messages go to the storage as they are written (the storage buffers a chunk), so a
+    long recording needs no more memory than a short one. ``with`` opens it: a path that
+    exists or cannot be written is a :class:`BagError` then, before anything is recorded.
+    """
 
     def __init__(self, path, storage='mcap'):
         if storage not in STORAGES:
             raise BagError(f'storage must be one of {list(STORAGES)}, got {storage!r}')
         if Path(path).exists():
             raise BagError(f'{path} exists already')
+        self.path = path
         self.writer = Writer(path, version=9, storage_plugin=STORAGES[storage])
         self.connections = {}
 
     def __enter__(self):
-        self.writer.open()
+        try:
+            self.writer.open()
+        except (OSError, WriterError) as exc:
+            raise BagError(f'{self.path}: cannot write: {exc}') from None
         return self
 
     def __exit__(self, *exc):
@@ -200,7 +210,7 @@ def write_cycles(path, config, cycles, storage='mcap', raw_protocol=None, anchor
     """
     model = config.model()
     counts = {}
-    with _BagWriter(path, storage) as bag:
+    with BagWriter(path, storage) as bag:
         for cycle, (stamp, ranges, joints, ages) in enumerate(cycles):
             messages = _anchor_messages(config, stamp, cycle, anchor_rounds, raw_protocol)
             messages += [(RANGES, _ranges_message(stamp, config.frame_id, config.link_names,
@@ -260,7 +270,7 @@ def write_frames(path, config, frames, storage='mcap', ages=None):
     count = 0
     per_frame = ((*frame, None) for frame in frames) if ages is None \
         else ((*frame, age) for frame, age in zip(frames, ages, strict=True))
-    with _BagWriter(path, storage) as bag:
+    with BagWriter(path, storage) as bag:
         for stamp_ns, ranges, frame_ages in per_frame:
             count += 1
             message = _ranges_message(stamp_ns, config.frame_id, config.link_names, ranges,
@@ -368,7 +378,7 @@ def evaluate(path, config, method='cepp', out=None, salvage=False, **options):
         bag.connections(RANGES, TYPES[RANGES])            # there, and of the right type
         if any(c.topic == TRUTH for c in bag.reader.connections):
             bag.connections(TRUTH, TYPES[TRUTH])
-        writer = _BagWriter(out, _storage_of(bag)) if out is not None else None
+        writer = BagWriter(out, _storage_of(bag)) if out is not None else None
         with writer or contextlib.nullcontext():
             for connection, t_ns, raw, message in _decoded(bag, salvage):
                 _evaluate_message(run, writer, connection, t_ns, raw, message)
@@ -656,6 +666,6 @@ def _count(counts, key):
 
 def write_raw(path, messages, storage='mcap'):
     """Write (topic, msgtype, t_ns, raw bytes, qos or None) messages as a bag."""
-    with _BagWriter(path, storage) as bag:
+    with BagWriter(path, storage) as bag:
         for topic, msgtype, t_ns, raw, qos in messages:
             bag.write(topic, t_ns, raw, msgtype, qos)

@@ -15,6 +15,7 @@
 """epp_bag and epp_ros.bags: round trips, live replay, and broken bags."""
 from dataclasses import replace
 import json
+from pathlib import Path
 import signal
 import subprocess
 import time
@@ -388,3 +389,15 @@ def test_record_takes_anchor_ranges_by_default():
     assert bags.ANCHOR_RANGES in bag_tool.DEFAULT_RECORD
     assert bags.TYPES[bags.ANCHOR_RANGES] == 'sensor_msgs/msg/JointState'
     assert bags.TOPIC_QOS[bags.ANCHOR_RANGES].depth == 100
+
+
+def test_record_refuses_its_output_before_it_records(tmp_path):
+    """An OUT that exists or cannot be written: one line at once, not after --duration."""
+    (tmp_path / 'taken').mkdir()
+    for out, says in ((tmp_path / 'taken', 'exists already'),
+                      (Path('/proc/no/such/bag'), 'cannot write')):
+        result = subprocess.run([script('epp_bag'), 'record', str(out), '--duration', '600'],
+                                capture_output=True, text=True, timeout=120)
+        lines = [line for line in result.stderr.splitlines() if line.strip()]
+        assert result.returncode == 2 and len(lines) == 1, result.stderr
+        assert says in lines[0] and str(out) in lines[0] and 'Traceback' not in lines[0]

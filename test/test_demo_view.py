@@ -244,8 +244,9 @@ def test_a_calibrated_description_goes_to_driver_and_estimator(tmp_path, capsys)
 
 
 def test_record_refuses_an_existing_bag(tmp_path, capsys):
-    assert demo.main(['--record', str(tmp_path), '--duration', '1']) == 2
-    assert 'exists already' in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stopped:      # argparse's one line, before it runs
+        demo.main(['--record', str(tmp_path), '--duration', '1'])
+    assert stopped.value.code == 2 and 'exists already' in capsys.readouterr().err
 
 
 PLAIN_LINE = re.compile(r'postures \d+   \d+\.\d Hz   running RMSE (\d+\.\d+|nan) m   '

@@ -240,6 +240,11 @@ def test_launch_file_starts_rviz_on_request_where_installed(monkeypatch, tmp_pat
     shown = {d['Class']: d['Topic']['Value'] for d in view['Displays'] if 'Topic' in d}
     assert shown == {'rviz_default_plugins/MarkerArray': 'arm_posture/markers',
                      'rviz_default_plugins/PoseArray': 'arm_posture'}
+    [model] = [d for d in view['Displays'] if d['Class'] == 'rviz_default_plugins/RobotModel']
+    assert model['Description Source'] == 'Topic'
+    assert model['Description Topic']['Value'] == 'robot_description'
+    assert model['Description Topic']['Durability Policy'] == 'Transient Local'   # latched
+    assert any(d['Class'] == 'rviz_default_plugins/TF' for d in view['Displays'])
 
 
 def test_launch_file_works_without_rviz(monkeypatch):

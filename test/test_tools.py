@@ -43,12 +43,47 @@ def test_demo_runs_the_pipeline_and_ends_with_a_json_summary(tmp_path):
     assert plot.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 
 
-def test_demo_rejects_bad_arguments():
-    with pytest.raises(SystemExit):
-        demo.parse_args(['--rate', '0'])
-    with pytest.raises(SystemExit):
-        demo.parse_args(['--method', 'magic'])
+def demo_process(*args, timeout=120, **options):
+    """Run epp_demo as a program; the CompletedProcess."""
+    return subprocess.run([sys.executable, '-m', 'epp_ros.tools.demo', *args],
+                          capture_output=True, text=True, timeout=timeout, **options)
+
+
+@pytest.mark.parametrize('bad', [
+    ['--rate', 'nan'], ['--rate', 'inf'], ['--rate', '1e6'], ['--rate', '0'],
+    ['--sigma', '-1'], ['--sigma', 'nan'], ['--drop', '2'], ['--seed', '-1'],
+    ['--duration', 'nan'], ['--duration', 'inf'], ['--postures', '0'], ['--method', 'magic'],
+    ['--plot', '/proc/x.png'], ['--plot', 'boom.xyz'], ['--record', '/proc/nope/bag']])
+def test_demo_refuses_what_it_cannot_run_in_one_line_before_starting(bad):
+    """Every option as the emulator checks it; outputs checked before anything runs."""
+    result = demo_process(*bad, '--duration' if '--duration' not in bad else '--seed', '5')
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert lines[0].startswith('epp_demo: error: ') and result.stdout == ''
+
+
+def test_demo_fails_when_its_config_cannot_be_read():
     assert demo.main(['--config', '/nonexistent.yaml', '--duration', '1']) == 2
+
+
+def test_demo_output_that_goes_away_ends_it_quietly(tmp_path):
+    """`| head -1`, /dev/full and a closed stdout: no traceback, and the pipeline stops."""
+    command = [sys.executable, '-m', 'epp_ros.tools.demo', '--plain', '--duration', '60']
+    piped = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    first = piped.stdout.readline()                 # then the reader goes away
+    piped.stdout.close()
+    assert piped.wait(120) == 0 and first
+    assert b'Traceback' not in piped.stderr.read()
+    piped.stderr.close()
+    with open('/dev/full', 'w') as full:
+        result = subprocess.run(command, stdout=full, stderr=subprocess.PIPE, text=True,
+                                timeout=120)
+    assert result.returncode == 2 and 'Traceback' not in result.stderr
+    assert 'cannot write the output' in result.stderr
+    closed = subprocess.run(['sh', '-c', '"$0" "$@" >&-', *command], capture_output=True,
+                            text=True, timeout=120)
+    assert closed.returncode == 2 and closed.stderr.count('\n') == 1
+    assert 'stdout is closed' in closed.stderr
 
 
 def test_bench_prints_tables_and_json(capsys):

@@ -41,8 +41,8 @@ ranging cycle, then one round a second (:func:`epp_ros.uwb.emulation.anchor_roun
 import sys
 
 from epp_ros import contract
-from epp_ros.arguments import (add_field_options, field_effects_of, host_port, integer,
-                               number, Parser, settle_noise_options)
+from epp_ros.arguments import (add_field_options, DURATION_S, field_effects_of, FRACTION,
+                               host_port, NOISE_M, Parser, RATE_HZ, SEED, settle_noise_options)
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core.simulate import (FieldSimulator, make_motion, Motion, RangeNoise,
                                    working_cycle)
@@ -81,23 +81,23 @@ def parse_args(argv):
                         help='write messages back to back without line ends, as the '
                              'Makerfabs ESP32 UWB tag writes its JSON')
     parser.add_argument('--config', help='pump description (default: the packaged pump.yaml)')
-    parser.add_argument('--rate', type=number(0, 1000, low_open=True), default=10.0,
+    parser.add_argument('--rate', type=RATE_HZ, default=10.0,
                         help='ranging cycles per second')
-    parser.add_argument('--sigma', type=number(0, 100),
+    parser.add_argument('--sigma', type=NOISE_M,
                         help=f'range noise, metres (default {NOISE_DEFAULTS["sigma"]:g})')
-    parser.add_argument('--nlos', type=number(0, 1),
+    parser.add_argument('--nlos', type=FRACTION,
                         help='fraction of NLOS links (exponential excess, mean 2 m; '
                              'default 0)')
-    parser.add_argument('--drop', type=number(0, 1),
+    parser.add_argument('--drop', type=FRACTION,
                         help='link dropout probability (default 0)')
     add_field_options(parser)
-    parser.add_argument('--garbage', type=number(0, 1), default=0.0,
+    parser.add_argument('--garbage', type=FRACTION, default=0.0,
                         help='probability that a line is corrupted or noise is sent')
     parser.add_argument('--truth', action='store_true',
                         help='publish the true posture on arm_posture/ground_truth')
-    parser.add_argument('--duration', type=number(0, 1e7, low_open=True), default=None,
+    parser.add_argument('--duration', type=DURATION_S, default=None,
                         help='stop after seconds')
-    parser.add_argument('--seed', type=integer(0, 2 ** 63 - 1), default=0)
+    parser.add_argument('--seed', type=SEED, default=0)
     args = parser.parse_args(argv)
     settle_noise_options(parser, args, NOISE_DEFAULTS)
     if args.tcp:

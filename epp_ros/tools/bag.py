@@ -35,7 +35,9 @@ options: giving both is refused. ``--anchor-ranges`` (field simulator too) also 
 (``FieldSimulator.anchor_ranges``: the true, possibly displaced anchors, their offsets, the
 range noise), a burst at start-up and one round a second, as the emulator prints them
 (``epp_ros.uwb.emulation.anchor_rounds``); with ``--raw`` their lines too, where the format
-has them. ``record`` records ``/uwb/anchor_ranges`` by default.
+has them. ``record`` records ``/uwb/anchor_ranges`` by default; it opens OUT before it
+subscribes (an OUT that exists or cannot be written is refused at once) and writes every
+message as it arrives, so a long recording holds no more in memory than a short one.
 """
 import argparse
 import importlib
@@ -364,12 +366,21 @@ DRAIN_S = 1.0
 
 
 def run_record(args):
+    # The output is opened first: a path that exists or cannot be written is refused before
+    # anything is recorded, and every message goes to it as it arrives.
+    with bags.BagWriter(args.out, args.storage) as bag:
+        count, topics = _record(args, bag)
+    print(f'recorded {count} messages on {topics} topics to {args.out}')
+
+
+def _record(args, bag):
+    """Record ``args.topics`` into ``bag`` until told to stop; (messages, topics)."""
     import rclpy
     import rclpy.executors
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     rclpy.init()
     node = rclpy.create_node('epp_bag_recorder')
-    received = []
+    received = [0]
     subscribed = {}
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                      reliability=ReliabilityPolicy.RELIABLE)
@@ -389,23 +400,23 @@ def run_record(args):
                         msgtype = types[0]
 
                         def keep(raw, topic=topic, msgtype=msgtype):
-                            received.append((topic, msgtype, time.time_ns(), raw))
+                            bag.write(topic, time.time_ns(), raw, msgtype,
+                                      bags.TOPIC_QOS.get(topic))
+                            received[0] += 1
                         subscribed[topic] = node.create_subscription(
                             _message_class(msgtype), topic, keep, qos, raw=True)
             executor.spin_once(timeout_sec=0.02)
         # Lose nothing that had arrived: take what is queued, until the topics are quiet
         # or DRAIN_S have passed (topics that keep flowing are never quiet).
-        end, quiet_since, count = time.monotonic() + DRAIN_S, time.monotonic(), len(received)
+        end, quiet_since, count = time.monotonic() + DRAIN_S, time.monotonic(), received[0]
         while time.monotonic() < end and time.monotonic() - quiet_since < 0.3:
             executor.spin_once(timeout_sec=0.01)
-            if len(received) != count:
-                quiet_since, count = time.monotonic(), len(received)
+            if received[0] != count:
+                quiet_since, count = time.monotonic(), received[0]
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-    bags.write_raw(args.out, [(topic, msgtype, t_ns, raw, bags.TOPIC_QOS.get(topic))
-                              for topic, msgtype, t_ns, raw in received], args.storage)
-    print(f'recorded {len(received)} messages on {len(subscribed)} topics to {args.out}')
+    return received[0], len(subscribed)
 
 
 COMMANDS = {'synth': run_synth, 'record': run_record, 'play': run_play, 'eval': run_eval,

@@ -38,6 +38,7 @@ measured from a frame's stamp to the moment DDS received its posture, not to whe
 demo got round to it.
 """
 import json
+import os
 from pathlib import Path
 import signal
 import subprocess
@@ -45,7 +46,8 @@ import sys
 import tempfile
 import time
 
-from epp_ros.arguments import field_names, Parser, settle_noise_options
+from epp_ros.arguments import (DURATION_S, field_names, FRACTION, integer, NOISE_M, Parser,
+                               RATE_HZ, SEED, settle_noise_options)
 from epp_ros.nodes.stopping import ignore_signals, shutdown_on_signals, ShutdownRequest
 
 # Only the standard library and the stop request above are imported before main() has
@@ -69,22 +71,22 @@ def parse_args(argv):
     from epp_ros.core.simulate import FIELD_EFFECTS
     parser = Parser(prog='epp_demo', description=__doc__.lstrip().splitlines()[0])
     parser.add_argument('--method', choices=RANGE_METHODS, default='cepp')
-    parser.add_argument('--duration', type=float, default=None,
+    parser.add_argument('--duration', type=DURATION_S, default=None,
                         help='seconds to run (default: until Ctrl-C)')
-    parser.add_argument('--postures', type=int, default=None,
+    parser.add_argument('--postures', type=integer(1, 10 ** 9), default=None,
                         help='stop once this many postures arrived (or --duration is over)')
-    parser.add_argument('--rate', type=float, default=10.0, help='ranging cycles per second')
-    parser.add_argument('--sigma', type=float,
+    parser.add_argument('--rate', type=RATE_HZ, default=10.0, help='ranging cycles per second')
+    parser.add_argument('--sigma', type=NOISE_M,
                         help=f'range noise, metres (default {NOISE_DEFAULTS["sigma"]:g})')
-    parser.add_argument('--drop', type=float,
+    parser.add_argument('--drop', type=FRACTION,
                         help=f'link dropout probability (default {NOISE_DEFAULTS["drop"]:g})')
-    parser.add_argument('--nlos', type=float, help='fraction of NLOS links (default 0)')
+    parser.add_argument('--nlos', type=FRACTION, help='fraction of NLOS links (default 0)')
     parser.add_argument('--field', metavar='EFFECT[,EFFECT...]', type=field_names,
                         help='the emulator simulates these field effects instead of '
                              '--sigma/--nlos/--drop: ' + ', '.join(FIELD_EFFECTS))
-    parser.add_argument('--garbage', type=float, default=0.01,
+    parser.add_argument('--garbage', type=FRACTION, default=0.01,
                         help='probability of a corrupted line')
-    parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--seed', type=SEED, default=0)
     parser.add_argument('--config', help='pump description (default: the packaged one)')
     parser.add_argument('--calibrated', metavar='PUMP.yaml',
                         help='driver and estimator start from this pump description (e.g. '
@@ -97,12 +99,38 @@ def parse_args(argv):
     parser.add_argument('--json', action='store_true',
                         help='print a JSON summary as the last stdout line')
     args = parser.parse_args(argv)
-    if args.rate <= 0 or (args.duration is not None and args.duration <= 0):
-        parser.error('--rate and --duration must be positive')
-    if args.postures is not None and args.postures < 1:
-        parser.error('--postures must be >= 1')
     settle_noise_options(parser, args, NOISE_DEFAULTS)
+    problem = _output_problem(args)
+    if problem:
+        parser.error(problem)
     return args
+
+
+def _writable(folder):
+    """Tell whether a file can be made in ``folder`` (try it: root may not write /proc)."""
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            return True
+    except OSError:
+        return False
+
+
+def _output_problem(args):
+    """Say what is wrong with --plot or --record before anything runs, or return None."""
+    for option, path in (('--plot', args.plot), ('--record', args.record)):
+        if path is None:
+            continue
+        folder = Path(path).resolve().parent
+        if not _writable(folder):
+            return f'{option} {path}: {folder} is not a folder this user can write to'
+    if args.record and Path(args.record).exists():
+        return f'--record {args.record}: exists already'
+    if args.plot:
+        from matplotlib.figure import Figure
+        kinds = Figure().canvas.get_supported_filetypes()
+        if Path(args.plot).suffix.lstrip('.').lower() not in kinds:
+            return f'--plot {args.plot}: not one of the image types {", ".join(sorted(kinds))}'
+    return None
 
 
 class Monitor:
@@ -407,9 +435,15 @@ def start_recorder(path, stderr=None):
 
 
 def stop(processes, wait=STOP_WAIT):
+    """
+    Ask every process to end (SIGTERM); kill what has not ended after ``wait`` seconds.
+
+    SIGTERM, not SIGINT: the nodes take both alike, and one still starting Python, before
+    its handlers are in, ends silently on SIGTERM (SIGINT would print a KeyboardInterrupt).
+    """
     for process in processes:
         if process.poll() is None:
-            process.send_signal(signal.SIGINT)
+            process.send_signal(signal.SIGTERM)
     for process in processes:
         try:
             process.wait(wait)
@@ -438,7 +472,17 @@ def main(argv=None):
     ShutdownRequest.requested = False
     stop_request = shutdown_on_signals()
     try:
-        return run(parse_args(sys.argv[1:] if argv is None else argv), stop_request)
+        args = parse_args(sys.argv[1:] if argv is None else argv)
+        if sys.stdout is None:                      # started with stdout closed
+            print('epp_demo: stdout is closed: nowhere to show the demo', file=sys.stderr)
+            return 2
+        return run(args, stop_request)
+    except BrokenPipeError:                         # `epp_demo | head -1`: the reader left
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+    except OSError as exc:                          # stdout on a full disk, /dev/full
+        print(f'epp_demo: cannot write the output: {exc.strerror or exc}', file=sys.stderr)
+        return 2
     finally:
         if argv is None:
             ignore_signals()
@@ -457,9 +501,6 @@ def run(args, stop_request):
             config = load_pump_config(args.calibrated)
     except ConfigError as exc:
         print(f'epp_demo: {exc}', file=sys.stderr)
-        return 2
-    if args.record and Path(args.record).exists():
-        print(f'epp_demo: {args.record} exists already', file=sys.stderr)
         return 2
     view = sys.stderr if args.json else sys.stdout
     live = view.isatty() and not args.plain
@@ -480,7 +521,11 @@ def run(args, stop_request):
         log.close()
     workdir.cleanup()
     _summarise(args, view, recorder, result)
-    return 0
+    if recorder is not None and recorder.returncode != 0:
+        print(f'epp_demo: the recording failed (epp_bag record exited {recorder.returncode})',
+              file=sys.stderr)
+        return 2
+    return 2 if failure else 0
 
 
 def _monitored(args, config, config_path, workdir, log, view, live, stop_request):
