@@ -56,10 +56,9 @@ import numpy as np
 
 __all__ = ['Topic', 'RANGES', 'RANGES_INPUT', 'RANGES_SENSOR_DATA', 'ANGLES', 'POSTURE',
            'MARKERS', 'TRUTH', 'DIAGNOSTICS', 'RAW', 'JOINT_STATES', 'ROBOT_DESCRIPTION',
-           'posture_poses',
-           'points_of', 'joints_of', 'stamp_parts', 'stamp_seconds', 'range_ages', 'ages_of',
-           'ANCHOR_RANGES', 'anchor_range_names', 'anchor_range_matrix', 'FRAME_NUMBER',
-           'frame_number', 'FrameNumbers']
+           'posture_poses', 'points_of', 'joints_of', 'stamp_parts', 'stamp_seconds',
+           'range_ages', 'ages_of', 'ANCHOR_RANGES', 'anchor_range_names',
+           'anchor_range_matrix', 'FRAME_NUMBER', 'frame_number', 'FrameNumbers']
 
 
 @dataclass(frozen=True)

@@ -17,11 +17,11 @@ One range frame from message to posture: the steps the live node and ``epp_bag e
 
 A ``uwb/ranges`` message passes the stamp rules (``core.frame_policy``), is read into the
 pump's links (``PumpConfig.link_frame``), is solved (``PostureEstimator.update``), and is
-published only when the estimator judged it valid, as the rigid boom at the estimate's joint
-angles. Every frame that goes no further is
-counted by its reason, under the same names in the node's ``/diagnostics`` (``frames
-<key>``) and in the bag tools' reports, so both decide alike by construction. No ROS
-imports: the node passes a message's fields, the bag tools a rosbags message's.
+published only when the estimator judged it valid, as the rigid boom at the estimate's
+joint angles. Every frame that goes no further is counted by its reason, under the same
+names in the node's ``/diagnostics`` (``frames <key>``) and in the bag tools' reports, so
+both decide alike by construction; so are the frames the driver numbered that never came.
+No ROS imports: the node passes a message's fields, the bag tools a rosbags message's.
 """
 from collections import Counter
 from typing import NamedTuple, Optional
