@@ -348,6 +348,26 @@ def test_hostile_frames_are_not_published_and_eval_decides_the_same(listener, pr
         assert any(later)
 
 
+class StillBoom:
+    """Publishes one posture's ranges on ``uwb/ranges``, frames 0.1 s apart, as a driver."""
+
+    JOINTS = CONFIG.model().forward_kinematics(0.3, np.radians([50.0, 20.0, 0.0, -20.0,
+                                                                -40.0]))
+
+    def __init__(self, listener, profile=RANGES_QOS):
+        self.publisher = listener.create_publisher(JointState, 'uwb/ranges', profile)
+        self.ranges = [float(v) for v in CONFIG.model().ranges(self.JOINTS).ravel()]
+        self.sent = time.time()
+
+    def publish(self):
+        """Publish the next frame; False, so that it can stand first in a wait's condition."""
+        self.sent += 0.1
+        message = JointState(name=CONFIG.link_names, position=self.ranges)
+        message.header.stamp = to_time(self.sent)
+        self.publisher.publish(message)
+        return False
+
+
 def set_parameters(node, target, **values):
     """Call ``target``'s SetParameters service; a list of (successful, reason)."""
     from rcl_interfaces.srv import SetParameters
@@ -373,17 +393,8 @@ def test_parameters_are_applied_live_or_refused(listener, processes):
     """
     processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML),
                *UNBIASED_ARGS])
-    publisher = listener.create_publisher(JointState, 'uwb/ranges', RANGES_QOS)
-    model = CONFIG.model()
-    joints = model.forward_kinematics(0.3, np.radians([50.0, 20.0, 0.0, -20.0, -40.0]))
-    sent = [time.time()]
-
-    def publish():
-        sent[0] += 0.1
-        message = JointState(name=CONFIG.link_names,
-                             position=[float(v) for v in model.ranges(joints).ravel()])
-        message.header.stamp = to_time(sent[0])
-        publisher.publish(message)
+    boom = StillBoom(listener)
+    publisher, publish, joints = boom.publisher, boom.publish, StillBoom.JOINTS
 
     def reported(key):
         """Get the newest value of ``key`` in the estimator's diagnostics, after a new report."""
@@ -422,23 +433,13 @@ def test_a_best_effort_publisher_reaches_an_estimator_told_sensor_data(listener,
     from rclpy.qos import qos_profile_sensor_data
     processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML),
                '-p', 'ranges_qos:=sensor_data', *UNBIASED_ARGS])
-    publisher = listener.create_publisher(JointState, 'uwb/ranges', qos_profile_sensor_data)
-    model = CONFIG.model()
-    joints = model.forward_kinematics(0.3, np.radians([50.0, 20.0, 0.0, -20.0, -40.0]))
-    sent = [time.time()]
-
-    def publish():
-        sent[0] += 0.1
-        message = JointState(name=CONFIG.link_names,
-                             position=[float(v) for v in model.ranges(joints).ravel()])
-        message.header.stamp = to_time(sent[0])
-        publisher.publish(message)
-        return False
+    boom = StillBoom(listener, qos_profile_sensor_data)
     try:
-        assert listener.spin_until(lambda: publish() or len(listener.postures) >= 3, 60)
-        np.testing.assert_allclose(poses_to_joints(listener.postures[-1]), joints, atol=1e-4)
+        assert listener.spin_until(lambda: boom.publish() or len(listener.postures) >= 3, 60)
+        np.testing.assert_allclose(poses_to_joints(listener.postures[-1]), StillBoom.JOINTS,
+                                   atol=1e-4)
     finally:
-        listener.destroy_publisher(publisher)
+        listener.destroy_publisher(boom.publisher)
     assert set_parameters(listener, '/posture_estimator', ranges_qos='reliable')[0][0] is False
     silent = lambda: any(s.level == DiagnosticStatus.ERROR  # noqa: E731
                          and s.message.startswith('no uwb/ranges for')
