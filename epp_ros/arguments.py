@@ -13,16 +13,19 @@
 # limitations under the License.
 
 """
-Command-line numbers, addresses and field effects, checked where they are parsed.
+Command-line numbers, addresses, field effects and output paths, checked where parsed.
 
-Every numeric option of the console scripts is finite and in its range, so that a typo
-gives argparse's one usage line and exit status 2, never a traceback or an all-NaN file.
+Every numeric option of the console scripts is finite and in its range, and every output
+path writable, so that a typo gives one line and exit status 2 before any work, never a
+traceback, an all-NaN file or a lost run.
 """
 import argparse
 import math
 
 __all__ = ['Parser', 'number', 'integer', 'host_port', 'field_names', 'add_field_options',
-           'settle_noise_options', 'RATE_HZ', 'NOISE_M', 'FRACTION', 'DURATION_S', 'SEED']
+           'settle_noise_options', 'RATE_HZ', 'NOISE_M', 'FRACTION', 'DURATION_S', 'SEED',
+           'writable_folder', 'new_path_problem', 'image_path_problem',
+           'replaced_file_problem']
 
 
 class Parser(argparse.ArgumentParser):
@@ -176,3 +179,71 @@ def add_field_options(parser):
     parser.add_argument('--motion', choices=MOTIONS, default='working',
                         help='working: the smooth pouring cycle; joystick: abrupt starts, '
                              'stops and reversals (default working)')
+
+
+def writable_folder(folder):
+    """Tell whether this user can make a file in ``folder`` (tried: root may not write /proc)."""
+    import tempfile
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            return True
+    except OSError:
+        return False
+
+
+def new_path_problem(option, path):
+    """
+    Say what stops ``option`` from creating ``path`` (a bag, a folder), or return None.
+
+    Checked before any work, so that a long run never ends in a path it cannot write.
+    """
+    from pathlib import Path
+    path = Path(path)
+    if path.exists() or path.is_symlink():
+        return f'{option} {path}: exists already'
+    folder = path.resolve().parent
+    if not writable_folder(folder):
+        return f'{option} {path}: {folder} is not a folder this user can write to'
+    return None
+
+
+def image_path_problem(option, path):
+    """Say what stops ``option`` from writing the image ``path``, or return None."""
+    from pathlib import Path
+    path = Path(path)
+    folder = path.resolve().parent
+    if path.is_dir():
+        return f'{option} {path}: is a folder'
+    if not writable_folder(folder):
+        return f'{option} {path}: {folder} is not a folder this user can write to'
+    from matplotlib.figure import Figure
+    kinds = Figure().canvas.get_supported_filetypes()
+    if path.suffix.lstrip('.').lower() not in kinds:
+        return f'{option} {path}: not one of the image types {", ".join(sorted(kinds))}'
+    return None
+
+
+def replaced_file_problem(option, path, keep_out=()):
+    """
+    Say what stops ``option`` from replacing the text file ``path``, or return None.
+
+    ``path`` may be absent, a regular file, or a symbolic link to either (the link's
+    target is replaced, the link kept). A folder, a FIFO, a device or a socket is refused,
+    and so is anything inside a rosbag2 folder or inside ``keep_out`` (e.g. the bag read).
+    """
+    from pathlib import Path
+    path = Path(path)
+    target = path.resolve()
+    if target.exists() and not target.is_file():
+        kind = 'a folder' if target.is_dir() else 'not a regular file'
+        return f'{option} {path}: is {kind}'
+    folder = target.parent
+    for guarded in keep_out:
+        guarded = Path(guarded).resolve()
+        if target == guarded or guarded in target.parents:
+            return f'{option} {path}: is inside {guarded}, which is read'
+    if any(folder.glob('*.mcap')) or any(folder.glob('*.db3')):
+        return f'{option} {path}: {folder} is a rosbag2 folder'
+    if not writable_folder(folder):
+        return f'{option} {path}: {folder} is not a folder this user can write to'
+    return None

@@ -27,6 +27,7 @@ the ranges' ages where known, see ``contract``), ``/arm_posture/ground_truth`` a
 from array import array
 import contextlib
 from dataclasses import dataclass, field
+import os
 from pathlib import Path
 import time
 
@@ -44,7 +45,7 @@ from rosbags.typesys import get_typestore, Stores
 
 __all__ = ['BagError', 'RANGES', 'TRUTH', 'POSTURE', 'RAW', 'ANCHOR_RANGES', 'TYPES',
            'synthesize', 'info', 'write_frames', 'evaluate', 'check', 'Damage', 'qos_profile',
-           'read_all', 'write_raw', 'read_anchor_ranges', 'BagWriter']
+           'read_all', 'write_raw', 'read_anchor_ranges', 'BagWriter', 'reindex']
 
 _TOPICS = (contract.RANGES, contract.TRUTH, contract.POSTURE, contract.RAW,
            contract.ANCHOR_RANGES)
@@ -286,6 +287,10 @@ class _Bag:
         self.path = Path(path)
         if not self.path.exists():
             raise BagError(f'{path}: no such bag')
+        if self.path.is_dir() and not (self.path / 'metadata.yaml').exists() and \
+                any(self.path.glob('*.mcap')):
+            raise BagError(f'{path}: no metadata.yaml: its recorder never closed it (killed?); '
+                           f'`epp_bag reindex {path}` recovers it up to its last whole chunk')
         try:
             self.reader = Reader(self.path)
             self.reader.open()
@@ -589,7 +594,7 @@ def read_all(path, salvage=False, topics=None):
         return messages, damage
 
 
-def read_anchor_ranges(path, config, salvage=False):
+def read_anchor_ranges(path, config, salvage=False, malformed=None):
     """
     Read a bag's ``/uwb/anchor_ranges``: every round of anchor-anchor ranges.
 
@@ -601,6 +606,9 @@ def read_anchor_ranges(path, config, salvage=False):
         The pump: the anchors' names.
     salvage : bool
         Use what can be read of a damaged topic instead of refusing it.
+    malformed : list, optional
+        Given, a malformed message is skipped (its round all NaN) and why is appended
+        here; without, it is a :class:`BagError`.
 
     Returns
     -------
@@ -612,7 +620,8 @@ def read_anchor_ranges(path, config, salvage=False):
     ------
     BagError
         On a bag that cannot be read, another message type on the topic, a malformed
-        message, or labels of which none names two configured anchors.
+        message (unless ``malformed`` collects them), or labels of which none names two
+        configured anchors.
 
     """
     m = len(config.anchor_names)
@@ -630,7 +639,11 @@ def read_anchor_ranges(path, config, salvage=False):
             rounds[index], missed = contract.anchor_range_matrix(
                 config.anchor_names, list(message.name), message.position)
         except ValueError as exc:
-            raise BagError(f'{path}: a {ANCHOR_RANGES} message is malformed: {exc}') from None
+            if malformed is None:
+                raise BagError(f'{path}: a {ANCHOR_RANGES} message is malformed: {exc}') \
+                    from None
+            malformed.append(str(exc))
+            continue
         unknown += missed
     if unknown and not np.isfinite(rounds).any():
         raise BagError(f'{path}: no {ANCHOR_RANGES} label names two anchors of the config '
@@ -669,3 +682,123 @@ def write_raw(path, messages, storage='mcap'):
     with BagWriter(path, storage) as bag:
         for topic, msgtype, t_ns, raw, qos in messages:
             bag.write(topic, t_ns, raw, msgtype, qos)
+
+
+#: MCAP's magic, at both ends of a file.
+_MCAP_MAGIC = b'\x89MCAP0\r\n'
+#: Its record opcodes (header 0x01 ... data end 0x0F); anything else is not a record.
+_MCAP_OPCODES = range(0x01, 0x10)
+
+
+def _whole_records_end(storage):
+    """Return the offset after the last whole MCAP record of ``storage`` (a killed file)."""
+    import struct
+    with open(storage, 'rb') as stream:
+        if stream.read(len(_MCAP_MAGIC)) != _MCAP_MAGIC:
+            raise BagError(f'{storage}: not an MCAP file')
+        size = storage.stat().st_size
+        end = stream.tell()
+        while end + 9 <= size:
+            opcode, length = struct.unpack('<BQ', stream.read(9))
+            if opcode not in _MCAP_OPCODES or end + 9 + length > size:
+                break                           # cut off mid-record, or never written
+            end = stream.seek(length, 1)
+        return end
+
+
+def reindex(path):
+    """
+    Make a bag whose recorder was killed readable, up to its last whole chunk.
+
+    rosbag2 writes ``metadata.yaml``, and MCAP its summary and footer, when a recording is
+    closed: after a SIGKILL or a power cut a bag has neither, and no reader opens it. The
+    MCAP file holds every chunk the recorder had written (``BagWriter`` writes one per MiB);
+    this keeps its whole records, ends them with a footer and writes the bag again,
+    metadata and all, in place (as ``ros2 bag reindex``).
+
+    Returns
+    -------
+    counts : dict
+        Messages recovered per topic.
+    lost_bytes : int
+        Bytes of the unfinished record at the end, dropped.
+    stopped : str or None
+        Why reading stopped before the last whole record (a damaged chunk), or None.
+
+    Raises
+    ------
+    BagError
+        On a bag that has its metadata, is not a folder of one MCAP file (sqlite3 storage
+        keeps nothing its writer had not committed on close), or is unreadable even so.
+
+    """
+    import tempfile
+    path = Path(path)
+    if not path.is_dir():
+        raise BagError(f'{path}: no such bag folder')
+    if (path / 'metadata.yaml').exists():
+        raise BagError(f'{path}: has its metadata.yaml: nothing to reindex')
+    storages = sorted(path.glob('*.mcap'))
+    if len(storages) != 1:
+        raise BagError(f'{path}: {len(storages)} MCAP files, need one (a sqlite3 recording '
+                       'keeps nothing its recorder did not close)')
+    storage = storages[0]
+    size, end = storage.stat().st_size, _whole_records_end(storage)
+    with tempfile.TemporaryDirectory(prefix=f'.{path.name}.', dir=path.parent) as work:
+        work = Path(work)
+        repaired = work / 'whole.mcap'
+        with open(storage, 'rb') as source, open(repaired, 'wb') as target:
+            _copy_bytes(source, target, end)
+            # A footer without a summary: readers scan the records.
+            target.write(b'\x02' + (20).to_bytes(8, 'little') + bytes(20) + _MCAP_MAGIC)
+        counts, stopped = _copy_readable(repaired, work / path.name)
+        for written in (work / path.name).iterdir():      # the storage first, metadata last
+            if written.name != 'metadata.yaml':
+                os.replace(written, path / written.name)
+        if storage.name != f'{path.name}.mcap':
+            storage.unlink()
+        os.replace(work / path.name / 'metadata.yaml', path / 'metadata.yaml')
+    return counts, size - end, stopped
+
+
+def _copy_bytes(source, target, count, block=1 << 20):
+    """Copy the first ``count`` bytes of ``source`` to ``target``, a block at a time."""
+    while count > 0:
+        data = source.read(min(block, count))
+        if not data:
+            break
+        target.write(data)
+        count -= len(data)
+
+
+def _copy_readable(storage, out):
+    """
+    Write every message a reader gets from the MCAP file ``storage`` as the bag ``out``.
+
+    Returns the messages copied per topic, and why reading stopped early (None: it did not).
+    """
+    counts = {}
+    try:
+        reader = Reader(storage)
+        reader.open()
+    except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds on bad files
+        raise BagError(f'{storage}: unreadable even up to its last whole record ({exc})') \
+            from None
+    stopped = None
+    try:
+        with BagWriter(out) as bag:
+            messages = reader.messages()
+            while True:
+                try:
+                    connection, t_ns, raw = next(messages)
+                except StopIteration:
+                    break
+                except Exception as exc:  # noqa: BLE001 - a broken chunk: keep what came before
+                    stopped = str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__
+                    break
+                bag.write(connection.topic, t_ns, raw, connection.msgtype,
+                          _offered_qos(connection))
+                _count(counts, connection.topic)
+    finally:
+        reader.close()
+    return counts, stopped

@@ -179,6 +179,46 @@ def test_play_into_the_live_estimator_equals_eval(tmp_path, listener, processes)
     assert to_seconds(listener.postures[-1].header.stamp) > 0
 
 
+def test_a_killed_recording_is_reindexed_up_to_its_last_whole_chunk(tmp_path, processes):
+    """SIGKILL leaves no metadata.yaml and no MCAP footer: reindex recovers the chunks."""
+    source = tmp_path / 'source'
+    bags.synthesize(source, CONFIG, duration=300.0, seed=9)
+    recording = tmp_path / 'killed'
+    recorder = processes([script('epp_bag'), 'record', str(recording), '--topics',
+                          bags.RANGES, bags.TRUTH])
+    storage = recording / 'killed.mcap'
+    deadline = time.monotonic() + 120
+    while not storage.exists() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    player = processes([script('epp_bag'), 'play', str(source), '--rate', '10',
+                        '--subscribers', '1'])
+    # Two whole chunks of a MiB each are on disk once the file is past 2.2 MiB.
+    deadline = time.monotonic() + 600
+    while storage.stat().st_size < 2.2 * 2 ** 20 and time.monotonic() < deadline:
+        assert recorder.poll() is None and player.poll() is None
+        time.sleep(0.05)
+    recorder.send_signal(signal.SIGKILL)
+    recorder.wait(60)
+    player.send_signal(signal.SIGINT)
+    assert not (recording / 'metadata.yaml').exists()
+    refused = epp_bag('info', recording)
+    assert refused.returncode == 2 and f'epp_bag reindex {recording}' in refused.stderr
+    result = epp_bag('reindex', recording)
+    assert result.returncode == 0 and result.stderr == '', result.stderr
+    assert f'reindexed {recording}: ' in result.stdout
+    original = {(m.header.stamp.sec, m.header.stamp.nanosec): m
+                for m in decoded(source, bags.RANGES)}
+    copy = decoded(recording, bags.RANGES)
+    # A MiB holds ~730 cycles of ranges and truth: two chunks, more than a thousand.
+    assert len(copy) > 1000 and len(decoded(recording, bags.TRUTH)) > 1000
+    for message in copy:
+        match = original[(message.header.stamp.sec, message.header.stamp.nanosec)]
+        assert list(message.name) == list(match.name)
+        np.testing.assert_array_equal(message.position, match.position)
+    assert bags.check(recording).intact
+    assert epp_bag('reindex', recording).returncode == 2       # nothing to reindex now
+
+
 def last_chunk(content):
     """Return the offset of the last chunk record of an MCAP file (opcode 0x06)."""
     import struct

@@ -31,6 +31,8 @@ from system import PUMP_YAML, script
 import yaml
 
 CONFIG = load_pump_config(PUMP_YAML)
+#: Seconds a calibration may take on a slow, loaded machine: it bounds a hang, not a speed.
+TIMEOUT = 900
 
 
 @pytest.fixture(scope='module')
@@ -55,7 +57,7 @@ def calibrated(good_bag, tmp_path_factory):
     result = subprocess.run([sys.executable, '-m', 'epp_ros.tools.calibrate', str(good_bag),
                              '--config', str(PUMP_YAML), '--out', str(out),
                              '--fixed-anchors', 'turret', '--plot', str(plot), '--json'],
-                            capture_output=True, text=True, timeout=120)
+                            capture_output=True, text=True, timeout=TIMEOUT)
     return result, out, plot
 
 
@@ -132,7 +134,7 @@ def test_a_parked_boom_gives_one_line_and_writes_nothing(tmp_path):
     result = subprocess.run([sys.executable, '-m', 'epp_ros.tools.calibrate', str(bag),
                              '--config', str(PUMP_YAML), '--out', str(out),
                              '--fixed-anchors', 'turret,cab'],
-                            capture_output=True, text=True, timeout=120)
+                            capture_output=True, text=True, timeout=TIMEOUT)
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith('epp_calibrate: '), result.stderr
@@ -171,7 +173,7 @@ def test_a_short_recording_gives_one_line_and_writes_nothing(tmp_path):
     out = tmp_path / 'calibrated.yaml'
     result = subprocess.run([sys.executable, '-m', 'epp_ros.tools.calibrate', str(bag),
                              '--config', str(PUMP_YAML), '--out', str(out)],
-                            capture_output=True, text=True, timeout=60)
+                            capture_output=True, text=True, timeout=TIMEOUT)
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and '30 frames' in lines[0] and 'nothing written' in lines[0]
@@ -195,7 +197,7 @@ def test_errors_are_one_line(tmp_path, case):
         arguments += ['--fixed-anchors', 'turret,boom']
         says = "'boom' is not an anchor"
     result = subprocess.run([sys.executable, '-m', 'epp_ros.tools.calibrate', *arguments],
-                            capture_output=True, text=True, timeout=60)
+                            capture_output=True, text=True, timeout=TIMEOUT)
     lines = result.stderr.strip().splitlines()
     assert result.returncode == 2 and len(lines) == 1, result.stderr
     assert says in lines[0] and lines[0].startswith('epp_calibrate: ')
@@ -353,7 +355,7 @@ def test_unreadable_anchor_ranges_give_one_line(tmp_path):
          bags.TYPESTORE.serialize_cdr(wrong, 'std_msgs/msg/String'), None)])
     result = subprocess.run([sys.executable, '-m', 'epp_ros.tools.calibrate', str(bag),
                              '--config', str(PUMP_YAML)], capture_output=True, text=True,
-                            timeout=120)
+                            timeout=TIMEOUT)
     lines = result.stderr.strip().splitlines()
     assert result.returncode == 2 and len(lines) == 1, result.stderr
     assert 'holds std_msgs/msg/String, expected sensor_msgs/msg/JointState' in lines[0]
@@ -368,3 +370,172 @@ def test_the_noise_settings_follow_the_nodes_and_learn_the_noise_by_default():
     document['/**']['ros__parameters']['learn_noise'] = 'yes'
     with pytest.raises(tool.CalibrationError, match='learn_noise'):
         tool.noise_settings(document)
+
+
+def rewritten(source, path, change):
+    """Copy a bag, each /uwb/ranges message's positions passed through ``change``."""
+    messages = []
+    for topic, msgtype, stamp, raw, extra in bags.read_all(source)[0]:
+        if topic == bags.RANGES:
+            message = bags.TYPESTORE.deserialize_cdr(raw, msgtype)
+            message.position = np.asarray(change(np.array(message.position)), dtype=float)
+            raw = bags.TYPESTORE.serialize_cdr(message, msgtype)
+        messages.append((topic, msgtype, stamp, raw, extra))
+    bags.write_raw(path, messages)
+    return path
+
+
+def test_ranges_nobody_could_measure_are_left_out_and_counted(tmp_path):
+    source = parked_bag(tmp_path / 'parked', 12.0)
+    rng = np.random.default_rng(3)
+    marked = []
+
+    def spoil(values):
+        spoilt = rng.random(values.size) < 0.1
+        spoilt[-1] = False                          # the frame number
+        values[spoilt] = rng.choice([0.0, 1e300, 1000.0, -2.0], spoilt.sum())
+        marked.append(spoilt)
+        return values
+    bag = rewritten(source, tmp_path / 'spoilt', spoil)
+    window = tool.range_window(yaml.safe_load(PUMP_YAML.read_text()))
+    assert window == (0.05, 200.0)
+    recording = tool.read_ranges(bag, CONFIG, window)
+    clean = tool.read_ranges(source, CONFIG, window)
+    spoilt = np.concatenate(marked)
+    assert recording.implausible == spoilt.sum() > 0 and clean.implausible == 0
+    assert np.isnan(recording.ranges).sum() == np.isnan(clean.ranges).sum() + spoilt.sum()
+    kept = np.isfinite(recording.ranges)
+    np.testing.assert_array_equal(recording.ranges[kept], clean.ranges[kept])
+    assert f'left out {spoilt.sum()} ranges outside [0.05, 200] m' in \
+        recording.left_out(window)
+    # Longer than the boom can reach is as implausible as beyond max_range.
+    far = tool.read_ranges(bag, CONFIG, (0.05, 1e6))
+    assert far.implausible == spoilt.sum() and clean.left_out(window) is None
+
+
+@pytest.mark.parametrize('value', [0.0, 1000.0, 1e300])
+def test_a_recording_of_implausible_ranges_is_refused_in_seconds(tmp_path, value):
+    bag = rewritten(parked_bag(tmp_path / 'parked', 12.0), tmp_path / 'absurd',
+                    lambda values: np.r_[np.full(len(values) - 1, value), values[-1:]])
+    out = tmp_path / 'calibrated.yaml'
+    result = subprocess.run([sys.executable, '-m', 'epp_ros.tools.calibrate', str(bag),
+                             '--config', str(PUMP_YAML), '--out', str(out)],
+                            capture_output=True, text=True, timeout=TIMEOUT)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert '0 frames with 6 or more plausible ranges (left out 3600 ranges outside ' \
+        '[0.05, 200] m' in lines[0] and not out.exists()
+
+
+def test_malformed_messages_are_skipped_and_counted(tmp_path):
+    source = parked_bag(tmp_path / 'parked', 12.0)
+    messages = bags.read_all(source)[0]
+    short = bags.TYPESTORE.types['sensor_msgs/msg/JointState'](
+        header=bags._header(10 ** 12, 'pump_base'), name=['boom1:turret'],
+        position=np.array([1.0, 2.0]), velocity=np.zeros(0), effort=np.zeros(0))
+    broken = [(bags.RANGES, bags.TYPES[bags.RANGES], 10 ** 12 + 5, bags._serialize(short),
+               None),
+              (bags.ANCHOR_RANGES, bags.TYPES[bags.ANCHOR_RANGES], 10 ** 12 + 5,
+               bags._serialize(short), None),
+              (bags.ANCHOR_RANGES, bags.TYPES[bags.ANCHOR_RANGES], 10 ** 12 + 6,
+               bags._serialize(replace(short, name=['turret:cab'], position=np.array([5.0]))),
+               None)]
+    bag = tmp_path / 'broken'
+    bags.write_raw(bag, messages + broken)
+    window = (0.05, 200.0)
+    recording = tool.read_ranges(bag, CONFIG, window)
+    assert recording.malformed == 1 and '1 names but 2 ranges' in recording.first_malformed
+    assert len(recording.ranges) == len(recording.stamps) == 120
+    np.testing.assert_array_equal(recording.ranges,
+                                  tool.read_ranges(source, CONFIG, window).ranges)
+    # The whole anchor round is used, the malformed one counted, both said in one line.
+    rounds, line = tool.read_survey(bag, CONFIG, window)
+    assert rounds.shape == (1, 6, 6) and rounds[0, 0, 5] == 5.0
+    assert 'left out 1 malformed messages (the first: 1 names but 2 ranges)' in line
+    # A topic whose labels name no anchors of the config: refused, naming --no-survey.
+    alien = tmp_path / 'alien'
+    bags.write_raw(alien, messages + [
+        (bags.ANCHOR_RANGES, bags.TYPES[bags.ANCHOR_RANGES], 10 ** 12 + 5,
+         bags._serialize(replace(short, name=['a:b'], position=np.array([5.0]))), None)])
+    with pytest.raises(bags.BagError, match='--no-survey'):
+        tool.read_survey(alien, CONFIG, window)
+    assert tool.read_survey(alien, CONFIG, window, ignore=True)[0] is None
+
+
+def test_unwritable_outputs_are_refused_before_the_bag_is_read(tmp_path):
+    import os
+    bag = tmp_path / 'no_such_bag'
+    folder = tmp_path / 'a_bag'
+    bags.synthesize(folder, CONFIG, duration=1.0)
+    fifo = tmp_path / 'fifo.yaml'
+    os.mkfifo(fifo)
+    for extra, says in (
+            (['--out', str(tmp_path)], 'is a folder'),
+            (['--out', str(fifo)], 'is not a regular file'),
+            (['--out', str(folder / 'metadata.yaml')], 'is a rosbag2 folder'),
+            (['--out', str(tmp_path / 'missing' / 'x.yaml')], 'not a folder this user can'),
+            (['--plot', str(tmp_path / 'missing' / 'x.png')], 'not a folder this user can'),
+            (['--plot', str(tmp_path / 'x.unknown')], 'not one of the image types')):
+        result = subprocess.run([sys.executable, '-m', 'epp_ros.tools.calibrate', str(bag),
+                                 '--config', str(PUMP_YAML), *extra],
+                                capture_output=True, text=True, timeout=TIMEOUT)
+        lines = result.stderr.strip().splitlines()
+        assert result.returncode == 2 and len(lines) == 1, (extra, result.stderr)
+        assert says in lines[0] and 'no such bag' not in lines[0], (extra, lines)
+    # Inside the bag read, whatever the folder holds.
+    inside = subprocess.run([sys.executable, '-m', 'epp_ros.tools.calibrate', str(folder),
+                             '--config', str(PUMP_YAML), '--out', str(folder / 'x.yaml')],
+                            capture_output=True, text=True, timeout=TIMEOUT)
+    assert inside.returncode == 2 and 'which is read' in inside.stderr, inside.stderr
+    assert fifo.is_fifo() and sorted(p.name for p in folder.iterdir()) == \
+        ['a_bag.mcap', 'metadata.yaml']
+
+
+def configured_result():
+    """Return a calibration result that says what the config says (write_config's input)."""
+    from types import SimpleNamespace
+    model = CONFIG.model()
+    return SimpleNamespace(anchors=model.anchors, anchor_offsets=model.anchor_offsets,
+                           tag_offsets=model.tag_offsets, pair_offsets=model.pair_offsets,
+                           bias_std=(0.01, 0.02), arm_length_std=np.zeros(5),
+                           arm_lengths=model.arm_lengths)
+
+
+def test_the_written_config_keeps_its_link_and_permissions(tmp_path):
+    import os
+    import stat
+    real = tmp_path / 'configs' / 'pump.yaml'
+    real.parent.mkdir()
+    real.write_text(PUMP_YAML.read_text())
+    real.chmod(0o640)
+    link = tmp_path / 'pump.yaml'
+    link.symlink_to(real)
+    tool.write_config(link, PUMP_YAML.read_text(), configured_result())
+    assert link.is_symlink() and os.readlink(link) == str(real)
+    assert stat.S_IMODE(real.stat().st_mode) == 0o640
+    assert 'link_bias_std: 0.01' in real.read_text()
+    assert sorted(p.name for p in real.parent.iterdir()) == ['pump.yaml']
+    # A new file gets what the umask gives, not mkstemp's 0600.
+    umask = os.umask(0o027)
+    try:
+        tool.write_config(tmp_path / 'new.yaml', PUMP_YAML.read_text(), configured_result())
+    finally:
+        os.umask(umask)
+    assert stat.S_IMODE((tmp_path / 'new.yaml').stat().st_mode) == 0o640
+    load_pump_config(tmp_path / 'new.yaml')
+
+
+def test_wild_ranges_are_found_and_a_moving_booms_are_not(good_bag):
+    from epp_ros.core.measurements import range_spikes
+    ranges = tool.read_ranges(good_bag, CONFIG, (0.05, 200.0)).ranges
+    # 60 s of a working cycle at 10 Hz, offsets and all: no range a wild one.
+    assert np.isfinite(ranges).sum() > 15000 and not range_spikes(ranges).any()
+    rng = np.random.default_rng(4)
+    wild = (rng.random(ranges.shape) < 0.05) & np.isfinite(ranges)
+    spoilt = ranges.copy()
+    spoilt[wild] += rng.choice([-1, 1], wild.sum()) * rng.uniform(1.5, 80.0, wild.sum())
+    found = range_spikes(spoilt)
+    assert not (wild & ~found).any()
+    # A good range is taken for wild only when three of its four neighbours are:
+    # P ~ 4 * 0.05**3 = 5e-4, ~8 of 15,000; four times that bounds it.
+    assert (found & ~wild).sum() <= 4 * 5e-4 * np.isfinite(ranges).sum()

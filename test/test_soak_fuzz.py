@@ -28,8 +28,8 @@ INPUTS = 2000
 
 def test_short_soak_loses_nothing_and_ends_with_the_json_summary():
     result = subprocess.run([sys.executable, '-m', 'epp_ros.tools.bench', 'soak', '--frames',
-                             '2000', '--live-frames', '200', '--json'],
-                            capture_output=True, text=True, timeout=300)
+                             '2000', '--live-frames', '200', '--lag-seconds', '4', '--json'],
+                            capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr[-2000:]
     summary = json.loads(result.stdout.strip().splitlines()[-1])
     for key in ('frames', 'frames_lost', 'rss_start_mb', 'rss_end_mb'):
@@ -44,6 +44,14 @@ def test_short_soak_loses_nothing_and_ends_with_the_json_summary():
     assert soak['live']['received'] == 200
     assert soak['live']['published'] + soak['live']['unsolved'] == 200
     assert '| in-process | 2000 |' in result.stdout
+    # The estimator stopped 4 s while 50 frames a second came (its publisher keeps 100):
+    # every frame played is received or counted lost, exactly.
+    lag = soak['lag']
+    assert lag['frames'] == 700 and lag['errors'] == 0
+    assert lag['frames'] == lag['received'] + lag['lost'] + lag['before_first'], lag
+    assert lag['accounted'] and summary['lag_accounted'] and summary['lag_frames'] == 700
+    assert lag['received'] == lag['published'] + lag['unsolved'] + lag['ignored']
+    assert 'every frame accounted for' in result.stdout
 
 
 @pytest.mark.parametrize('protocol', [*FORMATS, 'auto'])

@@ -188,3 +188,50 @@ def test_the_combined_field_case_publishes_nothing_confidently_wrong(method):
             error = np.linalg.norm(diagnostics['estimate'] - frame.joints, axis=1)
             assert not np.any((error > 1.0) & (error > 5 * diagnostics['joint_std']))
     assert published > len(frames) // 2
+
+
+def node_estimator(method):
+    """Return the model and an estimator as posture_estimator makes them from pump.yaml."""
+    from epp_ros.config import load_pump_config
+    from epp_ros.nodes.estimator import estimator_settings, SETTINGS
+    import yaml
+    from system import PUMP_YAML
+    config = load_pump_config(PUMP_YAML)
+    told = yaml.safe_load(PUMP_YAML.read_text())['/**']['ros__parameters']
+    values = {name: told.get(name, setting.default) for name, setting in SETTINGS.items()}
+    values['method'] = method
+    return config.model(), PostureEstimator(config.model(), **estimator_settings(values))
+
+
+@pytest.mark.parametrize('dark', ['silent', 'no_ranges', 'inner_tag', 'two_tags'])
+def test_track_publishes_after_a_dark_stretch_as_a_cold_track_does(dark):
+    """30 s without a usable frame, the boom at rest: then as many valid as a cold start."""
+    from epp_ros.core.simulate import random_posture, RangeNoise
+    model, _ = node_estimator('track')
+    rng = np.random.default_rng(1)
+    joints = random_posture(model, rng)[2]
+    noise = RangeNoise(sigma=0.1)
+    good = [noise.apply(model.ranges(joints), rng)[0] for _ in range(150)]
+    _, warm = node_estimator('track')
+    for k in range(50):
+        warm.update(good[k], stamp=PERIOD * k)
+    stamp, refused = PERIOD * 50, 0
+    for k in range(300 if dark != 'silent' else 0):
+        ranges = np.full(good[0].shape, np.nan) if dark == 'no_ranges' else \
+            noise.apply(model.ranges(joints), rng)[0]
+        if dark == 'inner_tag':
+            ranges[1] = np.nan
+        elif dark == 'two_tags':
+            ranges[2:] = np.nan
+        warm.update(ranges, stamp=stamp)
+        refused += not warm.last_diagnostics['valid']
+        stamp += PERIOD
+    assert refused >= (0 if dark == 'silent' else 250)
+    stamp = max(stamp, PERIOD * 350)
+    _, cold = node_estimator('track')
+    published = {'warm': 0, 'cold': 0}
+    for k, ranges in enumerate(good[50:]):
+        for name, estimator in (('warm', warm), ('cold', cold)):
+            estimator.update(ranges, stamp=stamp + PERIOD * k)
+            published[name] += estimator.last_diagnostics['valid']
+    assert published['cold'] >= 95 and published['warm'] >= published['cold'] - 1, published

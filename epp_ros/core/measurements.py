@@ -22,10 +22,12 @@ analytic Jacobian with respect to ``psi = (slew, pitch_1..pitch_p)``: the chain 
 least squares and the Cramér–Rao bound (``core.bounds``) share it.
 """
 from dataclasses import dataclass
+import warnings
 
 import numpy as np
 
-__all__ = ['SensorNoise', 'Measurements', 'Residuals', 'plausible_limits', 'wrap_angle']
+__all__ = ['SensorNoise', 'Measurements', 'Residuals', 'plausible_limits', 'range_spikes',
+           'SPIKE_M', 'wrap_angle']
 
 INPUTS = ('ranges', 'tag_ranges', 'pitches', 'slew')
 
@@ -78,6 +80,56 @@ def plausible_limits(model):
     reach = np.cumsum(model.arm_lengths)
     return (2.0 * model.max_ranges() + 10.0,
             2.0 * np.abs(reach[:, None] - reach[None, :]) + 10.0)
+
+
+#: Metres a range may stand off the median of its link's neighbouring frames (five, itself
+#: in the middle). The median follows any smooth motion, ramps exactly; UWB noise is a tenth
+#: of this, so what stands off further is a wild range, not the boom.
+SPIKE_M = 1.0
+
+
+def range_spikes(ranges, limit=SPIKE_M, width=5):
+    """
+    Mask of the wild ranges of a recording: far off the median of their link's neighbours.
+
+    Found again without those found, until no more are: wild ranges close together hide
+    each other from one median.
+
+    Parameters
+    ----------
+    ranges : ndarray, shape (N, ...)
+        Frames in time order, metres; NaN where not measured.
+    limit : float
+        Metres a range may differ from the median of the ``width`` frames around it (NaN
+        ignored).
+    width : int
+        Odd number of frames in the median.
+
+    Returns
+    -------
+    ndarray of bool, shape (N, ...)
+
+    """
+    values = np.array(ranges, dtype=float)
+    wild = np.zeros(values.shape, bool)
+    while len(values):
+        found = np.abs(values - _running_median(values, width)) > limit
+        if not found.any():
+            break
+        wild |= found
+        values[found] = np.nan
+    return wild
+
+
+def _running_median(values, width):
+    """Median of each entry's ``width`` frames (N, ...) about it, NaN ignored (all NaN: NaN)."""
+    from numpy.lib.stride_tricks import sliding_window_view
+    half = width // 2
+    pad = np.full((half, *values.shape[1:]), np.nan)
+    windows = sliding_window_view(np.concatenate([pad, values, pad]), width, axis=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore', RuntimeWarning)     # all-NaN windows: NaN, kept
+        return np.nanmedian(windows, axis=-1)
 
 
 @dataclass(frozen=True)

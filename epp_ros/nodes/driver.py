@@ -43,7 +43,7 @@ from epp_ros.nodes.common import (declare, declare_pump_parameters, pump_id, qos
                                   RANGES_QOS, run_node, StartupError, to_time)
 from epp_ros.uwb.decoder import PeerDecoders
 from epp_ros.uwb.formats import anchor_slot_problem
-from epp_ros.uwb.frames import FrameAssembler
+from epp_ros.uwb.frames import FrameAssembler, MAX_RANGE, MIN_RANGE
 from epp_ros.uwb.source import open_source
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -62,8 +62,8 @@ class UwbDriver(Node):
         baud = fixed('baud', 115200, 'Baud rate of serial sources.')
         frame_period = fixed('frame_period', 0.1, 'Longest ranging cycle, s: a frame closes '
                              'when every pair reported or after this long.')
-        min_range = fixed('min_range', 0.05, 'Shortest plausible range, m.')
-        max_range = fixed('max_range', 200.0, 'Longest plausible range, m.')
+        min_range = fixed('min_range', MIN_RANGE, 'Shortest plausible range, m.')
+        max_range = fixed('max_range', MAX_RANGE, 'Longest plausible range, m.')
         max_line = fixed('max_line', 4096, 'Longest line kept, bytes.')
         port = fixed('port', '', 'A single source instead of the configured list.')
         protocol = fixed('protocol', 'auto', f'Protocol of `port`: {PROTOCOLS}.')

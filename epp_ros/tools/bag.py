@@ -22,6 +22,7 @@ epp_bag: synthesise, record, replay, evaluate and describe rosbag2 files.
     epp_bag play BAG [--rate R] [--loop] [--fast] [--topics T ...] [--clock [HZ]]
     epp_bag eval BAG [--method M] [--config FILE] [--out BAG] [--plot FILE.png] [--json]
     epp_bag info BAG
+    epp_bag reindex BAG
 
 A bag that cannot be used (missing, truncated, without the topic, another message type)
 gives one error line and exit status 2.
@@ -38,6 +39,8 @@ range noise), a burst at start-up and one round a second, as the emulator prints
 has them. ``record`` records ``/uwb/anchor_ranges`` by default; it opens OUT before it
 subscribes (an OUT that exists or cannot be written is refused at once) and writes every
 message as it arrives, so a long recording holds no more in memory than a short one.
+A recorder that was killed leaves no metadata.yaml: ``reindex`` makes its bag readable up
+to the last chunk it wrote (a chunk a MiB, as ``ros2 bag reindex``).
 """
 import argparse
 import importlib
@@ -128,6 +131,9 @@ def parse_args(argv):
                           help='evaluate what can be read of a damaged bag (default: refuse)')
     show = commands.add_parser('info', help='topics, counts, duration')
     show.add_argument('bag')
+    repair = commands.add_parser('reindex', help='recover a bag whose recorder was killed, '
+                                                 'up to its last whole chunk')
+    repair.add_argument('bag')
     args = parser.parse_args(argv)
     if args.command == 'synth':
         settle_noise_options(synth, args, NOISE_DEFAULTS)
@@ -191,6 +197,17 @@ def run_info(args):
           f'Duration:  {summary["duration_s"]:.3f} s\nMessages:  {summary["messages"]}')
     for topic in summary['topics']:
         print(f'Topic: {topic["topic"]} | Type: {topic["type"]} | Count: {topic["count"]}')
+
+
+def run_reindex(args):
+    counts, lost_bytes, stopped = bags.reindex(args.bag)
+    found = ', '.join(f'{topic} {count}' for topic, count in sorted(counts.items())) or \
+        'no messages'
+    print(f'reindexed {args.bag}: {found}; {lost_bytes} bytes of an unfinished chunk '
+          'dropped')
+    if stopped:
+        print(f'epp_bag: {args.bag}: reading stopped at a damaged chunk ({stopped}): what '
+              'followed it is lost', file=sys.stderr)
 
 
 def run_eval(args):
@@ -420,7 +437,7 @@ def _record(args, bag):
 
 
 COMMANDS = {'synth': run_synth, 'record': run_record, 'play': run_play, 'eval': run_eval,
-            'info': run_info}
+            'info': run_info, 'reindex': run_reindex}
 
 
 def main(argv=None):

@@ -60,7 +60,7 @@ from pathlib import Path
 import sys
 from typing import Callable, NamedTuple
 
-from epp_ros.arguments import integer, Parser
+from epp_ros.arguments import integer, number, Parser
 from epp_ros.core import METHODS
 from epp_ros.tools import (calibration_bench, driver_bench, experiments, field_bench,
                            fuzz_bench, integrity_bench, soak_bench)
@@ -126,7 +126,8 @@ def _driver(args):
 
 def _soak(args):
     method = (args.methods or ['chain'])[0]
-    return soak_bench.run(args.frames, args.live_frames, method, args.seed, _progress)
+    return soak_bench.run(args.frames, args.live_frames, method, args.seed, _progress,
+                          args.lag_seconds)
 
 
 def _fuzz(args):
@@ -197,6 +198,9 @@ def parser():
                         help='soak: frames in-process (default 1,000,000)')
     result.add_argument('--live-frames', type=integer(0, 10 ** 7), default=100_000,
                         help='soak: frames through the live node (default 100,000; 0: none)')
+    result.add_argument('--lag-seconds', type=number(0, 3600), default=30.0,
+                        help='soak: seconds the live estimator is stopped while frames flow '
+                             '(default 30; 0: no lag phase)')
     result.add_argument('--inputs', type=integer(1, 10 ** 9), default=100_000,
                         help='fuzz: inputs per protocol and per configuration field')
     return result

@@ -37,6 +37,11 @@ goes into the fit too, so that the free anchors are self-surveyed and the record
 them; the table says how many rounds were used. --no-survey ignores them. A bag without
 them is calibrated from /uwb/ranges alone.
 
+Ranges no module measures are left out and counted, never fitted: outside the driver's
+[min_range, max_range], longer than the boom can make, or wild (over a metre off the
+median of their link's neighbouring frames); a malformed message is skipped and counted.
+--out and --plot are checked before the bag is read.
+
 A recording that does not determine every parameter (too short, a parked boom, too little
 slewing or luffing) gets its verdict, what to move, and exit status 2, and nothing is
 written unless --force; so does a model that fits a tag, an anchor or a link worse than
@@ -45,9 +50,11 @@ a link whose bias varies). --fit-arm-lengths fits the sections' lengths too and 
 them. Errors (no such bag, no /uwb/ranges, a bad config) are one line with exit status 2.
 """
 import argparse
+from dataclasses import dataclass
 import json
 import os
 from pathlib import Path
+import stat
 import sys
 import tempfile
 import time
@@ -177,19 +184,103 @@ def noise_settings(document):
     return settings
 
 
-def read_ranges(path, config, salvage=False, progress=None):
+def range_window(document):
+    """
+    Return the plausible ranges ``(min_range, max_range)``, metres, of a pump.yaml's settings.
+
+    They are the driver's: a recording of ranges it would have dropped is refused, not fitted.
+
+    Raises
+    ------
+    CalibrationError
+        On limits that are not finite numbers with 0 <= min_range < max_range.
+
+    """
+    import math
+
+    from epp_ros.uwb.frames import MAX_RANGE, MIN_RANGE
+    section = document['/**']['ros__parameters']
+    try:
+        low, high = (float(section.get('min_range', MIN_RANGE)),
+                     float(section.get('max_range', MAX_RANGE)))
+    except (TypeError, ValueError):
+        low = high = float('nan')
+    if not (math.isfinite(low) and math.isfinite(high) and 0.0 <= low < high):
+        raise CalibrationError('min_range, max_range: need finite numbers with 0 <= min_range '
+                               f'< max_range, got {section.get("min_range")!r}, '
+                               f'{section.get("max_range")!r}')
+    return low, high
+
+
+@dataclass
+class RangeRecording:
+    """
+    A bag's ``/uwb/ranges`` as calibrate takes them, and what of them was left out.
+
+    Attributes
+    ----------
+    ranges : ndarray, shape (N, p, m)
+        Metres, NaN where not measured or implausible.
+    tag_ranges : ndarray, shape (N, p, p)
+    stamps : ndarray, shape (N,)
+        Seconds, increasing.
+    damage : str or None
+        What of a damaged bag was skipped (``--salvage``).
+    malformed : int
+        Messages that could not be read as ranges (left out).
+    first_malformed : str or None
+        Why the first of them was.
+    implausible : int
+        Ranges outside ``[min_range, max_range]`` or longer than the boom can make
+        (``core.measurements.plausible_limits``), left out.
+    spikes : int
+        Wild ranges, far off their link's neighbouring frames
+        (``core.measurements.range_spikes``), left out.
+
+    """
+
+    ranges: object
+    tag_ranges: object
+    stamps: object
+    damage: object = None
+    malformed: int = 0
+    first_malformed: object = None
+    implausible: int = 0
+    spikes: int = 0
+
+    def left_out(self, window):
+        """Return a line on what was left out, or None when nothing was."""
+        from epp_ros.core.measurements import SPIKE_M
+        parts = []
+        if self.implausible:
+            parts.append(f'{self.implausible} ranges outside [{window[0]:g}, {window[1]:g}] m '
+                         "or beyond the boom's reach")
+        if self.spikes:
+            parts.append(f'{self.spikes} wild ranges (over {SPIKE_M:g} m off the median of '
+                         "their link's neighbouring frames)")
+        if self.malformed:
+            parts.append(f'{self.malformed} malformed messages (the first: '
+                         f'{self.first_malformed})')
+        return f'left out {" and ".join(parts)}' if parts else None
+
+
+def read_ranges(path, config, window, salvage=False, progress=None):
     """
     Read a bag's ``/uwb/ranges`` into the arrays calibrate takes.
 
     Messages are decoded and arranged by ``PumpConfig.link_frame``, as ``epp_bag eval``
-    reads them, in the order of their stamps.
+    reads them, in the order of their stamps. Implausible ranges are left out (NaN) and
+    malformed messages skipped, both counted: a few bad ones must not refuse a recording,
+    nor steer the fit.
 
     Parameters
     ----------
     path : path
         The bag.
     config : epp_ros.config.PumpConfig
-        The pump: link names of the messages.
+        The pump: link names of the messages, and the boom whose reach bounds the ranges.
+    window : tuple of float
+        ``(min_range, max_range)``, metres (:func:`range_window`).
     salvage : bool
         Use what can be read of a damaged bag.
     progress : callable, optional
@@ -197,17 +288,12 @@ def read_ranges(path, config, salvage=False, progress=None):
 
     Returns
     -------
-    ranges : ndarray, shape (N, p, m)
-    tag_ranges : ndarray, shape (N, p, p)
-    stamps : ndarray, shape (N,)
-        Seconds.
-    damage : str or None
-        What of a damaged bag was skipped.
+    RangeRecording
 
     Raises
     ------
     epp_ros.bags.BagError
-        On a bag that cannot be read, without /uwb/ranges or with malformed messages.
+        On a bag that cannot be read, without /uwb/ranges, or whose labels name no link.
 
     """
     import numpy as np
@@ -224,29 +310,64 @@ def read_ranges(path, config, salvage=False, progress=None):
     p, m = len(config.tag_names), len(config.anchor_names)
     ranges = np.full((len(messages), p, m), np.nan)
     tag_ranges = np.full((len(messages), p, p), np.nan)
-    stamps = np.zeros(len(messages))
-    unknown = 0
+    stamps = np.full(len(messages), np.nan)
+    unknown, problems = 0, []
     for index, (_, msgtype, _, raw, _) in enumerate(messages):
-        message = bags.TYPESTORE.deserialize_cdr(raw, msgtype)
+        try:
+            message = bags.TYPESTORE.deserialize_cdr(raw, msgtype)
+        except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds on bad bytes
+            problems.append(f'undecodable ({type(exc).__name__})')
+            continue
         try:
             frame = config.link_frame(list(message.name), message.position, message.effort)
         except ValueError as exc:
-            raise bags.BagError(f'{path}: a {bags.RANGES} message is malformed: {exc}') \
-                from None
-        ranges[index], tag_ranges[index] = frame.ranges, frame.tag_ranges
+            problems.append(str(exc))
+            continue
         stamps[index] = message.header.stamp.sec + 1e-9 * message.header.stamp.nanosec
+        ranges[index], tag_ranges[index] = frame.ranges, frame.tag_ranges
         unknown += frame.unknown
         if progress is not None:
             progress(index + 1, len(messages))
     if messages and unknown and not np.isfinite(ranges).any():
         raise bags.BagError(f'{path}: no {bags.RANGES} label names a tag-anchor pair of the '
                             'config (recorded with another pump.yaml? see --config)')
-    order = np.argsort(stamps, kind='stable')
-    return (ranges[order], tag_ranges[order], stamps[order],
-            None if damage.intact else damage.describe())
+    whole = np.isfinite(stamps)
+    order = np.flatnonzero(whole)[np.argsort(stamps[whole], kind='stable')]
+    ranges, tag_ranges = ranges[order], tag_ranges[order]
+    implausible, spikes = _leave_out_implausible(config.model(), window, ranges, tag_ranges)
+    return RangeRecording(ranges, tag_ranges, stamps[order],
+                          None if damage.intact else damage.describe(), len(problems),
+                          problems[0] if problems else None, implausible, spikes)
 
 
-def read_survey(path, config, salvage=False, ignore=False):
+def _leave_out_implausible(model, window, ranges, tag_ranges):
+    """
+    Set ranges (N, p, m) and tag ranges (N, p, p) nobody could measure to NaN.
+
+    Returns how many were implausible alone, and how many wild (``range_spikes``).
+    """
+    import numpy as np
+
+    from epp_ros.core.measurements import plausible_limits, range_spikes
+    range_limit, tag_limit = plausible_limits(model)
+    implausible = spikes = 0
+    for values, limit in ((ranges, range_limit), (tag_ranges, tag_limit)):
+        wrong = _implausible(values, window, limit)
+        values[wrong] = np.nan
+        wild = range_spikes(values)
+        values[wild] = np.nan
+        implausible, spikes = implausible + int(wrong.sum()), spikes + int(wild.sum())
+    return implausible, spikes
+
+
+def _implausible(values, window, limit):
+    """Mask of the measured ``values`` outside ``window`` (low, high) or over ``limit``."""
+    import numpy as np
+    inside = (values >= window[0]) & (values <= window[1]) & (values <= limit)
+    return ~np.isnan(values) & ~inside
+
+
+def read_survey(path, config, window, salvage=False, ignore=False):
     """
     Return a bag's rounds of anchor-anchor ranges for the self-survey, and a line about them.
 
@@ -255,7 +376,10 @@ def read_survey(path, config, salvage=False, ignore=False):
     path : path
         The bag.
     config : epp_ros.config.PumpConfig
-        The pump: the anchors' names.
+        The pump: the anchors' names and configured places.
+    window : tuple of float
+        ``(min_range, max_range)``, metres: ranges outside, or over twice the configured
+        distance plus 10 m, are left out.
     salvage : bool
         Use what can be read of a damaged ``/uwb/anchor_ranges``.
     ignore : bool
@@ -279,13 +403,27 @@ def read_survey(path, config, salvage=False, ignore=False):
     from epp_ros import bags
     if ignore:
         return None, f'Anchor self-survey: off (--no-survey: {bags.ANCHOR_RANGES} ignored)'
-    rounds = bags.read_anchor_ranges(path, config, salvage)
+    malformed = []
+    try:
+        rounds = bags.read_anchor_ranges(path, config, salvage, malformed)
+    except bags.BagError as exc:
+        raise bags.BagError(f'{exc} (--no-survey calibrates without them)') from None
+    anchors = config.model().anchors
+    limit = 2.0 * np.linalg.norm(anchors[:, None] - anchors[None], axis=-1) + 10.0
+    wrong = _implausible(rounds, window, limit)
+    rounds[wrong] = np.nan
     rounds = rounds[np.isfinite(rounds).any(axis=(1, 2))]
+    skipped = ''.join((
+        f'; left out {int(wrong.sum())} implausible ranges' if wrong.any() else '',
+        f'; left out {len(malformed)} malformed messages (the first: {malformed[0]})'
+        if malformed else ''))
     if not len(rounds):
-        return None, f'Anchor self-survey: none (no {bags.ANCHOR_RANGES} in the bag)'
+        usable = 'usable ' if skipped else ''
+        return None, (f'Anchor self-survey: none (no {usable}{bags.ANCHOR_RANGES} in the bag'
+                      f'{skipped})')
     pairs = int(np.isfinite(rounds).any(axis=0).sum())
     return rounds, (f'Anchor self-survey: yes, {len(rounds)} rounds of {bags.ANCHOR_RANGES} '
-                    f'({pairs} anchor pairs, {int(np.isfinite(rounds).sum())} ranges)')
+                    f'({pairs} anchor pairs, {int(np.isfinite(rounds).sum())} ranges{skipped})')
 
 
 class Progress:
@@ -423,6 +561,9 @@ def write_config(path, source_text, result):
     """
     Write the calibrated pump.yaml atomically (a temporary file renamed into place).
 
+    A symbolic link keeps pointing at the file, which is replaced; a replaced file keeps
+    its permissions, a new one gets those the umask gives.
+
     Returns
     -------
     str
@@ -438,9 +579,10 @@ def write_config(path, source_text, result):
     if result.arm_length_std.any():         # fitted (--fit-arm-lengths)
         values['arm_lengths'] = result.arm_lengths.tolist()
     text = update_pump_yaml(source_text, values)
-    path = Path(path)
-    handle, temporary = tempfile.mkstemp(prefix=f'.{path.name}.', dir=path.parent or '.')
+    path = Path(path).resolve()
+    handle, temporary = tempfile.mkstemp(prefix=f'.{path.name}.', dir=path.parent)
     try:
+        os.fchmod(handle, _mode_of(path))
         with os.fdopen(handle, 'w') as stream:
             stream.write(text)
         os.replace(temporary, path)
@@ -448,6 +590,16 @@ def write_config(path, source_text, result):
         Path(temporary).unlink(missing_ok=True)
         raise
     return text
+
+
+def _mode_of(path):
+    """Permissions of the file ``path``, or what a new file gets from the umask."""
+    try:
+        return stat.S_IMODE(path.stat().st_mode)
+    except FileNotFoundError:
+        umask = os.umask(0o022)
+        os.umask(umask)
+        return 0o666 & ~umask
 
 
 def link_residuals(model, ranges, result):
@@ -517,31 +669,38 @@ def run(args, out=None):
     import numpy as np
     import yaml
 
+    from epp_ros import bags
     from epp_ros.config import default_config_path, load_pump_config
     progress = Progress()
     config_path = Path(args.config) if args.config else default_config_path()
     config = load_pump_config(config_path)
     source_text = config_path.read_text()
-    settings = noise_settings(yaml.safe_load(source_text))
+    document = yaml.safe_load(source_text)
+    settings, window = noise_settings(document), range_window(document)
     fixed, note = fixed_anchor_indices(config, args.fixed_anchors)
-    if args.out is not None and Path(args.out).is_dir():
-        raise CalibrationError(f'--out {args.out} is a directory')
-    ranges, tag_ranges, stamps, damage = read_ranges(args.bag, config, args.salvage,
-                                                     progress)
-    if damage:
-        print(f'epp_calibrate: salvaged {args.bag}: {damage}', file=sys.stderr)
-    survey, survey_line = read_survey(args.bag, config, args.salvage, args.no_survey)
+    _check_outputs(args)
+    recording = read_ranges(args.bag, config, window, args.salvage, progress)
+    ranges = recording.ranges
+    if recording.damage:
+        print(f'epp_calibrate: salvaged {args.bag}: {recording.damage}', file=sys.stderr)
+    left_out = recording.left_out(window)
     p = len(config.tag_names)
     usable = int(np.sum(np.isfinite(ranges).sum(axis=(1, 2)) >= p + 1))
     if usable < MIN_FRAMES:
+        why = f' ({left_out})' if left_out else ''
         raise CalibrationError(
-            f'{args.bag}: {usable} frames with {p + 1} or more ranges, {MIN_FRAMES} needed: '
-            'record the boom slewing and luffing for a minute or more; nothing written')
+            f'{args.bag}: {usable} frames with {p + 1} or more plausible ranges{why}, '
+            f'{MIN_FRAMES} needed: record the boom slewing and luffing for a minute or more; '
+            'nothing written')
+    if left_out:
+        print(f'epp_calibrate: {args.bag}: {bags.RANGES}: {left_out}', file=sys.stderr)
+    survey, survey_line = read_survey(args.bag, config, window, args.salvage, args.no_survey)
     before = config.model()
     print(f'{args.bag}: {len(ranges)} frames of /uwb/ranges ({usable} usable), '
           f'{p} tags, {len(config.anchor_names)} anchors; {note}', file=out)
     progress.say(f'calibrating {usable} frames ...')
-    result = _calibration(args, before, (ranges, tag_ranges, stamps, survey), fixed, settings)
+    result = _calibration(args, before, (ranges, recording.tag_ranges, recording.stamps,
+                                         survey), fixed, settings)
     for line in report_lines(config, before, result, fixed, survey_line):
         print(line, file=out)
     written = _written(args, source_text, result, out)
@@ -556,6 +715,15 @@ def run(args, out=None):
               file=sys.stderr)
         return 0 if written else 2
     return 0
+
+
+def _check_outputs(args):
+    """Refuse --out and --plot paths that could not be written, before the long fit."""
+    from epp_ros.arguments import image_path_problem, replaced_file_problem
+    problem = ((args.out and replaced_file_problem('--out', args.out, keep_out=(args.bag,)))
+               or (args.plot and image_path_problem('--plot', args.plot)))
+    if problem:
+        raise CalibrationError(problem)
 
 
 def _calibration(args, before, recording, fixed, settings):

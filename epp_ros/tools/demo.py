@@ -46,8 +46,9 @@ import sys
 import tempfile
 import time
 
-from epp_ros.arguments import (DURATION_S, field_names, FRACTION, integer, NOISE_M, Parser,
-                               RATE_HZ, SEED, settle_noise_options)
+from epp_ros.arguments import (DURATION_S, field_names, FRACTION, image_path_problem, integer,
+                               new_path_problem, NOISE_M, Parser, RATE_HZ, SEED,
+                               settle_noise_options)
 from epp_ros.nodes.stopping import ignore_signals, shutdown_on_signals, ShutdownRequest
 
 # Only the standard library and the stop request above are imported before main() has
@@ -106,31 +107,10 @@ def parse_args(argv):
     return args
 
 
-def _writable(folder):
-    """Tell whether a file can be made in ``folder`` (try it: root may not write /proc)."""
-    try:
-        with tempfile.TemporaryFile(dir=folder):
-            return True
-    except OSError:
-        return False
-
-
 def _output_problem(args):
     """Say what is wrong with --plot or --record before anything runs, or return None."""
-    for option, path in (('--plot', args.plot), ('--record', args.record)):
-        if path is None:
-            continue
-        folder = Path(path).resolve().parent
-        if not _writable(folder):
-            return f'{option} {path}: {folder} is not a folder this user can write to'
-    if args.record and Path(args.record).exists():
-        return f'--record {args.record}: exists already'
-    if args.plot:
-        from matplotlib.figure import Figure
-        kinds = Figure().canvas.get_supported_filetypes()
-        if Path(args.plot).suffix.lstrip('.').lower() not in kinds:
-            return f'--plot {args.plot}: not one of the image types {", ".join(sorted(kinds))}'
-    return None
+    return ((args.plot and image_path_problem('--plot', args.plot))
+            or (args.record and new_path_problem('--record', args.record)) or None)
 
 
 class Monitor:

@@ -509,7 +509,8 @@ def _soak_notes(report):
 def soak_markdown(report):
     """Format a :class:`~epp_ros.tools.soak_bench.SoakReport` as a markdown table and notes."""
     parts = (('in-process', report.in_process), ('live node', report.live))
-    met = report.summary['frames_lost'] == 0 and report.summary['rss_ok']
+    met = (report.summary['frames_lost'] == 0 and report.summary['rss_ok']
+           and report.summary.get('lag_accounted', True))
     lines = [f'### Soak: {report.method}, parser + assembler + estimator in-process, '
              'and epp_bag play --fast through the live node', '',
              '| part | frames | decisions (postures / rejected) | frames lost | frames/s | '
@@ -518,10 +519,25 @@ def soak_markdown(report):
              *[_soak_row(name, part) for name, part in parts if part is not None], '',
              'Frames lost: cycles sent that reached no decision (in-process), frames '
              'played that the node did not receive (live). Rejections are decisions.',
-             *_soak_notes(report),
+             *_soak_notes(report), *_lag_lines(report.lag),
              f'Target (nothing lost, RSS at the end within {soak_bench.RSS_TOLERANCE:.0%} of '
              f'warm-up): {"met" if met else "NOT met"}.']
     return '\n'.join(lines)
+
+
+def _lag_lines(lag):
+    """Return the lines of the lag phase (``soak_bench.soak_lag``), or none."""
+    if lag is None:
+        return []
+    sums = (f'{lag["frames"]} played = {lag["received"]} received ({lag["published"]} '
+            f'published, {lag["unsolved"]} unsolved, {lag["ignored"]} ignored) + '
+            f'{lag["lost"]} lost + {lag["before_first"]} before the first')
+    lines = [f'Lag: the live estimator stopped for {lag["lag_seconds"]:g} s of frames at '
+             f'{lag["rate_hz"]:g} Hz: {sums}: '
+             f'{"every frame accounted for" if lag["accounted"] else "NOT accounted for"}.']
+    if not lag['accounted']:
+        lines += ["The node's log ends:", '```', lag['estimator_log_tail'].rstrip(), '```']
+    return lines
 
 
 def _fuzz_escape_table(escapes):

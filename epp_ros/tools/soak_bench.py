@@ -30,6 +30,11 @@ into a posture_estimator process; ``frames_lost = frames played - frames receive
 node (its ``/diagnostics`` count), next to the postures this process received and the
 frames the node reports unsolved.
 
+Lagging, a bag is played in real time at 50 Hz into a posture_estimator that is stopped
+(SIGSTOP) for ``lag_seconds`` in the middle: the frames its publisher could not keep for it
+are lost on the way, and the node must count every one (``frames lost`` from the frames'
+numbers): frames played = received + lost + before_first, exactly.
+
 The resident set (VmRSS of ``/proc/<pid>/status``) is read at the start, after warm-up
 (1 % of the frames) and at the end: of this process in-process, of the estimator process
 live. The target is nothing lost and the end within 10 % of the warm-up value.
@@ -54,7 +59,8 @@ from epp_ros.uwb.emulation import cycle_lines
 from epp_ros.uwb.frames import FrameAssembler
 import numpy as np
 
-__all__ = ['rss_mb', 'soak_in_process', 'soak_live', 'SoakReport', 'run', 'RSS_TOLERANCE']
+__all__ = ['rss_mb', 'soak_in_process', 'soak_live', 'soak_lag', 'SoakReport', 'run',
+           'RSS_TOLERANCE']
 
 RATE = 10.0                 #: ranging cycles per second of the simulated pump
 WARMUP = 0.01               #: fraction of the frames after which RSS is the reference
@@ -310,9 +316,15 @@ class _Listener:
             self.spin(0.05)
 
     def counts(self):
-        """Return the estimator's frames received, published, unsolved, errors, malformed."""
+        """Return the estimator's frame counts: received, published, unsolved, lost, ..."""
         return {key: int(self.latest.get(f'frames {key}', 0))
-                for key in ('received', 'published', 'unsolved', 'errors', 'malformed')}
+                for key in ('received', 'published', 'unsolved', 'errors', 'malformed',
+                            'lost', 'before_first')}
+
+    def accounted(self):
+        """Return the frames the estimator has seen or counted lost (received + lost + ...)."""
+        counts = self.counts()
+        return counts['received'] + counts['lost'] + counts['before_first']
 
     def close(self):
         """Destroy the node and shut rclpy down."""
@@ -328,10 +340,11 @@ def _start_estimator(config_path, method, log):
          '--log-level', 'warn'], stdout=log, stderr=subprocess.STDOUT)
 
 
-def _start_player(bag, topic):
-    """Start ``epp_bag play --fast`` of one topic of a bag."""
+def _start_player(bag, topic, speed=None):
+    """Start ``epp_bag play`` of one topic of a bag: ``--fast``, or ``speed`` times real time."""
+    timing = ['--fast'] if speed is None else ['--rate', str(speed), '--subscribers', '1']
     return subprocess.Popen(
-        [sys.executable, '-m', 'epp_ros.tools.bag', 'play', str(bag), '--fast',
+        [sys.executable, '-m', 'epp_ros.tools.bag', 'play', str(bag), *timing,
          '--topics', topic], stdout=subprocess.DEVNULL)
 
 
@@ -439,6 +452,85 @@ def soak_live(frames, method='chain', seed=0, progress=None, timeout=None):
             'estimator_log_tail': log_tail if not complete or counts['errors'] else ''}
 
 
+#: Seconds the lag phase plays before it stops the estimator, and after it lets it go on.
+LAG_MARGIN = 5.0
+
+
+def soak_lag(lag_seconds=30.0, rate=50.0, method='chain', seed=0, progress=None):
+    """
+    Play a bag in real time into a posture_estimator that is stopped for ``lag_seconds``.
+
+    Frames go at ``rate`` Hz, as from uwb_driver; :data:`LAG_MARGIN` seconds into the
+    stream the estimator is stopped (SIGSTOP), as a starved or stalled process, and after
+    ``lag_seconds`` let go on (SIGCONT). The frames behind it the publisher could not keep
+    are lost on the way; the estimator must count each from the frames' numbers.
+
+    Returns
+    -------
+    dict
+        ``frames`` (played), the node's ``received``, ``published``, ``unsolved``, ``lost``
+        and ``before_first``, ``ignored`` (received, neither published nor unsolved), and
+        ``accounted``: frames played = received + lost + before_first, exactly.
+
+    """
+    from epp_ros import bags
+
+    listener = _Listener()
+    config_path = default_config_path()
+    duration = lag_seconds + 2 * LAG_MARGIN
+    with tempfile.TemporaryDirectory() as folder:
+        bag = Path(folder) / 'lag'
+        written = bags.synthesize(bag, load_pump_config(config_path), duration=duration * rate
+                                  / RATE, rate=RATE, sigma=0.1, seed=seed)[bags.RANGES]
+        log = open(Path(folder) / 'estimator.log', 'w+')
+        os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 100)
+        estimator = _start_estimator(config_path, method, log)
+        listener.start()
+        player = None
+        try:
+            listener.wait_for(estimator)
+            player = _start_player(bag, listener.contract.RANGES.absolute, rate / RATE)
+            _lag(listener, estimator, lag_seconds, progress)
+            _settle(listener, player, written, timeout=120.0 + 2 * duration)
+        finally:
+            _stop(player, listener, estimator)
+            log_tail = _tail(log)
+    counts = listener.counts()
+    return {'method': method, 'lag_seconds': lag_seconds, 'rate_hz': rate, 'frames': written,
+            **counts, 'ignored': counts['received'] - counts['published'] - counts['unsolved'],
+            'accounted': written == listener.accounted(),
+            'estimator_log_tail': '' if written == listener.accounted() else log_tail}
+
+
+def _lag(listener, estimator, seconds, progress):
+    """Once frames flow, let LAG_MARGIN seconds pass, then stop the estimator ``seconds``."""
+    deadline = time.monotonic() + 120.0
+    while listener.received() == 0 and time.monotonic() < deadline:
+        listener.spin(0.05)
+    listener.spin_for(LAG_MARGIN)
+    if progress:
+        progress(f'soak lag: the estimator stopped for {seconds:g} s')
+    os.kill(estimator.pid, signal.SIGSTOP)
+    try:
+        listener.spin_for(seconds)
+    finally:
+        os.kill(estimator.pid, signal.SIGCONT)
+
+
+def _settle(listener, player, written, timeout):
+    """Spin until the player is done and every frame is accounted for, or quiet, or timeout."""
+    deadline = time.monotonic() + timeout
+    last, changed = listener.accounted(), time.monotonic()
+    while time.monotonic() < deadline:
+        listener.spin(0.05)
+        if listener.accounted() != last:
+            last, changed = listener.accounted(), time.monotonic()
+        if player.poll() is not None and (last >= written
+                                          or time.monotonic() - changed > QUIET):
+            break
+    listener.spin_for(2.0)                                  # the latest report
+
+
 @dataclass
 class SoakReport:
     """
@@ -451,6 +543,8 @@ class SoakReport:
         :func:`soak_in_process`.
     live : dict or None
         :func:`soak_live`; None when not run.
+    lag : dict or None
+        :func:`soak_lag`; None when not run.
     summary : dict
         The headline figures (see :func:`run`).
 
@@ -460,18 +554,21 @@ class SoakReport:
     in_process: dict
     live: dict | None
     summary: dict
+    lag: dict | None = None
     suite: str = 'soak'
 
 
-def run(frames=1_000_000, live_frames=100_000, method='chain', seed=0, progress=None):
+def run(frames=1_000_000, live_frames=100_000, method='chain', seed=0, progress=None,
+        lag_seconds=30.0):
     """
-    Run both soaks; the :class:`SoakReport`'s ``summary`` holds the headline figures.
+    Run the soaks; the :class:`SoakReport`'s ``summary`` holds the headline figures.
 
     ``summary``: ``frames`` and ``frames_lost`` over both parts, ``rss_start_mb``,
     ``rss_warm_mb``, ``rss_end_mb`` and ``rss_growth_pct`` of the in-process part (this
     process), ``live_rss_*`` of the estimator process, ``frames_per_s`` and
-    ``live_frames_per_s``, ``rss_ok`` (both ends within 10 % of warm-up). ``live_frames``
-    0 skips the live part.
+    ``live_frames_per_s``, ``rss_ok`` (both ends within 10 % of warm-up), and of the lag
+    phase (:func:`soak_lag`) ``lag_frames``, ``lag_lost`` and ``lag_accounted``.
+    ``live_frames`` 0 skips the live part, ``lag_seconds`` 0 the lag phase.
     """
     in_process = soak_in_process(frames, method, seed, progress=progress)
     live = soak_live(live_frames, method, seed, progress) if live_frames else None
@@ -490,4 +587,9 @@ def run(frames=1_000_000, live_frames=100_000, method='chain', seed=0, progress=
                            ('rss_start_mb', 'rss_warm_mb', 'rss_end_mb', 'rss_growth_pct')}})
     summary['rss_ok'] = all(part['rss_growth_pct'] is not None and
                             abs(part['rss_growth_pct']) <= 100 * RSS_TOLERANCE for part in parts)
-    return SoakReport(method, in_process, live, summary)
+    lag = soak_lag(lag_seconds, method=method, seed=seed, progress=progress) \
+        if lag_seconds else None
+    if lag:
+        summary.update({'lag_frames': lag['frames'], 'lag_lost': lag['lost'],
+                        'lag_accounted': lag['accounted']})
+    return SoakReport(method, in_process, live, summary, lag)

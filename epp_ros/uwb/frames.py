@@ -37,7 +37,11 @@ import math
 from epp_ros import contract
 import numpy as np
 
-__all__ = ['Frame', 'FrameAssembler', 'AnchorRound']
+__all__ = ['Frame', 'FrameAssembler', 'AnchorRound', 'MIN_RANGE', 'MAX_RANGE']
+
+#: The plausible ranges, metres, unless min_range and max_range say otherwise: the
+#: driver drops others, and epp_calibrate leaves them out of a recording.
+MIN_RANGE, MAX_RANGE = 0.05, 200.0
 
 
 @dataclass
@@ -157,7 +161,7 @@ class FrameAssembler:
 
     """
 
-    def __init__(self, config, frame_period=0.1, min_range=0.05, max_range=200.0):
+    def __init__(self, config, frame_period=0.1, min_range=MIN_RANGE, max_range=MAX_RANGE):
         if not (frame_period > 0 and 0 <= min_range < max_range):
             raise ValueError('need frame_period > 0 and 0 <= min_range < max_range')
         self.config = config
