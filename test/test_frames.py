@@ -185,6 +185,10 @@ def test_each_range_keeps_its_receive_time_and_is_published_with_its_age():
     assert frame.tag_received[0, 1] == 10.01 and np.isfinite(frame.tag_received).sum() == 1
     assert frame.stamp == 10.06
     names, ranges, ages = frame.labelled(CONFIG)
+    # Numbered in the order closed: the number last, as contract.FRAME_NUMBER.
+    assert frame.number == assembler.frames == 1
+    assert names[-1] == contract.FRAME_NUMBER and ranges[-1] == 1.0 and ages[-1] == 0.0
+    names, ranges, ages = names[:-1], ranges[:-1], ages[:-1]
     assert names == CONFIG.link_names + ['joint1:joint2'] and len(ranges) == len(ages) == 31
     np.testing.assert_allclose(ages[:24], np.repeat([0.06, 0.04, 0.02, 0.0], 6), atol=1e-12)
     assert np.isnan(ages[24:30]).all() and np.isnan(ranges[24:30]).all()
@@ -202,8 +206,9 @@ def test_a_raised_stamp_keeps_the_receive_times_so_ages_stay_true():
     (second,) = full_cycle(assembler, 100.0)               # the same read: stamp raised 1 us
     assert second.stamp > first[0].stamp and (second.received == 100.0).all()
     _, _, ages = second.labelled(CONFIG)
-    np.testing.assert_allclose(ages, second.stamp - 100.0)
-    assert min(ages) > 0
+    assert second.number == first[0].number + 1
+    np.testing.assert_allclose(ages[:-1], second.stamp - 100.0)       # then the number's
+    assert min(ages[:-1]) > 0
 
 
 def test_anchor_ranges_are_kept_apart_and_labelled_measuring_anchor_first():

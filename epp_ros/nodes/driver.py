@@ -90,7 +90,6 @@ class UwbDriver(Node):
         self._previous_counts = {}
         self._newest_line = {}          # port -> node-clock time of its newest line, s
         self._before_clock = 0          # lines read on simulated time before any /clock
-        self._frame_number = 0          # frames published, each numbered on uwb/ranges
         self._closed = False
         self.readers = []
         for source in sources:
@@ -153,9 +152,7 @@ class UwbDriver(Node):
         message = JointState()
         message.header.stamp = to_time(frame.stamp)
         message.header.frame_id = self.config.frame_id
-        self._frame_number += 1
-        message.name, message.position, message.effort = frame.labelled(self.config,
-                                                                        self._frame_number)
+        message.name, message.position, message.effort = frame.labelled(self.config)
         self.publisher.publish(message)
         self._last_frame = self._now()
 
@@ -176,7 +173,7 @@ class UwbDriver(Node):
         silent = now - self._last_frame
         with self._lock:
             dropped = dict(self.assembler.dropped)
-            frames = self._frame_number     # published: the last frame's number
+            frames = self.assembler.frames  # each published, numbered 1, 2, 3, ...
             anchor_ranges = self.assembler.anchor_ranges
             before_clock = self._before_clock
         for source, decoders, reader in self.readers:

@@ -61,18 +61,19 @@ class Frame:
     received: np.ndarray
     #: (p, p) receive time of each tag-tag range, seconds, NaN where none
     tag_received: np.ndarray
+    #: 1, 2, 3, ... in the order the assembler closed the frames; None: not numbered
+    number: int = None
 
-    def labelled(self, config, number=None):
+    def labelled(self, config):
         """
         Return the frame as ``uwb/ranges`` carries it (``epp_ros.contract``).
+
+        A numbered frame carries its number last, as ``contract.FRAME_NUMBER``.
 
         Parameters
         ----------
         config : epp_ros.config.PumpConfig
             The pump: the names of the links.
-        number : int, optional
-            The frame's number (1, 2, 3, ... from the driver's start), carried last as
-            ``contract.FRAME_NUMBER``; None: not numbered.
 
         Returns
         -------
@@ -92,9 +93,9 @@ class Frame:
         ranges = np.concatenate([self.ranges.ravel(), self.tag_ranges[rows, columns]])
         received = np.concatenate([self.received.ravel(), self.tag_received[rows, columns]])
         ages = contract.range_ages(self.stamp, received).tolist()
-        if number is None:
+        if self.number is None:
             return names, ranges.tolist(), ages
-        return ([*names, contract.FRAME_NUMBER], [*ranges.tolist(), float(number)],
+        return ([*names, contract.FRAME_NUMBER], [*ranges.tolist(), float(self.number)],
                 [*ages, 0.0])
 
 
@@ -189,10 +190,10 @@ class FrameAssembler:
         # Stamps strictly increase: lines of two cycles can arrive in one read.
         stamp = self._newest if self._last_stamp is None else \
             max(self._newest, self._last_stamp + 1e-6)
-        frame = Frame(stamp, self._ranges, self._rx_power, self._tag_ranges, self._received,
-                      self._tag_received)
-        self._last_stamp = stamp
         self.frames += 1
+        frame = Frame(stamp, self._ranges, self._rx_power, self._tag_ranges, self._received,
+                      self._tag_received, self.frames)
+        self._last_stamp = stamp
         self._reset()
         return frame
 
