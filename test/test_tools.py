@@ -138,7 +138,11 @@ def test_the_authors_cepp_solves_in_the_true_plane_from_cold_starts():
     model, truth = xie3dim()
     authors = experiments.TruthPlaneCEPP(model, truth, sigma=1.0)
     frames = experiments.xie3dim_frames(model, truth, 5, seed=1)
-    rmses, lengths, _ = experiments.run_frames(authors, frames, [truth] * 5, cold=True)
+    rmses, lengths, _, valid, _ = experiments.run_frames(authors, frames, [truth] * 5,
+                                                         cold=True)
+    assert np.isnan(valid).all()            # the paper's variant publishes every frame
+    assert experiments.summarize(rmses, lengths, np.ones(5), valid, valid).published_fraction \
+        is None
     assert len(authors.slews) == 5 and authors.slew_error() < 1e-9
     np.testing.assert_allclose(authors.slews, fit_slew(truth, model.base), atol=1e-9)
     assert np.all(rmses < 5.0) and np.all(lengths < 1e-4)     # CEPP holds the lengths
@@ -158,6 +162,21 @@ def test_xie3dim_gives_the_mean_and_rms_next_to_the_published_means_of_3000_tria
     assert 'one trial' not in text
     with pytest.raises(TypeError):
         reports.markdown({'suite': 'xie3dim'})
+
+
+def test_the_method_tables_score_what_a_user_gets_beside_every_frame():
+    summary = experiments.summarize(np.array([0.1, 2.0, 0.5, 1.5]), np.zeros((4, 5)),
+                                    np.ones(4), np.array([1.0, 1.0, 0.0, 1.0]),
+                                    np.array([0.1, 0.5, np.nan, 0.6]))
+    assert summary.valid_rmse_m == pytest.approx(np.sqrt((0.01 + 4.0 + 2.25) / 3))
+    assert summary.rmse_m == pytest.approx(np.sqrt((0.01 + 4.0 + 0.25 + 2.25) / 4))
+    # 2.0 m off, 0.5 predicted: under a third, confidently wrong; 1.5 off, 0.6 predicted: not.
+    assert (summary.published_fraction, summary.wrong_valid, summary.confidently_wrong) == \
+        (0.75, 2, 1)
+    report = experiments.xie3dim_suite(['chain'], 6, 0, {})
+    row = report.rows[0]
+    assert 0.0 <= row.published_fraction <= 1.0 and row.wrong_valid >= 0
+    assert f'{row.published_fraction:.0%} |' in reports.markdown(report)
 
 
 def test_bench_refuses_tpsm_where_no_angles_are_simulated():

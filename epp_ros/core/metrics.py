@@ -15,7 +15,13 @@
 """Scores of estimated postures against the truth, as the paper defines them."""
 import numpy as np
 
-__all__ = ['joint_errors', 'frame_rmse', 'pooled_rmse']
+__all__ = ['joint_errors', 'frame_rmse', 'pooled_rmse', 'wrong_frames', 'WRONG_M',
+           'COVERED_FRACTION']
+
+#: Metres: a frame published as valid this far off is wrong for a pump's controller ...
+WRONG_M = 1.0
+#: ... and confidently so when its predicted RMSE is under this fraction of its error.
+COVERED_FRACTION = 1.0 / 3.0
 
 
 def joint_errors(estimate, truth):
@@ -36,3 +42,17 @@ def pooled_rmse(frame_rmses):
     """RMSE over many frames: the root of the mean of the squared frame RMSEs."""
     frame_rmses = np.asarray(frame_rmses, dtype=float)
     return float(np.sqrt(np.mean(frame_rmses ** 2))) if frame_rmses.size else float('nan')
+
+
+def wrong_frames(squared, published, predicted):
+    """
+    Return how many frames were published as valid while more than ``WRONG_M`` off.
+
+    And of those, how many said so too little: a predicted RMSE under ``COVERED_FRACTION``
+    of the error (or none). ``squared`` (T,): each frame's mean squared joint error, m^2;
+    ``published`` (T,) bool; ``predicted`` (T,): the predicted RMSE, m (NaN: none).
+    """
+    error = np.sqrt(np.asarray(squared, dtype=float))
+    wrong = np.asarray(published, dtype=bool) & (error > WRONG_M)
+    confident = wrong & ~(np.asarray(predicted, dtype=float) >= COVERED_FRACTION * error)
+    return int(wrong.sum()), int(confident.sum())

@@ -46,10 +46,10 @@ import time
 
 from epp_ros.core import calibrate, PostureEstimator, survey_anchors
 from epp_ros.core.bounds import crlb
+from epp_ros.core.metrics import wrong_frames
 from epp_ros.core.simulate import (field_effects, FieldEffects, FieldSimulator,
                                    truck_body_anchors, truck_outriggers, truck_pump,
                                    WorkingMotion)
-from epp_ros.tools.field_bench import wrong_frames
 import numpy as np
 
 __all__ = ['run', 'markdown', 'TARGETS', 'CASES', 'MODELS']

@@ -34,7 +34,7 @@ from epp_ros.core.bounds import crlb
 from epp_ros.core.chain import angles_from_joints, ChainMethod
 from epp_ros.core.epp import CEPP
 from epp_ros.core.measurements import Measurements, Residuals, SensorNoise
-from epp_ros.core.metrics import frame_rmse, pooled_rmse
+from epp_ros.core.metrics import frame_rmse, pooled_rmse, wrong_frames
 from epp_ros.core.multilateration import cold_start_guess
 from epp_ros.core.plane import fit_slew, from_plane, to_plane
 from epp_ros.core.simulate import (AngleNoise, observe, random_posture, RangeNoise, truck_pump,
@@ -97,6 +97,14 @@ class Summary:
     arm_length_error_m: list    #: mean absolute error of each section's length
     ms_median: float            #: time per frame
     ms_p99: float
+    #: What a user gets: the RMSE over the frames published as valid, the fraction
+    #: published, and of those how many more than ``metrics.WRONG_M`` off, and how many
+    #: with a predicted RMSE under a third of their error (None: not judged, as the
+    #: paper's variants)
+    valid_rmse_m: float | None = None
+    published_fraction: float | None = None
+    wrong_valid: int | None = None
+    confidently_wrong: int | None = None
 
 
 @dataclass
@@ -363,9 +371,14 @@ def run_frames(estimator, frames, truths, cold=False, fused=False):
     length_errors : ndarray, shape (T, p)
     times : ndarray, shape (T,)
         Seconds.
+    valid : ndarray, shape (T,)
+        1.0 where the frame was published as valid, 0.0 where not, NaN where the
+        estimator does not judge its frames.
+    predicted : ndarray, shape (T,)
+        The predicted RMSE of each frame, metres (NaN: none).
 
     """
-    rmses, length_errors, times = [], [], []
+    rmses, length_errors, times, valid, predicted = [], [], [], [], []
     for frame, truth in zip(frames, truths):
         frame = method_inputs(estimator.method, frame, fused)
         if cold:
@@ -374,16 +387,27 @@ def run_frames(estimator, frames, truths, cold=False, fused=False):
         estimate = method_estimate(estimator, frame)
         times.append(time.perf_counter() - start)
         rmses.append(float(frame_rmse(estimate, truth)))
-        length_errors.append(estimator.last_diagnostics['arm_length_error'])
-    return np.array(rmses), np.array(length_errors), np.array(times)
+        diagnostics = estimator.last_diagnostics
+        length_errors.append(diagnostics['arm_length_error'])
+        valid.append(float(diagnostics['valid']) if 'valid' in diagnostics else np.nan)
+        predicted.append(float(diagnostics.get('predicted_rmse', np.nan)))
+    return (np.array(rmses), np.array(length_errors), np.array(times), np.array(valid),
+            np.array(predicted))
 
 
-def summarize(rmses, lengths, times):
+def summarize(rmses, lengths, times, valid, predicted):
     """Return the :class:`Summary` of :func:`run_frames`' arrays."""
+    judged = {}
+    if len(valid) and np.isfinite(valid).all():
+        published = valid.astype(bool)
+        wrong, confident = wrong_frames(rmses ** 2, published, predicted)
+        judged = {'valid_rmse_m': pooled_rmse(rmses[published]),
+                  'published_fraction': float(published.mean()), 'wrong_valid': wrong,
+                  'confidently_wrong': confident}
     return Summary(rmse_m=pooled_rmse(rmses), mean_rmse_m=float(np.mean(rmses)),
                    arm_length_error_m=lengths.mean(axis=0).tolist(),
                    ms_median=1e3 * float(np.median(times)),
-                   ms_p99=1e3 * float(np.percentile(times, 99)))
+                   ms_p99=1e3 * float(np.percentile(times, 99)), **judged)
 
 
 def method_options(method, options, sigma):

@@ -41,6 +41,7 @@ from epp_ros.core import PostureEstimator
 from epp_ros.core.bounds import crlb, posterior_crlb
 from epp_ros.core.chain import angles_from_joints, ChainMethod
 from epp_ros.core.measurements import Measurements, Residuals, SensorNoise
+from epp_ros.core.metrics import wrong_frames
 from epp_ros.core.simulate import (field_effects, FieldEffects, JoystickMotion, Motion,
                                    simulate_field, truck_outriggers, truck_pump,
                                    WorkingMotion, xie3dim)
@@ -183,26 +184,6 @@ def _case_runs(name, seconds, seeds):
 def _ratio_over(squared, bounds, frames):
     """Return :func:`_ratio` over some frames (a boolean mask), NaN when there are none."""
     return _ratio(squared[frames], bounds[frames]) if frames.any() else float('nan')
-
-
-#: Metres: a frame published as valid this far off is wrong for a pump's controller ...
-WRONG_M = 1.0
-#: ... and confidently so when its predicted RMSE is under this fraction of its error.
-COVERED_FRACTION = 1.0 / 3.0
-
-
-def wrong_frames(squared, published, predicted):
-    """
-    Return how many frames were published as valid while more than ``WRONG_M`` off.
-
-    And of those, how many said so too little: a predicted RMSE under ``COVERED_FRACTION``
-    of the error (or none). ``squared`` (T,): each frame's mean squared joint error, m^2;
-    ``published`` (T,) bool; ``predicted`` (T,): the predicted RMSE, m (NaN: none).
-    """
-    error = np.sqrt(squared)
-    wrong = published & (error > WRONG_M)
-    confident = wrong & ~(np.asarray(predicted) >= COVERED_FRACTION * error)
-    return int(wrong.sum()), int(confident.sum())
 
 
 def _method_cell(runs, bounds, heard):

@@ -38,6 +38,7 @@ from dataclasses import asdict, dataclass, field
 import time
 
 from epp_ros.core import PostureEstimator
+from epp_ros.core.metrics import WRONG_M
 from epp_ros.core.model import BoomModel
 from epp_ros.core.simulate import RangeNoise, truck_pump, working_cycle
 import numpy as np
@@ -48,7 +49,7 @@ __all__ = ['CASES', 'Stream', 'FrameLog', 'CaseResult', 'MethodSummary', 'Integr
 RATE = 10.0                         #: frames per second
 SIGMA = 0.1                         #: range noise, and what the estimators are told, metres
 DROPOUT = 0.05                      #: fraction of missing links
-WRONG_METRES = 1.0                  #: a joint this far off ...
+WRONG_METRES = WRONG_M              #: a joint this far off ...
 WRONG_SIGMAS = 5.0                  #: ... and this many predicted sigmas is wrong
 RECOVERY_TARGET_S = 2.0
 FALSE_REJECTION_TARGET = 0.005

@@ -79,17 +79,26 @@ def method_table(rows):
     """
     published = any(row.published for row in rows)
     trials = next((row.published.trials for row in rows if row.published), 0)
-    head = ('| method | RMSE, mean [m] | RMSE, RMS [m] | RMSE / CRLB (RMS) | mean arm-length '
-            'error [m] | ms/frame p50 | p99 |')
+    head = ('| method | RMSE, mean [m] | RMSE, RMS [m] | RMSE / CRLB (RMS) | valid: RMSE / '
+            'CRLB | published | valid > 1 m off / confidently | mean arm-length error [m] | '
+            'ms/frame p50 | p99 |')
     if published:
         head += f' published: mean RMSE of {_trials(trials)} trials [m], its RMS |'
     lines = [head, '|---' * (head.count('|') - 1) + '|']
     for row in rows:
         line = (f'| {row.method} | {row.mean_rmse_m:.3f} | {row.rmse_m:.3f} | '
-                f'{_ratio(row.rmse_m, row.crlb_m)} | {max(row.arm_length_error_m):.1e} | '
-                f'{row.ms_median:.2f} | {row.ms_p99:.2f} |')
+                f'{_ratio(row.rmse_m, row.crlb_m)} | {_valid_cells(row)} | '
+                f'{max(row.arm_length_error_m):.1e} | {row.ms_median:.2f} | {row.ms_p99:.2f} |')
         lines.append(line + (f' {_published_cell(row.published)} |' if published else ''))
     return lines
+
+
+def _valid_cells(row):
+    """Return the cells of what a user gets of a row: '-' where its frames are not judged."""
+    if row.published_fraction is None:
+        return '- | - | -'
+    return (f'{_ratio(row.valid_rmse_m, row.crlb_m)} | {row.published_fraction:.0%} | '
+            f'{row.wrong_valid} / {row.confidently_wrong}')
 
 
 def published_xie3dim():
