@@ -219,6 +219,31 @@ def test_a_killed_recording_is_reindexed_up_to_its_last_whole_chunk(tmp_path, pr
     assert epp_bag('reindex', recording).returncode == 2       # nothing to reindex now
 
 
+def test_reindex_refuses_what_it_cannot_recover_in_one_line(tmp_path):
+    whole = tmp_path / 'whole'
+    bags.synthesize(whole, CONFIG, duration=1.0)
+    sqlite = tmp_path / 'sqlite'
+    bags.synthesize(sqlite, CONFIG, duration=1.0, storage='sqlite3')
+    (sqlite / 'metadata.yaml').unlink()
+    foreign = tmp_path / 'foreign'
+    foreign.mkdir()
+    (foreign / 'foreign.mcap').write_bytes(b'not an mcap file at all')
+    for bag, says in ((whole, 'has its metadata.yaml'), (sqlite, 'sqlite3'),
+                      (foreign, 'not an MCAP file'), (tmp_path / 'none', 'no such bag')):
+        with pytest.raises(bags.BagError, match=says):
+            bags.reindex(bag)
+        result = epp_bag('reindex', bag)
+        assert result.returncode == 2 and len(result.stderr.splitlines()) == 1, result.stderr
+    # Cut inside its first chunk, a bag keeps nothing, and says so.
+    cut = tmp_path / 'cut'
+    cut.mkdir()
+    content = (whole / 'whole.mcap').read_bytes()
+    (cut / 'cut.mcap').write_bytes(content[:last_chunk(content) + 100])
+    counts, lost, stopped = bags.reindex(cut)
+    assert counts == {} and lost > 0 and stopped is None
+    assert bags.info(cut)['messages'] == 0
+
+
 def last_chunk(content):
     """Return the offset of the last chunk record of an MCAP file (opcode 0x06)."""
     import struct
