@@ -193,7 +193,7 @@ def test_the_combined_field_case_publishes_nothing_confidently_wrong(method):
 def node_estimator(method):
     """Return the model and an estimator as posture_estimator makes them from pump.yaml."""
     from epp_ros.config import load_pump_config
-    from epp_ros.nodes.estimator import estimator_settings, SETTINGS
+    from epp_ros.settings import estimator_settings, SETTINGS
     import yaml
     from system import PUMP_YAML
     config = load_pump_config(PUMP_YAML)

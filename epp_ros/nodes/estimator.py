@@ -45,11 +45,11 @@ jump and the estimator starts over, a zero stamp is malformed. Those steps are
 ``epp_ros.pipeline``'s, which ``epp_bag eval`` takes too. Topic names are relative:
 ``-r __ns:=/pump7`` runs one per pump.
 
-Parameters (``SETTINGS``) are live: a change is checked as at start (refused with the
-reason otherwise) and applies from the next frame; a new ``method`` starts cold, which
-``/diagnostics`` counts. The pump's description and the angle sensors' names are read-only.
+Parameters (``epp_ros.settings.SETTINGS``) are live: a change is checked as at start
+(refused with the reason otherwise) and applies from the next frame; a new ``method``
+starts cold, which ``/diagnostics`` counts. The pump's description and the angle sensors'
+names are read-only.
 """
-from dataclasses import dataclass
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -57,9 +57,7 @@ from epp_ros.angles import AngleSamples
 from epp_ros.config import PUMP_PARAMETERS
 from epp_ros.contract import (ANGLES, DIAGNOSTICS, JOINT_STATES, MARKERS, POSTURE, RANGES,
                               ROBOT_DESCRIPTION)
-from epp_ros.core import METHODS, PostureEstimator, RANGE_METHODS
-from epp_ros.core.estimators import ESTIMATOR_OPTIONS
-from epp_ros.core.integrity import IntegrityLimits, Thresholds
+from epp_ros.core import METHODS, PostureEstimator
 from epp_ros.health import assess, grade
 from epp_ros.nodes.common import (declare, declare_pump_parameters, posture_markers,
                                   posture_message, POSTURE_QOS, pump_id, qos,
@@ -67,6 +65,7 @@ from epp_ros.nodes.common import (declare, declare_pump_parameters, posture_mark
                                   StartupError, to_seconds, to_time)
 from epp_ros.pipeline import RangePipeline
 from epp_ros.robot_description import joint_names, joint_positions, urdf
+from epp_ros.settings import estimator_settings, parameter_name, SETTINGS
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, SetParametersResult
 from rclpy.node import Node
@@ -80,123 +79,18 @@ LEVELS = {0: DiagnosticStatus.OK, 1: DiagnosticStatus.WARN, 2: DiagnosticStatus.
 SILENT_AFTER = 1.0
 
 
-@dataclass(frozen=True)
-class Setting:
-    """
-    One node parameter.
-
-    Its default, what it means, whether it can change while running, and its range
-    (inclusive, shown by ``ros2 param describe`` and enforced by ROS).
-    """
-
-    default: object
-    description: str
-    live: bool = True
-    low: float = None
-    high: float = None
-
-    def descriptor(self):
-        """Keyword arguments of the ParameterDescriptor."""
-        extra = {'read_only': not self.live}
-        if self.low is None:
-            return extra
-        if isinstance(self.default, int):
-            extra['integer_range'] = [IntegerRange(from_value=self.low, to_value=self.high,
-                                                   step=1)]
-        else:
-            extra['floating_point_range'] = [FloatingPointRange(from_value=float(self.low),
-                                                                to_value=float(self.high))]
+def descriptor(setting):
+    """Return the ParameterDescriptor keywords of a :class:`~epp_ros.settings.Setting`."""
+    extra = {'read_only': not setting.live}
+    if setting.low is None:
         return extra
-
-
-def _metres(name, description):
-    """Declare a threshold in metres, its default from ``core.integrity.Thresholds``."""
-    return Setting(getattr(Thresholds, name), description, True, 1e-6, 1e3)
-
-
-def _told(option, description, low, high):
-    """Declare what the estimator is told, its default from ``ESTIMATOR_OPTIONS``."""
-    return Setting(float(ESTIMATOR_OPTIONS[option]), description, True, low, high)
-
-
-#: The node's parameters. Thresholds are metres; a frame at ERROR is not published.
-SETTINGS = {
-    'method': Setting('cepp', f'Estimator: {", ".join(RANGE_METHODS)}; a change starts cold.'),
-    'reset_after_failures': Setting(10, 'Frames in a row that cannot be solved or do not fit '
-                                        'before the estimator starts cold.', True, 1, 100000),
-    'publish_markers': Setting(True, 'Also publish arm_posture/markers for RViz.'),
-    'learn_noise': Setting(True, 'Learn the range noise from the residuals while running, '
-                                 'starting from range_sigma, nlos_fraction and nlos_gamma.'),
-    'arm_length_warn': _metres('arm_length_warn', 'Section length or plane error for WARN, m.'),
-    'arm_length_error': _metres('arm_length_error',
-                                'Section length or plane error for ERROR, m.'),
-    'residual_warn': _metres('residual_warn', 'Range residual RMS for WARN, m.'),
-    'residual_error': _metres('residual_error', 'Range residual RMS for ERROR, m.'),
-    'predicted_rmse_warn': _metres('predicted_rmse_warn',
-                                   'Predicted RMSE (Cramer-Rao bound) for WARN, m.'),
-    'predicted_rmse_error': _metres('predicted_rmse_error', 'Predicted RMSE for ERROR, m.'),
-    'range_sigma': _told('sigma', 'UWB range standard deviation, m.', 1e-6, 100.0),
-    'nlos_fraction': _told('nlos_fraction', 'Prior probability that a range is NLOS.', 0.0,
-                           0.99),
-    'nlos_gamma': _told('nlos_gamma', 'Mean NLOS excess, m.', 1e-3, 100.0),
-    'tag_sigma': _told('sigma', 'Tag-tag range standard deviation, m.', 1e-6, 100.0),
-    'pitch_sigma': _told('pitch_sigma', 'Inclinometer standard deviation, rad.', 1e-6, 1.0),
-    'slew_sigma': _told('slew_sigma', 'Slew encoder standard deviation, rad.', 1e-6, 1.0),
-    'lowest_joint': _told('lowest_joint', 'No joint is below this height, m (ground z = 0).',
-                          -1e3, 1e3),
-    'link_bias_std': _told('link_bias_std', "Std of each range's own bias left after the "
-                           'offsets (not averaged over frames), m.', 0.0, 10.0),
-    'common_bias_std': _told('common_bias_std', 'Std of the bias common to all ranges left '
-                             'after the offsets, m: adds to the predicted RMSE.', 0.0, 10.0),
-    'bias_slope_std': _told('bias_slope_std', 'Std of the growth of that common bias with '
-                            'range, m per m.', 0.0, 1.0),
-    'max_angular_rate': Setting(IntegrityLimits.max_angular_rate, 'Fastest slew or pitch '
-                                'rate of the boom, rad/s: rules out jumps and folds.', True,
-                                1e-4, 100.0),
-    'slew_name': Setting('slew', 'boom_angles joint name of the slew encoder.', False),
-    'pitch_names': Setting([], 'boom_angles joint names of the inclinometers, base outward '
-                               '(default pitch1..pitchp).', False),
-    'angle_max_age': Setting(0.2, 'Largest stamp difference between a range frame and its '
-                                  'angles, s.', True, 1e-3, 60.0),
-    'ranges_qos': Setting('reliable', 'QoS of the uwb/ranges subscription: reliable (keep '
-                          'all: no frame lost unseen) or sensor_data (best effort, REP 2003, '
-                          'for publishers that offer only that).', False),
-}
-#: Estimator options told by parameters of another name.
-OPTION_OF = {'range_sigma': 'sigma', 'nlos_fraction': 'nlos_fraction',
-             'nlos_gamma': 'nlos_gamma', 'tag_sigma': 'tag_sigma', 'pitch_sigma': 'pitch_sigma',
-             'slew_sigma': 'slew_sigma', 'lowest_joint': 'lowest_joint',
-             'link_bias_std': 'link_bias_std', 'common_bias_std': 'common_bias_std',
-             'bias_slope_std': 'bias_slope_std'}
-
-
-def _parameter_name(message):
-    """Say the node parameter where an estimator error names its option."""
-    option = message.split(':', 1)[0]
-    names = {option_name: parameter for parameter, option_name in OPTION_OF.items()}
-    return message.replace(option, names[option], 1) if option in names else message
-
-
-def estimator_settings(values):
-    """
-    Keyword arguments of PostureEstimator from the node's parameter values.
-
-    Raises
-    ------
-    ValueError
-        Naming the parameter, when a value cannot be used.
-
-    """
-    method = values['method']
-    if method not in RANGE_METHODS:
-        raise ValueError(f'method: {method!r} is not one of {RANGE_METHODS} (the node '
-                         'receives UWB ranges only)')
-    thresholds = Thresholds(**{name: values[name] for name in Thresholds.__dataclass_fields__})
-    integrity = IntegrityLimits(max_angular_rate=values['max_angular_rate'])
-    return dict(method=method, integrity=integrity, thresholds=thresholds,
-                reset_after_failures=values['reset_after_failures'],
-                learn_noise=values['learn_noise'],
-                **{OPTION_OF[name]: values[name] for name in OPTION_OF})
+    if isinstance(setting.default, int):
+        extra['integer_range'] = [IntegerRange(from_value=setting.low, to_value=setting.high,
+                                               step=1)]
+    else:
+        extra['floating_point_range'] = [FloatingPointRange(from_value=float(setting.low),
+                                                            to_value=float(setting.high))]
+    return extra
 
 
 class PostureEstimatorNode(Node):
@@ -210,7 +104,7 @@ class PostureEstimatorNode(Node):
         self.model = self.config.model()
         self.lengths = self.model.arm_lengths
         self.values = {name: declare(self, name, self._default(name), setting.description,
-                                     **setting.descriptor())
+                                     **descriptor(setting))
                        for name, setting in SETTINGS.items()}
         try:
             settings = estimator_settings(self.values)
@@ -219,7 +113,7 @@ class PostureEstimatorNode(Node):
         except ImportError as exc:
             raise StartupError(f'method: {exc}') from None
         except ValueError as exc:
-            raise StartupError(_parameter_name(str(exc))) from None
+            raise StartupError(parameter_name(str(exc))) from None
         self.posture = self.create_publisher(PoseArray, POSTURE.name, POSTURE_QOS)
         self.markers = self.create_publisher(MarkerArray, MARKERS.name, POSTURE_QOS)
         self.joint_states = self.create_publisher(JointState, JOINT_STATES.name,
@@ -304,7 +198,7 @@ class PostureEstimatorNode(Node):
         except ImportError as exc:
             return SetParametersResult(successful=False, reason=f'method: {exc}')
         except ValueError as exc:
-            return SetParametersResult(successful=False, reason=_parameter_name(str(exc)))
+            return SetParametersResult(successful=False, reason=parameter_name(str(exc)))
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters):

@@ -149,39 +149,27 @@ def fixed_anchor_indices(config, text):
 
 def noise_settings(document):
     """
-    Return calibrate's noise keywords from a pump.yaml's node settings (defaults if absent).
+    Return calibrate's noise keywords from a pump.yaml's settings, as the estimator reads them.
+
+    ``range_sigma``, ``tag_sigma``, ``nlos_fraction``, ``nlos_gamma`` and ``learn_noise``
+    (``epp_ros.settings``: the node's defaults and ranges).
 
     Raises
     ------
     CalibrationError
-        On a setting that is not a finite number in its range.
+        On a setting the node would refuse.
 
     """
-    import math
-    section = document['/**']['ros__parameters']
-    limits = {'range_sigma': ('sigma', 0.1, 0.0), 'tag_sigma': ('tag_sigma', None, 0.0),
-              'nlos_fraction': ('nlos_fraction', 0.1, None),
-              'nlos_gamma': ('nlos_gamma', 1.0, 0.0)}
-    settings = {}
-    for name, (keyword, default, low) in limits.items():
-        value = section.get(name, default)
-        if value is None:
-            continue
-        try:
-            value = float(value)
-        except (TypeError, ValueError):
-            value = float('nan')
-        inside = (value > low) if low is not None else (0.0 <= value < 1.0)
-        if not (math.isfinite(value) and inside):
-            raise CalibrationError(f'{name}: must be a finite number '
-                                   f'{"> 0" if low is not None else "in [0, 1)"}, got '
-                                   f'{section.get(name)!r}')
-        settings[keyword] = value
-    learn = section.get('learn_noise', True)
-    if not isinstance(learn, bool):
-        raise CalibrationError(f'learn_noise: must be true or false, got {learn!r}')
-    settings['learn_noise'] = learn     # as the estimator: nobody knows a site's noise
-    return settings
+    from epp_ros.settings import file_settings
+    try:
+        told = file_settings(document, ('range_sigma', 'tag_sigma', 'nlos_fraction',
+                                        'nlos_gamma', 'learn_noise'))
+    except ValueError as exc:
+        raise CalibrationError(str(exc)) from None
+    # learn_noise as the estimator: nobody knows a site's noise
+    return {'sigma': told['range_sigma'], 'tag_sigma': told['tag_sigma'],
+            'nlos_fraction': told['nlos_fraction'], 'nlos_gamma': told['nlos_gamma'],
+            'learn_noise': told['learn_noise']}
 
 
 def range_window(document):

@@ -28,7 +28,7 @@ import argparse
 import sys
 
 from epp_ros.arguments import number, Parser
-from epp_ros.core.integrity import IntegrityLimits
+from epp_ros.settings import SETTINGS
 
 
 def parse_args(argv):
@@ -37,26 +37,26 @@ def parse_args(argv):
                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('config', nargs='?', help='pump description (default: the packaged '
                                                   'pump.yaml)')
-    parser.add_argument('--max-angular-rate', type=number(1e-4, 100.0), metavar='RAD_PER_S',
-                        help="every joint's velocity limit (default: the file's "
-                             f'max_angular_rate, else {IntegrityLimits.max_angular_rate})')
+    rate = SETTINGS['max_angular_rate']
+    parser.add_argument('--max-angular-rate', type=number(rate.low, rate.high),
+                        metavar='RAD_PER_S', help="every joint's velocity limit (default: the "
+                                                  f"file's max_angular_rate, else {rate.default})")
     parser.add_argument('-o', '--output', help='write here instead of stdout')
     return parser.parse_args(argv)
 
 
 def configured_rate(path):
-    """Return the estimator's max_angular_rate in a pump.yaml (its ``/**`` section)."""
+    """Return the estimator's max_angular_rate in a pump.yaml, as the estimator reads it."""
     from pathlib import Path
 
     from epp_ros.config import ConfigError, default_config_path
+    from epp_ros.settings import file_settings
     import yaml
     document = yaml.safe_load(Path(path or default_config_path()).read_text())
-    settings = document['/**']['ros__parameters']
-    rate = settings.get('max_angular_rate', IntegrityLimits.max_angular_rate)
-    if isinstance(rate, bool) or not isinstance(rate, (int, float)) \
-            or not 1e-4 <= rate <= 100.0:
-        raise ConfigError(f'max_angular_rate: must be a number in [0.0001, 100], got {rate!r}')
-    return float(rate)
+    try:
+        return file_settings(document, ['max_angular_rate'])['max_angular_rate']
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
 
 
 def main(argv=None):
