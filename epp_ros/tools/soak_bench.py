@@ -413,43 +413,68 @@ def soak_live(frames, method='chain', seed=0, progress=None, timeout=None):
         and ``complete`` (False when ``timeout`` ran out).
 
     """
-    from epp_ros import bags
-
-    listener = _Listener()
-    config_path = default_config_path()
-    config = load_pump_config(config_path)
     timeout = timeout if timeout is not None else 120.0 + frames / 50.0
-    with tempfile.TemporaryDirectory() as folder:
-        bag = Path(folder) / 'soak'
-        if progress:
-            progress(f'soak live: synthesising a {frames}-frame bag')
-        written = bags.synthesize(bag, config, duration=frames / RATE, rate=RATE, sigma=0.1,
-                                  seed=seed)[bags.RANGES]
-        log = open(Path(folder) / 'estimator.log', 'w+')
-        os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 100)
-        estimator = _start_estimator(config_path, method, log)
-        listener.start()
-        player = None
-        try:
-            listener.wait_for(estimator)
-            memory = _Memory(frames, estimator.pid)
-            player = _start_player(bag, listener.contract.RANGES.absolute)
-            _follow(listener, player, memory, written, timeout, progress)
-            memory.finish()
-            complete = listener.received() >= written
-            listener.spin_for(2.0)                          # late postures and a report
-        finally:
-            _stop(player, listener, estimator)
-            log_tail = _tail(log)
-    counts = listener.counts()
-    postures = listener.postures
+    if progress:
+        progress(f'soak live: synthesising a {frames}-frame bag')
+    with _LiveRun(frames, method, seed) as run:
+        memory = _Memory(frames, run.estimator.pid)
+        _follow(run.listener, run.play(), memory, run.written, timeout, progress)
+        memory.finish()
+        complete = run.listener.received() >= run.written
+        run.listener.spin_for(2.0)                          # late postures and a report
+    counts = run.listener.counts()
+    postures = run.listener.postures
     elapsed = postures[-1] - postures[0] if len(postures) > 1 else 0.0
-    return {'method': method, 'frames': written, **counts, 'postures': len(postures),
-            'frames_lost': written - counts['received'], 'complete': complete,
+    return {'method': method, 'frames': run.written, **counts, 'postures': len(postures),
+            'frames_lost': run.written - counts['received'], 'complete': complete,
             'seconds': elapsed,
             'frames_per_s': (len(postures) - 1) / elapsed if elapsed > 0 else 0.0,
             **memory.fields(),
-            'estimator_log_tail': log_tail if not complete or counts['errors'] else ''}
+            'estimator_log_tail': run.log_tail if not complete or counts['errors'] else ''}
+
+
+class _LiveRun:
+    """
+    A synthesised bag of ``frames`` frames and a posture_estimator process ready for it.
+
+    ``with`` starts the estimator and this process's :class:`_Listener` and waits until
+    they see each other; leaving stops the player (:meth:`play`), the listener and the
+    estimator, and keeps the end of the estimator's log in ``log_tail``.
+    """
+
+    def __init__(self, frames, method, seed):
+        self.frames, self.method, self.seed = frames, method, seed
+        self.listener, self.player, self.estimator, self.log_tail = _Listener(), None, None, ''
+
+    def __enter__(self):
+        from epp_ros import bags
+        self._folder = tempfile.TemporaryDirectory()
+        folder = Path(self._folder.name)
+        config_path = default_config_path()
+        self.bag = folder / 'soak'
+        self.written = bags.synthesize(self.bag, load_pump_config(config_path),
+                                       duration=self.frames / RATE, rate=RATE, sigma=0.1,
+                                       seed=self.seed)[bags.RANGES]
+        self._log = open(folder / 'estimator.log', 'w+')
+        os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 100)
+        self.estimator = _start_estimator(config_path, self.method, self._log)
+        self.listener.start()
+        try:
+            self.listener.wait_for(self.estimator)
+        except BaseException:
+            self.__exit__()
+            raise
+        return self
+
+    def play(self, speed=None):
+        """Start playing the bag's ranges (``--fast``, or ``speed`` times real time)."""
+        self.player = _start_player(self.bag, self.listener.contract.RANGES.absolute, speed)
+        return self.player
+
+    def __exit__(self, *exc):
+        _stop(self.player, self.listener, self.estimator)
+        self.log_tail = _tail(self._log)
+        self._folder.cleanup()
 
 
 #: Seconds the lag phase plays before it stops the estimator, and after it lets it go on.
@@ -473,33 +498,16 @@ def soak_lag(lag_seconds=30.0, rate=50.0, method='chain', seed=0, progress=None)
         ``accounted``: frames played = received + lost + before_first, exactly.
 
     """
-    from epp_ros import bags
-
-    listener = _Listener()
-    config_path = default_config_path()
     duration = lag_seconds + 2 * LAG_MARGIN
-    with tempfile.TemporaryDirectory() as folder:
-        bag = Path(folder) / 'lag'
-        written = bags.synthesize(bag, load_pump_config(config_path), duration=duration * rate
-                                  / RATE, rate=RATE, sigma=0.1, seed=seed)[bags.RANGES]
-        log = open(Path(folder) / 'estimator.log', 'w+')
-        os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 100)
-        estimator = _start_estimator(config_path, method, log)
-        listener.start()
-        player = None
-        try:
-            listener.wait_for(estimator)
-            player = _start_player(bag, listener.contract.RANGES.absolute, rate / RATE)
-            _lag(listener, estimator, lag_seconds, progress)
-            _settle(listener, player, written, timeout=120.0 + 2 * duration)
-        finally:
-            _stop(player, listener, estimator)
-            log_tail = _tail(log)
-    counts = listener.counts()
-    return {'method': method, 'lag_seconds': lag_seconds, 'rate_hz': rate, 'frames': written,
-            **counts, 'ignored': counts['received'] - counts['published'] - counts['unsolved'],
-            'accounted': written == listener.accounted(),
-            'estimator_log_tail': '' if written == listener.accounted() else log_tail}
+    with _LiveRun(int(round(duration * rate)), method, seed) as run:
+        player = run.play(rate / RATE)
+        _lag(run.listener, run.estimator, lag_seconds, progress)
+        _settle(run.listener, player, run.written, timeout=120.0 + 2 * duration)
+    counts, accounted = run.listener.counts(), run.written == run.listener.accounted()
+    return {'method': method, 'lag_seconds': lag_seconds, 'rate_hz': rate,
+            'frames': run.written, **counts,
+            'ignored': counts['received'] - counts['published'] - counts['unsolved'],
+            'accounted': accounted, 'estimator_log_tail': '' if accounted else run.log_tail}
 
 
 def _lag(listener, estimator, seconds, progress):
