@@ -33,7 +33,8 @@ import yaml
 
 __all__ = ['ConfigError', 'Source', 'PumpConfig', 'LinkFrame', 'PUMP_PARAMETERS', 'PROTOCOLS',
            'pump_config_from_parameters', 'load_pump_config', 'default_config_path',
-           'normalise_device_id', 'device_number', 'listen_address', 'update_pump_yaml']
+           'normalise_device_id', 'device_number', 'listen_address', 'update_pump_yaml',
+           'read_parameters']
 
 PROTOCOLS = (*FORMATS, 'auto')
 _LISTEN = re.compile(r'tcp-listen://(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+)'
@@ -585,6 +586,22 @@ def load_pump_config(path=None):
 
     The ``/**`` section holds the description (and node settings, ignored here).
     """
+    values = read_parameters(path)
+    # The section also holds node settings (baud, method, ...): keep the pump's own.
+    return pump_config_from_parameters({name: value for name, value in values.items()
+                                        if name in PUMP_PARAMETERS})
+
+
+def read_parameters(path=None):
+    """
+    Return the ``/**`` ``ros__parameters`` of a parameters file (default: the packaged one).
+
+    Raises
+    ------
+    ConfigError
+        On a file that cannot be read (or is an alias bomb) or has no such section.
+
+    """
     path = Path(path) if path is not None else default_config_path()
     try:
         document = _safe_yaml(path)
@@ -594,9 +611,9 @@ def load_pump_config(path=None):
         values = document['/**']['ros__parameters']
     except (TypeError, KeyError):
         raise ConfigError(f"{path}: no '/**: ros__parameters:' section") from None
-    # The section also holds node settings (baud, method, ...): keep the pump's own.
-    return pump_config_from_parameters({name: value for name, value in values.items()
-                                        if name in PUMP_PARAMETERS})
+    if not isinstance(values, dict):
+        raise ConfigError(f"{path}: no '/**: ros__parameters:' section")
+    return values
 
 
 def _yaml_number(value):

@@ -29,7 +29,7 @@ from epp_ros.core.estimators import ESTIMATOR_OPTIONS
 from epp_ros.core.integrity import IntegrityLimits, Thresholds
 
 __all__ = ['Setting', 'SETTINGS', 'OPTION_OF', 'estimator_settings', 'parameter_name',
-           'file_settings']
+           'file_settings', 'estimator_options']
 
 
 @dataclass(frozen=True)
@@ -159,14 +159,14 @@ def estimator_settings(values):
                 **{OPTION_OF[name]: values[name] for name in OPTION_OF})
 
 
-def file_settings(document, names):
+def file_settings(parameters, names):
     """
     Return the settings ``names`` of a pump.yaml, each its default where the file has none.
 
     Parameters
     ----------
-    document : dict
-        The parsed pump.yaml: its ``/**`` ``ros__parameters`` are read.
+    parameters : dict
+        The file's ``/**`` ``ros__parameters`` (``config.read_parameters``).
     names : iterable of str
         Names in :data:`SETTINGS`.
 
@@ -176,6 +176,32 @@ def file_settings(document, names):
         Naming the first setting whose value the node would refuse.
 
     """
-    section = document['/**']['ros__parameters']
-    return {name: SETTINGS[name].checked(name, section.get(name, SETTINGS[name].default))
+    return {name: SETTINGS[name].checked(name, parameters.get(name, SETTINGS[name].default))
             for name in names}
+
+
+def estimator_options(path=None, method=None):
+    """
+    Return ``PostureEstimator``'s keyword arguments as posture_estimator reads a pump.yaml.
+
+    Parameters
+    ----------
+    path : path, optional
+        The parameters file; default: the packaged pump.yaml.
+    method : str, optional
+        Instead of the file's ``method``.
+
+    Raises
+    ------
+    epp_ros.config.ConfigError
+        On a file that cannot be read, or a setting the node would refuse, named.
+
+    """
+    from epp_ros.config import ConfigError, read_parameters
+    try:
+        values = file_settings(read_parameters(path), SETTINGS)
+        if method is not None:
+            values['method'] = method
+        return estimator_settings(values)
+    except ValueError as exc:
+        raise ConfigError(f'{path or "pump.yaml"}: {parameter_name(str(exc))}') from None

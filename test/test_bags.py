@@ -154,22 +154,53 @@ def test_record_and_play_stop_when_told_while_topics_flow(tmp_path, listener, pr
     assert 'stopped playing' in player.stdout.read()
 
 
-def test_play_into_the_live_estimator_equals_eval(tmp_path, listener, processes):
+#: A setting of every estimator setting but the sensors' names and the QoS, none its default.
+ALTERED = {'method': 'chain', 'reset_after_failures': 7, 'publish_markers': False,
+           'learn_noise': False, 'arm_length_warn': 0.08, 'arm_length_error': 0.6,
+           'residual_warn': 0.6, 'residual_error': 2.5, 'predicted_rmse_warn': 0.6,
+           'predicted_rmse_error': 2.5, 'range_sigma': 0.12, 'nlos_fraction': 0.15,
+           'nlos_gamma': 1.2, 'tag_sigma': 0.11, 'pitch_sigma': 0.01, 'slew_sigma': 0.011,
+           'lowest_joint': -0.8, 'link_bias_std': 0.05, 'common_bias_std': 0.2,
+           'bias_slope_std': 0.008, 'max_angular_rate': 0.5, 'angle_max_age': 0.3,
+           'slew_name': 'slew_encoder'}
+
+
+def altered_pump_yaml(path):
+    """Write the packaged pump.yaml with every setting of :data:`ALTERED` changed."""
+    import yaml
+    from epp_ros.settings import SETTINGS
+    assert set(SETTINGS) - set(ALTERED) == {'pitch_names', 'ranges_qos'}
+    assert all(value != SETTINGS[name].default for name, value in ALTERED.items())
+    document = yaml.safe_load(PUMP_YAML.read_text())
+    document['/**']['ros__parameters'].update(ALTERED)
+    path.write_text(yaml.safe_dump(document))
+    return path
+
+
+@pytest.mark.parametrize('settings', ['packaged', 'altered'])
+def test_play_into_the_live_estimator_equals_eval(settings, tmp_path, listener, processes):
+    """The node and ``epp_bag eval --config`` read the same file alike, every setting."""
     bag = tmp_path / 'cycle'
     bags.synthesize(bag, CONFIG, duration=6.0, sigma=0.1, drop=0.1, seed=6)
-    expected = bags.evaluate(bag, CONFIG, 'cepp', out=tmp_path / 'evaluated')
+    config = PUMP_YAML if settings == 'packaged' else altered_pump_yaml(tmp_path / 'pump.yaml')
+    evaluated = epp_bag('eval', bag, '--config', config, '--out', tmp_path / 'evaluated',
+                        '--json', timeout=300)
+    assert evaluated.returncode == 0, evaluated.stderr
+    expected = json.loads(evaluated.stdout.splitlines()[-1])
+    assert expected['method'] == ('cepp' if settings == 'packaged' else 'chain')
     offline = {(m.header.stamp.sec, m.header.stamp.nanosec): m
                for m in decoded(tmp_path / 'evaluated', bags.POSTURE)}
-    processes([script('posture_estimator'), '--ros-args', '--params-file', str(PUMP_YAML)])
+    processes([script('posture_estimator'), '--ros-args', '--params-file', str(config)])
     # The listener subscribes too: wait for the estimator as the second subscriber.
-    assert listener.spin_until(lambda: listener.count_subscribers('/uwb/ranges') >= 2, 10)
+    assert listener.spin_until(lambda: listener.count_subscribers('/uwb/ranges') >= 2, 60)
     # Keep spinning while the bag plays: the listener's queue is only 10 deep.
     # The player must match the estimator, not only the listener, before it starts.
     player = processes([script('epp_bag'), 'play', str(bag), '--fast', '--topics',
                         bags.RANGES, '--subscribers', '2'])
-    assert listener.spin_until(lambda: len(listener.postures) >= expected['solved'], 20)
-    assert player.wait(10) == 0
-    assert len(listener.postures) == expected['solved']
+    assert listener.spin_until(lambda: len(listener.postures) >= expected['solved'], 120)
+    assert player.wait(60) == 0
+    listener.spin_until(lambda: False, 1.0)             # nothing more may come
+    assert len(listener.postures) == expected['solved'] > 0
     for live in listener.postures:
         key = (live.header.stamp.sec, live.header.stamp.nanosec)
         reference = offline[key]

@@ -29,15 +29,19 @@ def document(**settings):
     return parsed
 
 
+def parameters(**settings):
+    """Return the ``/**`` parameters of :func:`document`."""
+    return document(**settings)['/**']['ros__parameters']
+
+
 def test_a_files_settings_are_read_as_the_node_reads_them():
-    empty = {'/**': {'ros__parameters': {}}}
-    read = file_settings(empty, SETTINGS)
+    read = file_settings({}, SETTINGS)
     assert read == {name: setting.default for name, setting in SETTINGS.items()}
     assert read['max_angular_rate'] == IntegrityLimits.max_angular_rate
     assert read['range_sigma'] == ESTIMATOR_OPTIONS['sigma']
     # An integer is a number; the packaged file's own values come through.
-    assert file_settings(document(range_sigma=1), ['range_sigma']) == {'range_sigma': 1.0}
-    assert file_settings(document(), ['max_angular_rate'])['max_angular_rate'] == 0.35
+    assert file_settings(parameters(range_sigma=1), ['range_sigma']) == {'range_sigma': 1.0}
+    assert file_settings(parameters(), ['max_angular_rate'])['max_angular_rate'] == 0.35
 
 
 @pytest.mark.parametrize('name, value, says', [
@@ -51,7 +55,7 @@ def test_a_files_settings_are_read_as_the_node_reads_them():
 ])
 def test_a_value_the_node_would_refuse_is_refused_everywhere(name, value, says):
     with pytest.raises(ValueError, match=says):
-        file_settings(document(**{name: value}), [name])
+        file_settings(parameters(**{name: value}), [name])
     if name in ('range_sigma', 'learn_noise', 'nlos_fraction'):
         with pytest.raises(calibrate.CalibrationError, match=says):
             calibrate.noise_settings(document(**{name: value}))
@@ -67,3 +71,23 @@ def test_the_tools_take_the_schemas_defaults_and_names():
     options = estimator_settings({name: setting.default for name, setting in SETTINGS.items()})
     assert options['method'] == 'cepp' and options['sigma'] == SETTINGS['range_sigma'].default
     assert parameter_name('sigma: must be > 0') == 'range_sigma: must be > 0'
+
+
+def test_estimator_options_read_a_file_as_the_node_does(tmp_path):
+    from epp_ros.config import ConfigError
+    from epp_ros.settings import estimator_options
+    path = tmp_path / 'pump.yaml'
+    path.write_text(yaml.safe_dump(document(method='chain', range_sigma=0.3, learn_noise=False,
+                                            max_angular_rate=0.5, residual_error=3.0)))
+    options = estimator_options(path)
+    assert options['method'] == 'chain' and options['sigma'] == 0.3
+    assert options['learn_noise'] is False and options['integrity'].max_angular_rate == 0.5
+    assert options['thresholds'].residual_error == 3.0
+    assert estimator_options(path, method='cepp')['method'] == 'cepp'
+    assert estimator_options()['method'] == 'cepp'          # the packaged file's
+    path.write_text(yaml.safe_dump(document(range_sigma=-1.0)))
+    with pytest.raises(ConfigError, match=r'range_sigma: must be in \[1e-06, 100\]'):
+        estimator_options(path)
+    path.write_text(yaml.safe_dump(document(method='tpsm')))
+    with pytest.raises(ConfigError, match='method'):
+        estimator_options(path)

@@ -25,7 +25,9 @@ epp_bag: synthesise, record, replay, evaluate and describe rosbag2 files.
     epp_bag reindex BAG
 
 A bag that cannot be used (missing, truncated, without the topic, another message type)
-gives one error line and exit status 2.
+gives one error line and exit status 2. eval reads the estimator's settings from --config
+(the packaged pump.yaml by default) as posture_estimator does (epp_ros.settings); --method
+replaces the file's method.
 
 synth draws each cycle's ranges with ``--sigma``/``--nlos``/``--drop`` noise; with
 ``--field NAMES`` (comma-separated presets of ``epp_ros.core.simulate.FIELD_EFFECTS``) or
@@ -55,6 +57,7 @@ from epp_ros.arguments import (add_field_options, field_effects_of, integer, num
 from epp_ros.config import ConfigError, load_pump_config
 from epp_ros.core import RANGE_METHODS
 from epp_ros.core.simulate import FieldSimulator, make_motion
+from epp_ros.settings import estimator_options
 from epp_ros.uwb.emulation import anchor_rounds
 from epp_ros.uwb.formats import FORMATS
 import numpy as np
@@ -122,8 +125,11 @@ def parse_args(argv):
                            'up to 2 s for one)')
     evaluate = commands.add_parser('eval', help='run an estimator offline over a bag')
     evaluate.add_argument('bag')
-    evaluate.add_argument('--method', choices=RANGE_METHODS, default='cepp')
-    evaluate.add_argument('--config')
+    evaluate.add_argument('--method', choices=RANGE_METHODS,
+                          help="instead of the config's method")
+    evaluate.add_argument('--config', help='the pump.yaml: its pump and the estimator '
+                                           'settings, as posture_estimator reads them '
+                                           '(default: the packaged one)')
     evaluate.add_argument('--out', help='write a copy with /arm_posture added')
     evaluate.add_argument('--plot', help='PNG of the error over time')
     evaluate.add_argument('--json', action='store_true')
@@ -212,7 +218,9 @@ def run_reindex(args):
 
 def run_eval(args):
     config = load_pump_config(args.config)
-    result = bags.evaluate(args.bag, config, args.method, out=args.out, salvage=args.salvage)
+    options = estimator_options(args.config, args.method)
+    result = bags.evaluate(args.bag, config, options.pop('method'), out=args.out,
+                           salvage=args.salvage, **options)
     if result['damage']:
         print(f'epp_bag: salvaged {args.bag}: {result["damage"]}', file=sys.stderr)
     joints = ' '.join(f'{e:.3f}' for e in result['joint_rmse_m']) or '-'
@@ -231,7 +239,7 @@ def run_eval(args):
         axis.plot(seconds, result['frame_rmse_m'])
         axis.set_xlabel('time [s]')
         axis.set_ylabel('frame RMSE [m]')
-        axis.set_title(f'{args.method}: RMSE {result["rmse_m"]:.3f} m')
+        axis.set_title(f'{result["method"]}: RMSE {result["rmse_m"]:.3f} m')
         axis.grid(True)
         figure.savefig(args.plot, dpi=100, bbox_inches='tight')
         pyplot.close(figure)

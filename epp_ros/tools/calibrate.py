@@ -162,8 +162,9 @@ def noise_settings(document):
     """
     from epp_ros.settings import file_settings
     try:
-        told = file_settings(document, ('range_sigma', 'tag_sigma', 'nlos_fraction',
-                                        'nlos_gamma', 'learn_noise'))
+        told = file_settings(document['/**']['ros__parameters'],
+                             ('range_sigma', 'tag_sigma', 'nlos_fraction', 'nlos_gamma',
+                              'learn_noise'))
     except ValueError as exc:
         raise CalibrationError(str(exc)) from None
     # learn_noise as the estimator: nobody knows a site's noise

@@ -47,14 +47,10 @@ def parse_args(argv):
 
 def configured_rate(path):
     """Return the estimator's max_angular_rate in a pump.yaml, as the estimator reads it."""
-    from pathlib import Path
-
-    from epp_ros.config import ConfigError, default_config_path
+    from epp_ros.config import ConfigError, read_parameters
     from epp_ros.settings import file_settings
-    import yaml
-    document = yaml.safe_load(Path(path or default_config_path()).read_text())
     try:
-        return file_settings(document, ['max_angular_rate'])['max_angular_rate']
+        return file_settings(read_parameters(path), ['max_angular_rate'])['max_angular_rate']
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
 
