@@ -19,7 +19,8 @@ Each setting's default, meaning, whether it can change while the node runs, and 
 posture_estimator declares its parameters from :data:`SETTINGS`; the tools that read a
 pump.yaml's settings (``epp_bag eval`` through :func:`estimator_options`, ``epp_urdf``,
 ``epp_calibrate``) read them through :func:`file_settings`, so a value means the same,
-with the same default and range, wherever it is read. ROS-free: the node turns a :class:`Setting` into its descriptor.
+with the same default and range, wherever it is read. ROS-free: the node turns a
+:class:`Setting` into its descriptor.
 """
 from dataclasses import dataclass
 import math
