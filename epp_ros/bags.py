@@ -583,9 +583,8 @@ def read_all(path, salvage=False, topics=None):
                     _count(damage.undecodable, connection.topic)
                     continue
                 _count(damage.read, connection.topic)
-                profiles = getattr(connection.ext, 'offered_qos_profiles', None)
                 messages.append((connection.topic, connection.msgtype, t_ns, bytes(raw),
-                                 profiles[0] if profiles else None))
+                                 _offered_qos(connection)))
         except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds on bad files
             damage.error = str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__
         if not damage.intact and not salvage:

@@ -97,7 +97,8 @@ def _valid_cells(row):
     """Return the cells of what a user gets of a row: '-' where its frames are not judged."""
     if row.published_fraction is None:
         return '- | - | -'
-    return (f'{_ratio(row.valid_rmse_m, row.crlb_m)} | {row.published_fraction:.0%} | '
+    ratio = _ratio(row.valid_rmse_m, row.crlb_m) if row.published_fraction else '-'
+    return (f'{ratio} | {row.published_fraction:.0%} | '
             f'{row.wrong_valid} / {row.confidently_wrong}')
 
 
