@@ -18,7 +18,7 @@ Set up the project's own venv if needed, then run the demo or the test suite.
 
     python3 dev.py demo [epp_demo options]    # live demo on the built-in simulated pump
     python3 dev.py test [pytest options]      # the whole test suite
-    python3 dev.py bench [epp_bench options]  # the benchmarks
+    python3 dev.py bench SUITE [options]      # the benchmarks (benchmarks/, not installed)
 
 The venv (.venv/) is rebuilt from requirements.txt only when that file, setup.py,
 setup.cfg or this script changed since the last run, so a second run starts at once.
@@ -75,9 +75,10 @@ def main(argv):
                    str(ROOT / 'config' / 'fastdds_fast_discovery.xml'))
     if command == 'test':
         args = [str(python), '-m', 'pytest'] + rest
+    elif command == 'bench':
+        args = [str(python), '-m', 'benchmarks'] + rest
     else:
-        script = {'demo': 'epp_demo', 'bench': 'epp_bench'}[command]
-        args = [str(VENV / 'bin' / script)] + rest
+        args = [str(VENV / 'bin' / 'epp_demo')] + rest
     child = subprocess.Popen(args, cwd=ROOT, env=env)
     while True:
         try:

@@ -31,8 +31,8 @@ setup(
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'pyserial', 'PyYAML', 'rich', 'rosbags'],
     # test: what colcon test looks for to run pytest (the ament_python template's
-    # tests_require, which setuptools 80 dropped). bench: epp_bench paper's SDP baseline
-    # and plots; never needed at runtime.
+    # tests_require, which setuptools 80 dropped). bench: the SDP baseline and the
+    # benchmarks' plots (python3 dev.py bench); never needed at runtime.
     extras_require={'test': ['pytest', 'hypothesis', 'yourdfpy'],
                     'bench': ['cvxpy', 'matplotlib']},
     zip_safe=True,
@@ -45,11 +45,10 @@ setup(
             'uwb_driver = epp_ros.nodes.entry:uwb_driver',
             'posture_estimator = epp_ros.nodes.entry:posture_estimator',
             'uwb_emulator = epp_ros.nodes.entry:uwb_emulator',
-            'epp_demo = epp_ros.tools.demo:main',
-            'epp_bench = epp_ros.tools.bench:main',
-            'epp_bag = epp_ros.tools.bag:main',
-            'epp_calibrate = epp_ros.tools.calibrate:main',
-            'epp_urdf = epp_ros.tools.urdf:main',
+            'epp_demo = epp_ros.cli.demo:main',
+            'epp_bag = epp_ros.cli.bag:main',
+            'epp_calibrate = epp_ros.cli.calibrate:main',
+            'epp_urdf = epp_ros.cli.urdf:main',
         ],
     },
 )

@@ -11,6 +11,7 @@
 # distributed under the License is distributed on an "AS IS" BASIS,
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
+# limitations under the License.
 
 """
 epp_calibrate on a recording with a fraction of its ranges wild (uniform 0-80 m).
@@ -30,10 +31,10 @@ import sys
 import tempfile
 import time
 
-from epp_ros import bags
-from epp_ros.config import default_config_path, load_pump_config
-from epp_ros.tools import bag as bag_tool
-from epp_ros.tools import calibrate
+from epp_ros.app import bags
+from epp_ros.app.config import default_config_path, load_pump_config
+from epp_ros.cli import bag as bag_tool
+from epp_ros.cli import calibrate
 import numpy as np
 
 
@@ -91,7 +92,7 @@ def main():
 def _calibrated(bag, config_path):
     """Run epp_calibrate --json on a bag; its JSON result and exit status."""
     import json
-    result = subprocess.run([sys.executable, '-m', 'epp_ros.tools.calibrate', str(bag),
+    result = subprocess.run([sys.executable, '-m', 'epp_ros.cli.calibrate', str(bag),
                              '--config', str(config_path), '--json'],
                             capture_output=True, text=True)
     if not result.stdout.strip():

@@ -18,7 +18,7 @@ What ``nearest_edm``'s stopping rule costs the EDM estimators, side by side in o
 
     python3 benchmarks/nedm_stopping.py [--reference REV] [--seconds S] [--cases a,b]
 
-Runs epp1, epp2 and cepp on frames of ``epp_bench field`` cases twice, frame by frame in
+Runs epp1, epp2 and cepp on frames of ``python3 dev.py bench field`` cases twice, frame by frame in
 turn: with this checkout's ``nearest_edm`` and with the one at git revision ``REV``
 (default cb73d97, the last with the old rule: relative change of sqrt(f + c p) <= tol).
 Prints per method and case the median and p99 CPU time per frame, the ratio of the two,
@@ -35,9 +35,11 @@ import types
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from epp_ros.core import epp, nedm, PostureEstimator  # noqa: E402,I100
-from epp_ros.core.simulate import field_effects, simulate_field, truck_pump  # noqa: E402
-from epp_ros.tools import field_bench  # noqa: E402
+from benchmarks import field_bench  # noqa: E402
+from epp_ros.core import PostureEstimator  # noqa: E402,I100
+from epp_ros.core.estimation.methods import epp  # noqa: E402
+from epp_ros.core.simulation import field_effects, simulate_field, truck_pump  # noqa: E402
+from epp_ros.core.solvers import nedm  # noqa: E402
 import numpy as np  # noqa: E402
 
 

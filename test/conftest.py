@@ -40,11 +40,22 @@ _configure_ros_environment()
 # Fixtures of the multi-process tests (imported here, after the environment is set).
 import pytest  # noqa: E402
 
+#: A test that uses one of these runs processes or speaks DDS: it is a system test.
+SYSTEM_FIXTURES = {'processes', 'listener', 'fresh_listener', 'install'}
+
+
+def pytest_collection_modifyitems(items):
+    """Mark the tests under test/system/, and any test that starts processes, ``system``."""
+    for item in items:
+        if ('system' in Path(item.path).relative_to(HERE).parts[:1]
+                or SYSTEM_FIXTURES & set(getattr(item, 'fixturenames', ()))):
+            item.add_marker(pytest.mark.system)
+
 
 @pytest.fixture(scope='module')
 def listener():
     import rclpy
-    from system import Listener
+    from ros_processes import Listener
     rclpy.init()
     node = Listener()
     yield node
@@ -61,7 +72,7 @@ def fresh_listener(listener):
 
 @pytest.fixture
 def processes():
-    from system import Processes
+    from ros_processes import Processes
     started = Processes()
     yield started
     started.stop_all()

@@ -13,11 +13,11 @@
 # limitations under the License.
 
 """Plain numerical library of epp_ros: geometry, estimators, simulation. No ROS imports."""
-from .calibrate import calibrate, CalibrationResult
-from .estimators import METHODS, PostureEstimator, RANGE_METHODS
-from .model import BoomModel
-from .nedm import nearest_edm
-from .survey import survey_anchors, SurveyResult
+from epp_ros.core.calibration.fit import calibrate, CalibrationResult
+from epp_ros.core.calibration.survey import survey_anchors, SurveyResult
+from epp_ros.core.estimation.estimators import METHODS, PostureEstimator, RANGE_METHODS
+from epp_ros.core.model.boom import BoomModel
+from epp_ros.core.solvers.nedm import nearest_edm
 
 __all__ = ['BoomModel', 'PostureEstimator', 'METHODS', 'RANGE_METHODS', 'nearest_edm',
            'calibrate', 'CalibrationResult', 'survey_anchors', 'SurveyResult']

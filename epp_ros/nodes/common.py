@@ -20,8 +20,8 @@ import sys
 import tempfile
 
 from builtin_interfaces.msg import Duration, Time
-from epp_ros import contract
-from epp_ros.config import ConfigError, pump_config_from_parameters, PUMP_PARAMETERS
+from epp_ros.app import contract
+from epp_ros.app.config import ConfigError, pump_config_from_parameters, PUMP_PARAMETERS
 from epp_ros.nodes.stopping import ignore_signals, shutdown_on_signals
 from geometry_msgs.msg import Point, Pose, PoseArray
 from rcl_interfaces.msg import ParameterDescriptor
@@ -37,7 +37,7 @@ import yaml
 
 
 def qos(topic):
-    """Return the rclpy QoS profile of a :class:`epp_ros.contract.Topic`."""
+    """Return the rclpy QoS profile of a :class:`epp_ros.app.contract.Topic`."""
     reliability = ReliabilityPolicy.RELIABLE if topic.reliable else \
         ReliabilityPolicy.BEST_EFFORT
     durability = DurabilityPolicy.TRANSIENT_LOCAL if topic.latched else \
@@ -49,7 +49,7 @@ def qos(topic):
                       history=HistoryPolicy.KEEP_LAST, depth=topic.depth)
 
 
-#: The profiles of the message contract (``epp_ros.contract``), by use.
+#: The profiles of the message contract (``epp_ros.app.contract``), by use.
 RANGES_QOS = qos(contract.RANGES)
 RANGES_INPUT_QOS = qos(contract.RANGES_INPUT)
 #: The estimator's choice of input profile (its read-only ``ranges_qos`` parameter).

@@ -23,7 +23,7 @@ anchor id is another configured tag's), ``header.stamp`` the receive time of the
 range, ``effort[i]`` how long before the stamp range i was received (s, NaN where missing),
 ``velocity`` empty, and last the frame's number (``"frame"``: 1, 2, 3, ... since the
 driver started, as its diagnostics' ``frames`` count them), from which a receiver counts
-what it lost (``epp_ros.contract``). It never publishes on ``joint_states``.
+what it lost (``epp_ros.app.contract``). It never publishes on ``joint_states``.
 Anchor-anchor ranges (TREK1000 ``ma`` lines) go to ``uwb/anchor_ranges``, one message per
 line: ``name[i] = "<anchor>:<anchor>"`` (measuring anchor first), ``position[i]`` metres,
 stamped with the line's receive time; implausible ones and unknown anchors are dropped and
@@ -37,10 +37,10 @@ import sys
 import threading
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from epp_ros import contract
-from epp_ros.config import ConfigError, listen_address, normalise_device_id, PROTOCOLS, Source
-from epp_ros.nodes.common import (declare, declare_pump_parameters, pump_id, qos,
-                                  RANGES_QOS, run_node, StartupError, to_time)
+from epp_ros.app import contract
+from epp_ros.app.config import ConfigError, listen_address, normalise_device_id, PROTOCOLS, Source
+from epp_ros.nodes.common import (declare, declare_pump_parameters, pump_id, qos, RANGES_QOS,
+                                  run_node, StartupError, to_time)
 from epp_ros.uwb.decoder import PeerDecoders
 from epp_ros.uwb.formats import anchor_slot_problem
 from epp_ros.uwb.frames import FrameAssembler, MAX_RANGE, MIN_RANGE
@@ -152,7 +152,7 @@ class UwbDriver(Node):
         message = JointState()
         message.header.stamp = to_time(frame.stamp)
         message.header.frame_id = self.config.frame_id
-        message.name, message.position, message.effort = frame.labelled(self.config)
+        message.name, message.position, message.effort = contract.frame_fields(frame, self.config)
         self.publisher.publish(message)
         self._last_frame = self._now()
 
@@ -163,7 +163,7 @@ class UwbDriver(Node):
         message = JointState()
         message.header.stamp = to_time(anchor_round.stamp)
         message.header.frame_id = self.config.frame_id
-        message.name, message.position = anchor_round.labelled(self.config)
+        message.name, message.position = contract.anchor_round_fields(anchor_round, self.config)
         self.anchor_publisher.publish(message)
 
     def _publish_diagnostics(self):

@@ -27,8 +27,8 @@ stamped with the node's clock (simulated time with ``use_sim_time``), which also
 cycles and measures ``--duration``.
 
 The ranges carry ``--sigma``/``--nlos``/``--drop`` noise, drawn anew each cycle. With
-``--field NAMES`` (presets of :data:`epp_ros.core.simulate.FIELD_EFFECTS`, comma-separated)
-or ``--motion joystick`` they come from :class:`epp_ros.core.simulate.FieldSimulator`
+``--field NAMES`` (presets of :data:`epp_ros.core.simulation.FIELD_EFFECTS`, comma-separated)
+or ``--motion joystick`` they come from :class:`epp_ros.core.simulation.simulate.FieldSimulator`
 instead: the presets' effects, or, without ``--field``, the same noise as above. ``--field``
 replaces the noise options, so giving both is refused.
 
@@ -40,12 +40,11 @@ ranging cycle, then one round a second (:func:`epp_ros.uwb.emulation.anchor_roun
 """
 import sys
 
-from epp_ros import contract
-from epp_ros.arguments import (add_field_options, DURATION_S, field_effects_of, FRACTION,
-                               host_port, NOISE_M, Parser, RATE_HZ, SEED, settle_noise_options)
-from epp_ros.config import ConfigError, load_pump_config
-from epp_ros.core.simulate import (FieldSimulator, make_motion, Motion, RangeNoise,
-                                   working_cycle)
+from epp_ros.app import contract
+from epp_ros.app.config import ConfigError, load_pump_config
+from epp_ros.cli.arguments import (add_field_options, DURATION_S, field_effects_of, FRACTION,
+                                   host_port, NOISE_M, Parser, RATE_HZ, SEED, settle_noise_options)
+from epp_ros.core.simulation import FieldSimulator, make_motion, Motion, RangeNoise, working_cycle
 from epp_ros.nodes.common import posture_message, POSTURE_QOS, run_node
 from epp_ros.nodes.stopping import shutdown_on_signals
 from epp_ros.uwb.emulation import (anchor_lines, anchor_rounds, channel_devices, corrupt,

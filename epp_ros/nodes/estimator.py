@@ -42,10 +42,10 @@ reason; after ``reset_after_failures`` frames in a row that could not be solved 
 fit, the estimator starts cold. Which frames are solved at all is ``core.frame_policy``'s:
 a stamp not newer than the last is ignored and counted, one more than 1 s older is a clock
 jump and the estimator starts over, a zero stamp is malformed. Those steps are
-``epp_ros.pipeline``'s, which ``epp_bag eval`` takes too. Topic names are relative:
+``epp_ros.app.pipeline``'s, which ``epp_bag eval`` takes too. Topic names are relative:
 ``-r __ns:=/pump7`` runs one per pump.
 
-Parameters (``epp_ros.settings.SETTINGS``) are live: a change is checked as at start
+Parameters (``epp_ros.app.settings.SETTINGS``) are live: a change is checked as at start
 (refused with the reason otherwise) and applies from the next frame; a new ``method``
 starts cold, which ``/diagnostics`` counts. The pump's description and the angle sensors'
 names are read-only.
@@ -53,19 +53,19 @@ names are read-only.
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from epp_ros.angles import AngleSamples
-from epp_ros.config import PUMP_PARAMETERS
-from epp_ros.contract import (ANGLES, DIAGNOSTICS, JOINT_STATES, MARKERS, POSTURE, RANGES,
-                              ROBOT_DESCRIPTION)
+from epp_ros.app.angles import AngleSamples
+from epp_ros.app.config import PUMP_PARAMETERS
+from epp_ros.app.contract import (ANGLES, DIAGNOSTICS, JOINT_STATES, MARKERS, POSTURE, RANGES,
+                                  ROBOT_DESCRIPTION)
+from epp_ros.app.health import assess, grade
+from epp_ros.app.pipeline import RangePipeline
+from epp_ros.app.robot_description import joint_names, joint_positions, urdf
+from epp_ros.app.settings import estimator_settings, parameter_name, SETTINGS
 from epp_ros.core import METHODS, PostureEstimator
-from epp_ros.health import assess, grade
 from epp_ros.nodes.common import (declare, declare_pump_parameters, posture_markers,
                                   posture_message, POSTURE_QOS, pump_id, qos,
-                                  RANGES_INPUT_PROFILES, RANGES_INPUT_QOS, run_node,
-                                  StartupError, to_seconds, to_time)
-from epp_ros.pipeline import RangePipeline
-from epp_ros.robot_description import joint_names, joint_positions, urdf
-from epp_ros.settings import estimator_settings, parameter_name, SETTINGS
+                                  RANGES_INPUT_PROFILES, RANGES_INPUT_QOS, run_node, StartupError,
+                                  to_seconds, to_time)
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, SetParametersResult
 from rclpy.node import Node
@@ -80,7 +80,7 @@ SILENT_AFTER = 1.0
 
 
 def descriptor(setting):
-    """Return the ParameterDescriptor keywords of a :class:`~epp_ros.settings.Setting`."""
+    """Return the ParameterDescriptor keywords of a :class:`~epp_ros.app.settings.Setting`."""
     extra = {'read_only': not setting.live}
     if setting.low is None:
         return extra

@@ -80,7 +80,7 @@ def cycle_lines(config, ranges, protocol, sequence=0, rx_power=-80.0):
 
     Parameters
     ----------
-    config : epp_ros.config.PumpConfig
+    config : epp_ros.app.config.PumpConfig
         The pump: device ids and anchor positions.
     ranges : ndarray, shape (p, m)
         Metres; NaN links are not reported.
@@ -162,7 +162,7 @@ def anchor_lines(config, ranges, protocol, sequence=0):
 
     Parameters
     ----------
-    config : epp_ros.config.PumpConfig
+    config : epp_ros.app.config.PumpConfig
         The pump: anchor ids and positions.
     ranges : ndarray, shape (m, m)
         Metres, row the measuring anchor; NaN pairs are not reported.

@@ -34,7 +34,6 @@ from collections import Counter
 from dataclasses import dataclass
 import math
 
-from epp_ros import contract
 import numpy as np
 
 __all__ = ['Frame', 'FrameAssembler', 'AnchorRound', 'MIN_RANGE', 'MAX_RANGE']
@@ -64,40 +63,6 @@ class Frame:
     #: 1, 2, 3, ... in the order the assembler closed the frames; None: not numbered
     number: int = None
 
-    def labelled(self, config):
-        """
-        Return the frame as ``uwb/ranges`` carries it (``epp_ros.contract``).
-
-        A numbered frame carries its number last, as ``contract.FRAME_NUMBER``.
-
-        Parameters
-        ----------
-        config : epp_ros.config.PumpConfig
-            The pump: the names of the links.
-
-        Returns
-        -------
-        names : list of str
-            Every ``"<tag>:<anchor>"`` pair, tag-major, then ``"<tag>:<tag>"`` for each
-            tag-tag range reported, then the number.
-        ranges : list of float
-            Metres, NaN where a pair did not report; then the number.
-        ages : list of float
-            Seconds before ``stamp`` each range was received, NaN where it is missing;
-            then 0.
-
-        """
-        rows, columns = np.nonzero(np.isfinite(self.tag_ranges))
-        names = config.link_names + [config.tag_link_name(row, column)
-                                     for row, column in zip(rows, columns)]
-        ranges = np.concatenate([self.ranges.ravel(), self.tag_ranges[rows, columns]])
-        received = np.concatenate([self.received.ravel(), self.tag_received[rows, columns]])
-        ages = contract.range_ages(self.stamp, received).tolist()
-        if self.number is None:
-            return names, ranges.tolist(), ages
-        return ([*names, contract.FRAME_NUMBER], [*ranges.tolist(), float(self.number)],
-                [*ages, 0.0])
-
 
 @dataclass
 class AnchorRound:
@@ -112,26 +77,6 @@ class AnchorRound:
     #: metres
     ranges: list
 
-    def labelled(self, config):
-        """
-        Return the round as ``uwb/anchor_ranges`` carries it (``epp_ros.contract``).
-
-        Parameters
-        ----------
-        config : epp_ros.config.PumpConfig
-            The pump: the anchors' names.
-
-        Returns
-        -------
-        names : list of str
-            ``"<anchor>:<anchor>"``, the measuring anchor first.
-        ranges : list of float
-            Metres.
-
-        """
-        return (contract.anchor_range_names(config.anchor_names, self.rows, self.columns),
-                [float(value) for value in self.ranges])
-
 
 class FrameAssembler:
     """
@@ -139,7 +84,7 @@ class FrameAssembler:
 
     Parameters
     ----------
-    config : epp_ros.config.PumpConfig
+    config : epp_ros.app.config.PumpConfig
     frame_period : float
         Longest cycle, seconds.
     min_range, max_range : float

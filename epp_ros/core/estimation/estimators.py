@@ -1,0 +1,630 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Posture estimators behind one interface, chosen by name.
+
+``PostureEstimator(model, method)`` turns each frame of tag-anchor ranges (p, m) into joint
+positions (p, 3), keeping the previous estimate as the warm start. Methods:
+
+- ``epp1``, ``epp2``, ``cepp``: the paper's NEDM estimators (``core.epp``): in 3-D without
+  and with the arm lengths, and in the boom's vertical plane.
+- ``chain``: least squares over the slew and the pitches (``core.chain``), at the
+  Cramér–Rao bound, robust to NLOS ranges; also fuses tag-tag ranges and angle sensors.
+- the paper's baselines (``core.baselines``): ``srls`` (each tag alone), ``sdp`` (the
+  Biswas–Ye relaxation; needs the optional cvxpy) and ``tpsm`` (angle sensors only).
+"""
+from dataclasses import replace
+import inspect
+import time
+
+from epp_ros.core.estimation.bias_learning import BiasLearner
+from epp_ros.core.estimation.integrity import ERROR, Integrity, IntegrityLimits, OK, Thresholds
+from epp_ros.core.estimation.methods.baselines import SDPMethod, SRLSMethod, TPSMMethod
+from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMethod
+from epp_ros.core.estimation.methods.epp import CEPP, EPP1, EPP2
+from epp_ros.core.estimation.methods.track import TrackMethod
+from epp_ros.core.estimation.noise_learning import frame_scale, NoiseLearner, RangeNoiseEstimate
+from epp_ros.core.estimation.posture_method import FrameResult
+from epp_ros.core.model.bounds import RangeBiasPrior
+from epp_ros.core.model.measurements import Measurements, plausible_limits, Residuals, SensorNoise
+from epp_ros.core.model.nlos import NlosMixture
+from epp_ros.core.solvers.multilateration import cold_start_guess
+import numpy as np
+
+__all__ = ['PostureEstimator', 'METHODS', 'RANGE_METHODS', 'ESTIMATOR_OPTIONS',
+           'accepted_options']
+
+
+METHODS = {'epp1': EPP1, 'epp2': EPP2, 'cepp': CEPP, 'chain': ChainMethod,
+           'track': TrackMethod, 'srls': SRLSMethod, 'sdp': SDPMethod, 'tpsm': TPSMMethod}
+
+#: Methods that work from UWB ranges alone (what the estimator node receives).
+RANGE_METHODS = [name for name, cls in METHODS.items() if 'ranges' in cls.inputs]
+
+
+#: Options of the estimator itself, given to every method that accepts them: what it is
+#: told about the noise (which the integrity checks use for every method) and the ground.
+ESTIMATOR_OPTIONS = {'sigma': 0.1, 'eta': 0.0, 'tag_sigma': None, 'pitch_sigma': np.radians(0.5),
+                     'slew_sigma': np.radians(0.5), 'nlos_fraction': 0.1, 'nlos_gamma': 1.0,
+                     'lowest_joint': -0.5, 'link_bias_std': 0.1, 'common_bias_std': 0.25,
+                     'bias_slope_std': 0.01}
+
+
+def accepted_options(method):
+    """Names of the keyword options ``PostureEstimator(model, method, ...)`` takes."""
+    return set(ESTIMATOR_OPTIONS) | _constructor_names(method)
+
+
+def _constructor_names(method):
+    """Names of the options the method's own constructor (and its bases') take."""
+    names = set()
+    cls = METHODS[method]
+    for cls in cls.__mro__ + getattr(cls, 'delegates', ()):
+        if '__init__' in vars(cls):
+            names |= {name for name, parameter in
+                      inspect.signature(cls.__init__).parameters.items()
+                      if parameter.kind in (parameter.KEYWORD_ONLY,
+                                            parameter.POSITIONAL_OR_KEYWORD)
+                      and name not in ('self', 'model')}
+    return names
+
+
+def _told(options):
+    """Return the estimator options with their defaults, checked (ValueError naming the option)."""
+    told = {name: options.get(name, default) for name, default in ESTIMATOR_OPTIONS.items()}
+    for name, value in told.items():
+        if value is not None and not (isinstance(value, (int, float, np.integer, np.floating))
+                                      and np.isfinite(value)):
+            raise ValueError(f'{name}: must be a finite number, got {value!r}')
+    for name in ('eta', 'link_bias_std', 'common_bias_std', 'bias_slope_std'):
+        if told[name] < 0:
+            raise ValueError(f'{name}: must be >= 0, got {told[name]}')
+    if told['tag_sigma'] is None:
+        told['tag_sigma'] = told['sigma']
+    return told
+
+
+def _integrity(model, told, limits, thresholds):
+    """Return the :class:`Integrity` of the noise the estimator is told."""
+    noise = SensorNoise(float(told['sigma']), float(told['tag_sigma']),
+                        float(told['pitch_sigma']), float(told['slew_sigma']))
+    nlos = NlosMixture(float(told['nlos_fraction']), float(told['nlos_gamma']))
+    bias = RangeBiasPrior(float(told['link_bias_std']), float(told['common_bias_std']),
+                          float(told['bias_slope_std']))
+    return Integrity(model, noise, nlos, told['eta'], told['lowest_joint'], limits, thresholds,
+                     bias)
+
+
+class PostureEstimator:
+    """
+    Frame-by-frame boom posture from UWB ranges (and, for some methods, angle sensors).
+
+    Every estimate is judged by :class:`~epp_ros.core.estimation.integrity.Integrity` before it is
+    called valid or kept as the next frame's warm start: a frame whose residuals the noise
+    cannot explain, whose posture it does not determine, or which puts the boom where it
+    cannot be, is reported invalid with its reason. When the warm start looks lost the
+    frame is also solved from scratch, and that fit taken if it passes.
+
+    Parameters
+    ----------
+    model : BoomModel
+    method : str
+        One of ``METHODS``: ``"epp1"``, ``"epp2"``, ``"cepp"``, ``"chain"``, or a baseline,
+        ``"srls"``, ``"sdp"``, ``"tpsm"``.
+    integrity : IntegrityLimits
+        How the consistency and observability checks decide.
+    thresholds : Thresholds
+        WARN and ERROR levels; a frame at ERROR is not valid.
+    reset_after_failures : int
+        Frames in a row that could not be solved or did not fit, after which the warm
+        start is dropped.
+    learn_noise : bool
+        Learn the range noise (``sigma``, ``eta``, ``nlos_fraction``, ``nlos_gamma``) from
+        the residuals while running (``core.noise_learning``), starting from the told
+        values, and the range bias common to all links (``core.bias_learning``), starting
+        from none; the solver and the integrity checks then use what was learned. False:
+        the told values stay (benchmarks that tell the truth).
+    **options
+        What the estimator is told, for every method (``ESTIMATOR_OPTIONS``): ``sigma``
+        (tag-anchor range standard deviation, 0.1 m), ``eta`` (multiplicative range
+        noise, 0), ``tag_sigma`` (tag-tag ranges; ``sigma``), ``pitch_sigma`` and
+        ``slew_sigma`` (angle sensors, 0.5 deg), ``nlos_fraction`` (0.1) and ``nlos_gamma``
+        (1 m), ``lowest_joint`` (-0.5 m), ``link_bias_std`` (0.1 m), ``common_bias_std``
+        (0.25 m) and ``bias_slope_std`` (0.01 m/m): what is not known of the ranges' biases
+        once the model's offsets are taken off, each link's own and the part common to
+        all, an offset and a growth with range (uncalibrated DW1000-class links: see
+        ``core.bounds.RangeBiasPrior``); they add to the predicted joint standard
+        deviations the thresholds judge, and with ``learn_noise`` the common part is
+        learned and taken off the ranges (``core.bias_learning``). And the method's own:
+        ``prior_weight`` (weight of tag-tag distances from the previous pose, default 0;
+        the paper uses 1),
+        ``anchor_weight`` (inf: anchor-anchor distances fixed, the default; a number:
+        weighted), ``tol``, ``max_iter``; CEPP also ``predict_slew`` (default true; false:
+        the paper's plane from the previous pose), ``slew_iterations`` (re-solves after
+        refining the slew, default 0), ``slew_tol``, ``clip_weight``,
+        ``irls_iterations`` (NLOS reweighting, default 2; 0 is the paper's CEPP and turns
+        off the rest of this list), ``noise_weights`` (links weighted by the noise model),
+        ``silent_weight`` (a silent tag keeps the previous bends), ``cold_search`` and
+        ``fold_search`` (searches beyond the paper's start); chain:
+        ``tol``, ``max_iter``, ``slew_starts``, ``screen_iterations``; track: the chain's,
+        ``process_noise`` (starting acceleration spectral density, rad^2/s^3),
+        ``adapt_process_noise``, ``max_rate``, ``max_hypotheses``; sdp: ``solver``.
+
+    Attributes
+    ----------
+    last_diagnostics : FrameResult
+        Of the last :meth:`update` (None before the first), readable as a mapping:
+        ``status`` (``"ok"``, ``"insufficient_data"``,
+        ``"solver_failed"``, or the integrity's ``"inconsistent"``, ``"ambiguous"``,
+        ``"unobservable"``, ``"implausible"``), ``valid`` (positions come from this frame
+        and may be published), ``level`` (0 OK, 1 WARN, 2 ERROR) and ``message``,
+        ``method``, ``cold_start``, ``reacquired`` (a fresh solve replaced the warm one),
+        ``arm_length_error`` (p,) and ``section_lengths`` (p,) in metres,
+        ``range_residual_rms`` (m), ``missing_links`` (including ``implausible_links``,
+        those dropped as longer than the geometry allows), ``iterations``, ``solve_time``
+        (s), the integrity's statistics (``chi_square``, ``chi_square_limit``,
+        ``nlos_links`` (p, m), ``predicted_rmse`` (m), ``joint_std`` (p,),
+        ``ambiguous_joints``), the method's ``estimate`` (p, 3) whether valid or not,
+        ``noise`` (the range noise in use, :class:`RangeNoiseEstimate`), and solver
+        details (``converged``, ...; track: ``rates`` (p + 1,), ``hypotheses``,
+        ``manoeuvre``).
+
+    """
+
+    def __init__(self, model, method='cepp', *, integrity=IntegrityLimits(),
+                 thresholds=Thresholds(), reset_after_failures=10, learn_noise=True,
+                 **options):
+        if method not in METHODS:
+            raise ValueError(f'method must be one of {sorted(METHODS)}, got {method!r}')
+        self.model = model
+        self.method = method
+        self._settings = {}
+        self._learner = None
+        self._bias_learner = None
+        self.last_diagnostics = None
+        self._configure(integrity=integrity, thresholds=thresholds,
+                        reset_after_failures=reset_after_failures, learn_noise=learn_noise,
+                        options=options)
+        self._limits = plausible_limits(model)
+        self._previous = None           # (joints, stamp, joint_std) last accepted
+        self._warm = None               # the last estimate that fitted its frame
+        self._stamp = None
+        self._second_opinion_stamp = -np.inf
+        self._in_doubt = False
+        self._failures = 0
+
+    def reconfigure(self, *, integrity=None, thresholds=None, reset_after_failures=None,
+                    learn_noise=None, **options):
+        """
+        Change settings from the next frame on, keeping the warm start.
+
+        Takes the constructor's keywords; those not given keep their values. Raises
+        ValueError, leaving the estimator as it was, when the new settings are invalid.
+        """
+        changes = {'integrity': integrity, 'thresholds': thresholds,
+                   'reset_after_failures': reset_after_failures, 'learn_noise': learn_noise}
+        settings = {**self._settings, **{k: v for k, v in changes.items() if v is not None}}
+        settings['options'] = {**self._settings['options'], **options}
+        self._configure(**settings)
+
+    def _configure(self, integrity, thresholds, reset_after_failures, learn_noise, options):
+        """Validate the settings and build the method and the integrity checks from them."""
+        method = self.method
+        unknown = set(options) - accepted_options(method)
+        if unknown:
+            raise ValueError(f'method {method!r} takes no option {sorted(unknown)}; it takes '
+                             f'{sorted(accepted_options(method))}')
+        if isinstance(reset_after_failures, bool) or not isinstance(
+                reset_after_failures, (int, np.integer)) or reset_after_failures < 1:
+            raise ValueError(f'reset_after_failures: must be an integer >= 1, got '
+                             f'{reset_after_failures!r}')
+        if not isinstance(learn_noise, (bool, np.bool_)):
+            raise ValueError(f'learn_noise: must be true or false, got {learn_noise!r}')
+        told = _told(options)
+        checks = _integrity(self.model, told, integrity, thresholds)
+        own = _constructor_names(method)
+        solver = METHODS[method](self.model, **{name: value for name, value
+                                                in {**options, **told}.items() if name in own})
+        self.integrity, self._solver = checks, solver
+        self.reset_after_failures = int(reset_after_failures)
+        configured = RangeNoiseEstimate(told['sigma'], told['eta'], told['nlos_fraction'],
+                                        told['nlos_gamma'])
+        same_bias = all(told[name] == self._told.get(name) for name in (
+            'link_bias_std', 'common_bias_std', 'bias_slope_std')) if self._learner else False
+        keep = (learn_noise and self._learner is not None
+                and self._learner.configured == configured and same_bias)
+        if not keep:            # what was learned from other told values starts over
+            self._learner = NoiseLearner(configured) if learn_noise else None
+            self._bias_learner = BiasLearner(
+                told['common_bias_std'], told['bias_slope_std'], told['link_bias_std'],
+                self.model.n_sections * self.model.n_anchors) if learn_noise else None
+        self._told = told
+        self._settings = {'integrity': integrity, 'thresholds': thresholds,
+                          'reset_after_failures': reset_after_failures,
+                          'learn_noise': bool(learn_noise), 'options': dict(options)}
+        if keep:
+            self._use_noise(self._learner.estimate)
+        self._share_bias()
+
+    @property
+    def noise(self):
+        """Return the range noise in use (:class:`RangeNoiseEstimate`): learned or told."""
+        if self._learner is not None:
+            return self._learner.estimate
+        told = self._told
+        return RangeNoiseEstimate(told['sigma'], told['eta'], told['nlos_fraction'],
+                                  told['nlos_gamma'])
+
+    def _use_noise(self, estimate):
+        """Give the solver and the integrity checks the range noise ``estimate``."""
+        told = {**self._told, **estimate.as_options()}
+        if self._settings['options'].get('tag_sigma') is None:
+            told['tag_sigma'] = estimate.sigma          # tag-tag ranges are UWB ranges too
+        self.integrity = _integrity(self.model, told, self._settings['integrity'],
+                                    self._settings['thresholds'])
+        self._share_bias()
+        if hasattr(self._solver, 'tune'):
+            self._solver.tune(**estimate.as_options())
+
+    def _share_bias(self):
+        """Tell the integrity checks what is still unknown of the learned common bias."""
+        if self._bias_learner is not None:
+            self.integrity.common_covariance = self._bias_learner.covariance()
+
+    @property
+    def range_bias(self):
+        """Return the common range bias taken off (offset m, slope m/m at 20 m), or zeros."""
+        return np.zeros(2) if self._bias_learner is None else self._bias_learner.estimate.copy()
+
+    def _unbiased(self, measurements):
+        """Return ``measurements`` with the learned common bias taken off the ranges."""
+        if self._bias_learner is None or not self._bias_learner.estimate.any():
+            return measurements
+        ranges = measurements.ranges
+        return replace(measurements, ranges=ranges - self._bias_learner.correction(ranges))
+
+    def _learn_bias(self, joints, info, measurements, verdict):
+        """
+        Add a frame's line-of-sight residuals to the common bias learned.
+
+        From frames published, and from those refused only as too uncertain: the prior on
+        the bias alone can make the first frames so, and only frames can shrink it. Each
+        tag is where it was when it ranged (``timed_joints``), for a method that knows.
+        """
+        if self._bias_learner is None or verdict.status not in ('ok', 'unobservable'):
+            return
+        kept = np.isfinite(measurements.ranges)
+        blocked = verdict.values.get('nlos_links')
+        if blocked is not None:
+            kept &= ~np.asarray(blocked, dtype=bool)
+        sigma = self.integrity.link_sigma(measurements)
+        residuals = Residuals(self.model, Measurements.ranges_only(
+            np.where(kept, measurements.ranges, np.nan)), SensorNoise(sigma))
+        slew, pitches = angles_from_joints(self.model, joints)
+        fitted = self.model.ranges(info.get('timed_joints', joints))[kept]
+        scaled = (fitted - measurements.ranges[kept]) / sigma[kept]
+        if self._bias_learner.observe(residuals.jacobian(np.r_[slew, pitches]), sigma[kept],
+                                      scaled, fitted, np.flatnonzero(kept)):
+            self._share_bias()
+
+    def reset(self, joints=None):
+        """
+        Forget the warm start: the next frame is solved from scratch, or from ``joints``.
+
+        Parameters
+        ----------
+        joints : array_like, shape (p, 3), optional
+            A posture to start the next frame from (metres), e.g. a parking pose or one
+            from another source. It seeds the solver only: the checks of the next frame
+            decide whether what follows from it is valid. The noise learned is kept.
+
+        """
+        seed = None
+        if joints is not None:
+            seed = np.array(joints, dtype=float)
+            if seed.shape != (self.model.n_sections, 3) or not np.all(np.isfinite(seed)):
+                raise ValueError(f'joints: must be finite, of shape '
+                                 f'({self.model.n_sections}, 3), got {np.shape(joints)}')
+        self._previous, self._warm = None, seed
+        self._failures = 0
+        self._solver.reset(seed)
+
+    @property
+    def previous(self):
+        """Return the last valid estimate (p, 3), or None."""
+        return None if self._previous is None else self._previous[0].copy()
+
+    def _fallback(self):
+        if self._previous is not None:
+            return self._previous[0].copy()
+        # Nothing known yet: a straight horizontal boom along +x, flagged invalid.
+        return self.model.forward_kinematics(0.0, np.zeros(self.model.n_sections))
+
+    def update(self, ranges, *, tag_ranges=None, pitches=None, slew=None, stamp=None,
+               range_stamps=None):
+        """
+        Estimate the joint positions from one frame of measurements.
+
+        Parameters
+        ----------
+        ranges : array_like, shape (p, m)
+            Tag-anchor distances, metres; row k is the tag on joint k+1, column j anchor j;
+            NaN, inf, negative or impossibly long entries count as missing.
+        tag_ranges : array_like, shape (p, p), optional
+            Tag-tag distances, metres, NaN where not measured.
+        pitches : array_like, shape (p,), optional
+            Inclinometer pitch of each section, radians, NaN where not measured.
+        slew : float, optional
+            Slew encoder angle, radians.
+        stamp : float, optional
+            The frame's time, seconds: how far the boom can have moved since the last
+            accepted posture. Without it frames are ``integrity.frame_period`` apart.
+        range_stamps : array_like, shape (p,), optional
+            When each tag's row of ``ranges`` was measured, seconds on the clock of
+            ``stamp``; NaN: at ``stamp``. Methods without a motion model ignore it.
+
+        Inputs a method does not use are listed in ``last_diagnostics["ignored_inputs"]``.
+
+        Returns
+        -------
+        joints : ndarray, shape (p, 3)
+            Base outward, tip last. Never NaN: a frame that is not valid returns the last
+            valid estimate, and ``last_diagnostics["valid"]`` is False.
+
+        """
+        start = time.perf_counter()
+        stamp = self._frame_time(stamp)
+        p, m = self.model.n_sections, self.model.n_anchors
+        measurements, implausible = Measurements.clean(self.model, ranges, tag_ranges,
+                                                       pitches, slew, self._limits, stamp,
+                                                       range_stamps)
+        measurements = self._unbiased(measurements)
+        valid = np.isfinite(measurements.ranges)
+        diagnostics = {'method': self.method, 'noise': self.noise,
+                       'range_bias': self.range_bias,
+                       'missing_links': int(p * m - valid.sum()),
+                       'implausible_links': implausible, 'cold_start': self._warm is None,
+                       'reacquired': False, 'iterations': 0,
+                       'ignored_inputs': [name for name in measurements.present()
+                                          if name not in self._solver.inputs]}
+        if range_stamps is not None and 'range_stamps' not in self._solver.inputs:
+            diagnostics['ignored_inputs'].append('range_stamps')
+        if not self._solver.enough_information(measurements):
+            return self._reject('insufficient_data', diagnostics, measurements, start)
+        solved = self._solve(measurements, warm=self._warm is not None)
+        if isinstance(solved, str):
+            diagnostics['error'] = solved
+            return self._reject('solver_failed', diagnostics, measurements, start)
+        verdict = self._judge(solved, measurements, stamp)
+        if self._warm is not None and not solved[1].get('searched'):
+            solved, verdict = self._reconsider(solved, verdict, measurements, stamp,
+                                               diagnostics)
+        if self._learner is not None and not self._learner.settled:
+            solved, verdict = self._bootstrap_noise(measurements, stamp, solved, verdict)
+        joints, info = solved
+        self._learn(joints, info, measurements, verdict)
+        self._learn_bias(joints, info, measurements, verdict)
+        diagnostics.update(info, noise=self.noise)       # as learned from this frame
+        if not verdict.lost and hasattr(self._solver, 'accept'):
+            self._solver.accept()           # a motion model takes the fit as its state
+        diagnostics.update(verdict.values, estimate=joints)
+        diagnostics.update(level=verdict.level, message=verdict.message)
+        if not verdict.lost:            # it fits the frame: the next frame's start
+            self._warm = joints.copy()
+        if not verdict.valid:
+            return self._reject(verdict.status, diagnostics, measurements, start, joints)
+        # A fold about as likely widens what later frames allow (Integrity.fold_spread).
+        self._previous = (joints.copy(), stamp, verdict.values['reach_std'])
+        self._failures = 0
+        return self._finish(joints, 'ok', diagnostics, measurements, start)
+
+    def _excess(self, joints, measurements):
+        """Return measured minus fitted tag-anchor ranges and the fitted ones, (n,) each."""
+        fitted = self.model.ranges(joints)
+        measured = np.isfinite(measurements.ranges)
+        return measurements.ranges[measured] - fitted[measured], fitted[measured]
+
+    def _dof(self, info=None):
+        """
+        Return the parameters the frame's fit spent: the chain's angles, or 3 per joint.
+
+        A motion model says how many its prediction did not supply (``fitted_dof``).
+        """
+        if info is not None and 'fitted_dof' in info:
+            return info['fitted_dof']
+        p = self.model.n_sections
+        return p + 1 if getattr(self._solver, 'holds_chain', True) else 3 * p
+
+    def _bootstrap_noise(self, measurements, stamp, solved, verdict, attempts=3):
+        """
+        Before the noise is learned, take the frame's own scale when far above the told one.
+
+        A told sigma ten times too small makes every link look blocked, which can send a
+        cold start to a wrong fit: the frame is solved again with its own scale, at most
+        ``attempts`` times. A smaller scale waits for the window: trusting one frame's
+        would make the estimator claim an accuracy it does not have.
+        """
+        threshold = 2.0
+        for _ in range(attempts):
+            excess, fitted = self._excess(solved[1].get('timed_joints', solved[0]),
+                                          measurements)
+            factor = frame_scale(excess, self._learner.estimate.link_sigma(fitted),
+                                 self._dof(solved[1]), too_short_only=False)
+            if not np.isfinite(factor) or factor <= threshold:   # one frame never shrinks it
+                break
+            threshold = 1.25                # once far off, settle it closely
+            self._learner.rescale(factor)
+            self._use_noise(self._learner.estimate)
+            again = self._solve(measurements, warm=self._warm is not None)
+            if isinstance(again, str):
+                break
+            solved, verdict = again, self._judge(again, measurements, stamp)
+        return solved, verdict
+
+    def _learn(self, joints, info, measurements, verdict):
+        """Add the frame's residuals to the noise learned, unless its fit is impossible."""
+        if self._learner is None or verdict.status == 'implausible':
+            return
+        excess, fitted = self._excess(info.get('timed_joints', joints), measurements)
+        if self._learner.observe(excess, fitted, self._dof(info)):
+            self._use_noise(self._learner.estimate)
+
+    def _frame_time(self, stamp):
+        """Return the frame's time, seconds: the stamp, or one frame period after the last."""
+        if stamp is None:
+            previous = -self.integrity.limits.frame_period if self._stamp is None \
+                else self._stamp
+            stamp = previous + self.integrity.limits.frame_period
+        self._stamp = float(stamp)
+        return self._stamp
+
+    def _judge(self, solved, measurements, stamp):
+        joints, info = solved
+        known = {'alternatives': info.get('alternatives', ()),
+                 'chain': getattr(self._solver, 'holds_chain', True),
+                 'timed_joints': info.get('timed_joints'), 'rivals': info.get('rivals', ())}
+        if self._previous is None:
+            return self.integrity.judge(joints, measurements, **known)
+        reference, then, reference_std = self._previous
+        return self.integrity.judge(joints, measurements, reference, max(stamp - then, 0.0),
+                                    reference_std, **known)
+
+    def _reconsider(self, solved, verdict, measurements, stamp, diagnostics):
+        """
+        Solve a warm-started frame from scratch too, when its fit is lost or suspicious.
+
+        Not when the method searched from scratch for this frame already. Returns the
+        (joints, info) kept and its verdict; ``diagnostics["reacquired"]`` says whether
+        the fresh fit won.
+        """
+        if verdict.lost:
+            if self._due_for_search():
+                fresh = self._solve(measurements, warm=False)
+                if not isinstance(fresh, str):
+                    fresh_verdict = self._judge(fresh, measurements, stamp)
+                    if fresh_verdict.valid:
+                        diagnostics['reacquired'] = True
+                        return fresh, fresh_verdict
+        elif self._suspicious(verdict, measurements, stamp):
+            solved, verdict, diagnostics['reacquired'] = self._second_opinion(
+                solved, measurements, stamp, verdict)
+        return solved, verdict
+
+    #: Seconds between second opinions on fits that call many links blocked.
+    SECOND_OPINION_PERIOD = 1.0
+
+    def _suspicious(self, verdict, measurements, stamp):
+        """
+        Judge whether a fit that explains its frame does so by calling a tag's links blocked.
+
+        A warm fit in the wrong basin can fit that way: half of a tag's links or more
+        flagged blocked earns a fresh search, at most once a ``SECOND_OPINION_PERIOD``,
+        and every frame while the last search found another posture about as likely.
+        Not for a method with a state of its own (a motion model): one frame's search
+        would replace what many frames built.
+        """
+        blocked = verdict.values.get('nlos_links')
+        if blocked is None or hasattr(self._solver, 'accept'):
+            return False
+        if self._in_doubt:
+            return True
+        if stamp - self._second_opinion_stamp < self.SECOND_OPINION_PERIOD:
+            return False
+        flagged = np.sum(blocked, axis=1)
+        measured = np.sum(np.isfinite(measurements.ranges), axis=1)
+        return bool(np.any((flagged >= 2) & (2 * flagged >= measured)))
+
+    def _second_opinion(self, solved, measurements, stamp, verdict):
+        """
+        Solve the frame from scratch too; keep the fit the frame likes better.
+
+        The other stays as an alternative: when it is about as likely and elsewhere, the
+        frame is ambiguous. Returns (joints, info), verdict, and whether the fresh fit won.
+        """
+        self._second_opinion_stamp = stamp
+        fresh = self._solve(measurements, warm=False)
+        if isinstance(fresh, str):
+            return solved, verdict, False
+        costs = self.integrity.posture_cost(np.array([solved[0], fresh[0]]), measurements)
+        # Not to a posture the boom cannot be in (beyond its reach since the last one).
+        moved = bool(costs[1] < costs[0]) and \
+            self._judge(fresh, measurements, stamp).status != 'implausible'
+        best, other = (fresh, solved) if moved else (solved, fresh)
+        best[1]['alternatives'] = (list(best[1].get('alternatives', [])) + [other[0]]
+                                   + list(other[1].get('alternatives', [])))
+        verdict = self._judge(best, measurements, stamp)
+        self._in_doubt = verdict.status == 'ambiguous'
+        return best, verdict, moved
+
+    def _due_for_search(self):
+        """
+        Judge whether this rejected frame gets a fresh solve.
+
+        The first few in a run do, then every tenth, so that a stream of garbage does not
+        cost a search per frame.
+        """
+        failures = self._failures + 1
+        return failures & (failures - 1) == 0 or failures % 10 == 0
+
+    def _solve(self, measurements, warm):
+        """Return the method's (joints, info) from the warm start or a cold one; why not if not."""
+        prior = self._warm if warm else None
+        if prior is None and self._solver.prior != 'unused':
+            prior = cold_start_guess(self.model, measurements.ranges)
+        if prior is None and self._solver.prior == 'required':
+            return 'no tag could be located for a start'
+        try:
+            joints, info = self._solver.solve(measurements, prior, warm=warm)
+        except (np.linalg.LinAlgError, RuntimeError) as exc:
+            return str(exc)
+        if not np.all(np.isfinite(joints)):
+            return 'the solver returned non-finite positions'
+        return joints, info
+
+    def _reject(self, status, diagnostics, measurements, start, joints=None):
+        """
+        Report an invalid frame; the warm start is dropped after too many in a row.
+
+        A frame that fitted but did not determine the posture (ambiguous, unobservable)
+        does not count: its fit is a good start for the next frame.
+        """
+        if status not in ('ambiguous', 'unobservable'):
+            self._failures += 1
+        diagnostics.setdefault('level', ERROR)
+        diagnostics.setdefault('message', f'no estimate: {status}')
+        if self._failures >= self.reset_after_failures:
+            self._previous = self._warm = None
+            self._failures = 0
+            diagnostics['cold_restart'] = True
+        estimate = self._fallback() if joints is None else joints
+        self._finish(estimate, status, diagnostics, measurements, start)
+        return self._fallback()
+
+    def _finish(self, joints, status, diagnostics, measurements, start):
+        lengths = self.model.section_lengths(joints)
+        # Each tag where it was when it ranged, for a method that knows.
+        residual = self.model.ranges(diagnostics.get('timed_joints', joints)) \
+            - measurements.ranges
+        valid = np.isfinite(residual)
+        diagnostics.update(
+            status=status, valid=status == 'ok', section_lengths=lengths,
+            arm_length_error=np.abs(lengths - self.model.arm_lengths),
+            range_residual_rms=float(np.sqrt(np.mean(residual[valid] ** 2))) if valid.any()
+            else float('nan'),
+            solve_time=time.perf_counter() - start)
+        diagnostics.setdefault('level', OK)
+        diagnostics.setdefault('message', 'tracking')
+        self.last_diagnostics = FrameResult.from_values(diagnostics)
+        return joints

@@ -1,0 +1,728 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Integrity: whether an estimated posture may be published, and if not, why.
+
+The posture feeds collision avoidance. A wrong posture flagged as wrong is safe; a wrong
+posture reported as good is the worst outcome. Every estimate, whatever method made it, is
+judged here on what its frame can show, so that the node and ``epp_bag eval`` agree:
+
+- consistency: the range residuals must be explained by the noise the estimator was told
+  (Gaussian errors, and an always-positive excess on a fraction of blocked links). Links
+  more likely blocked than not are set aside; the rest must pass a chi-square test, overall
+  and tag by tag (and their RMS the ``residual_*`` thresholds); how many were set aside a
+  binomial test, and how long they are a gamma test;
+- observability: the Cramér–Rao bound at the estimate, from the links kept, must be finite
+  and small, and no joint may have another position that fits about as well (a fold, the
+  tip at another pitch, the whole boom mirrored, another fit the method's search found),
+  unless the boom could not have got there since the last accepted posture;
+- plausibility: no joint below ``lowest_joint``, section lengths and the boom's vertical
+  plane as configured, no jump faster than the boom moves.
+
+Levels follow ``diagnostic_msgs``: a frame at ERROR is never published.
+"""
+from dataclasses import dataclass, field, fields
+import math
+
+from epp_ros.core.estimation.bias_learning import bias_design
+from epp_ros.core.estimation.methods.chain import angles_from_joints
+from epp_ros.core.model.bounds import (bias_covariance, bound_from_covariance,
+                                       bound_from_information, RangeBiasPrior)
+from epp_ros.core.model.measurements import Measurements, Residuals, wrap_angle
+import numpy as np
+from scipy.special import betainc, gammaincc, gammainccinv
+
+__all__ = ['OK', 'WARN', 'ERROR', 'Thresholds', 'IntegrityLimits', 'Verdict', 'Integrity',
+           'fold_alternatives']
+
+OK, WARN, ERROR = 0, 1, 2
+
+#: Tip positions scanned for its other well-fitting pitches.
+TIP_CANDIDATES = 72
+
+
+def _chi_square_limit(alpha, dof):
+    """
+    Return the upper ``alpha`` quantile of chi-square with ``dof`` degrees of freedom.
+
+    Computed with scipy.special: a per-frame cost, where scipy.stats' generic machinery is
+    ten times slower.
+    """
+    return 2.0 * gammainccinv(0.5 * np.asarray(dof, dtype=float), alpha)
+
+
+def _binomial_tail(count, trials, fraction):
+    """P(K >= count) for K ~ Binomial(trials, fraction); 1 where count is 0."""
+    count = np.asarray(count, dtype=float)
+    trials = np.asarray(trials, dtype=float)
+    safe = np.maximum(count, 1.0)
+    tail = betainc(safe, np.maximum(trials - safe + 1.0, 1e-300), fraction)
+    return np.where(count > 0, np.where(count <= trials, tail, 0.0), 1.0)
+
+
+def _excess_tail(total, count, gamma):
+    """P(S >= total) for S the sum of ``count`` exponential excesses of mean ``gamma``."""
+    count = np.asarray(count, dtype=float)
+    tail = gammaincc(np.maximum(count, 1.0), np.maximum(total, 0.0) / gamma)
+    return np.where(count > 0, tail, 1.0)
+
+
+def _norm(vectors):
+    """Euclidean norms over the last axis (np.linalg.norm's overhead dominates here)."""
+    return np.sqrt(np.einsum('...i,...i->...', vectors, vectors))
+
+
+def _zero_nan(values):
+    """Return a copy with NaN as 0 (the measured mask is kept aside)."""
+    return np.where(np.isnan(values), 0.0, values)
+
+
+def _check_positive(instance):
+    for item in fields(instance):
+        value = getattr(instance, item.name)
+        if not (isinstance(value, (int, float, np.floating, np.integer))
+                and math.isfinite(value) and value > 0):
+            raise ValueError(f'{item.name}: must be a finite number > 0, got {value!r}')
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """
+    Limits of a good estimate, metres: above ``*_error`` ERROR, else above ``*_warn`` WARN.
+
+    A ``*_warn`` above its ``*_error`` is allowed and means that quantity never warns: a
+    pair is not required to be ordered, so ``ros2 param load``, which sets one parameter at
+    a time in the file's order, reaches any pair a start-up could.
+    """
+
+    arm_length_warn: float = 0.05       #: worst section-length error
+    arm_length_error: float = 0.5
+    residual_warn: float = 0.5          #: range residual RMS
+    residual_error: float = 2.0
+    predicted_rmse_warn: float = 0.5    #: Cramér–Rao bound of the joints' RMSE
+    predicted_rmse_error: float = 2.0
+
+    def __post_init__(self):
+        _check_positive(self)
+
+
+@dataclass(frozen=True)
+class IntegrityLimits:
+    """
+    How the consistency and observability checks decide.
+
+    Attributes
+    ----------
+    false_alarm : float
+        Probability that a frame consistent with the noise fails one residual test.
+    ambiguity_odds : float
+        Another position of a joint is ruled out when it is this many times less likely
+        than the estimate's, given the frame's ranges.
+    ambiguity_distance : float
+        Metres; alternatives closer to the estimate than this, or than three times the
+        joint's predicted standard deviation, do not matter.
+    max_angular_rate : float
+        Radians per second that neither the slew nor any section's pitch exceeds: how far
+        each joint can have moved since the last accepted posture rules out alternatives
+        and jumps (:meth:`Integrity.reach`). Hydraulic booms turn at up to about 0.2 rad/s.
+    frame_period : float
+        Seconds between frames when no stamps are given.
+
+    """
+
+    false_alarm: float = 1e-4
+    ambiguity_odds: float = 1000.0
+    ambiguity_distance: float = 1.0
+    max_angular_rate: float = 0.35
+    frame_period: float = 0.1
+
+    def __post_init__(self):
+        _check_positive(self)
+        if not self.false_alarm < 0.5:
+            raise ValueError(f'false_alarm: must be < 0.5, got {self.false_alarm}')
+        if not self.ambiguity_odds > 1:
+            raise ValueError(f'ambiguity_odds: must be > 1, got {self.ambiguity_odds}')
+
+
+@dataclass
+class Verdict:
+    """
+    The integrity of one estimate.
+
+    Attributes
+    ----------
+    level : int
+        OK, WARN or ERROR; ERROR is never published.
+    status : str
+        ``"ok"``, or why the posture is not published: ``"inconsistent"`` (residuals the
+        noise cannot explain), ``"ambiguous"`` (a joint could fold), ``"unobservable"``
+        (infinite or too large predicted uncertainty), ``"implausible"`` (below ground,
+        wrong section lengths, or a jump faster than the boom moves).
+    message : str
+        One line for a person.
+    values : dict
+        The statistics behind it (for diagnostics).
+
+    """
+
+    level: int
+    status: str
+    message: str
+    values: dict = field(default_factory=dict)
+
+    @property
+    def valid(self):
+        """Whether the posture may be published."""
+        return self.level < ERROR
+
+    @property
+    def lost(self):
+        """Whether a fresh (cold) solve of the frame could do better than this estimate."""
+        return self.status in ('inconsistent', 'implausible')
+
+
+def fold_alternatives(model, joints):
+    """
+    Each inner joint reflected across the line through its neighbours.
+
+    Reflection keeps both adjacent section lengths and, for a boom in a vertical plane,
+    the plane: the other solution when the joint's own ranges are few or weak.
+
+    Returns
+    -------
+    alternatives : ndarray, shape (p - 1, 3)
+        Row k: joint k (0-based, k < p - 1) folded; the others stay.
+
+    """
+    chain = np.vstack([model.pivot_of(joints), joints])
+    inner, outer = chain[:-2], chain[2:]
+    axis = outer - inner
+    axis /= np.maximum(_norm(axis), 1e-12)[:, None]
+    offset = chain[1:-1] - inner
+    foot = inner + np.sum(offset * axis, axis=1)[:, None] * axis
+    return 2.0 * foot - chain[1:-1]
+
+
+class Integrity:
+    """
+    Judges estimated postures for one boom and one noise model.
+
+    Parameters
+    ----------
+    model : BoomModel
+    noise : SensorNoise
+        What the estimator is told about the measurement noise.
+    nlos : NlosMixture
+        Prior fraction of blocked links and their mean excess.
+    eta : float
+        Multiplicative range noise: a range r has sigma ``sqrt(sigma^2 + (eta r)^2)``.
+    lowest_joint : float
+        No joint is below this height, metres.
+    limits : IntegrityLimits
+    thresholds : Thresholds
+    bias : RangeBiasPrior
+        What is not known of the ranges' biases. Each link's own part is, within one
+        frame, another independent error of each range: it adds to the range sigma of
+        every check (:meth:`link_sigma`). The part common to all links moves a fit in a
+        direction its residuals barely see: it adds to each joint's predicted standard
+        deviation (``joint_std``, ``predicted_rmse``, judged by the observability
+        thresholds) only; the checks of ambiguity and of jumps leave it out (a bias
+        constant over frames neither folds a joint nor makes it jump).
+
+    """
+
+    def __init__(self, model, noise, nlos, eta=0.0, lowest_joint=-0.5,
+                 limits=IntegrityLimits(), thresholds=Thresholds(), bias=RangeBiasPrior()):
+        self.model = model
+        self.bias = bias
+        #: Covariance (2, 2) of the common bias's offset and slope still unknown: the
+        #: prior's, or less once the estimator has learned it (``core.bias_learning``).
+        self.common_covariance = bias.common_covariance()
+        self.noise = noise
+        self.nlos = nlos
+        self.eta = float(eta)
+        self.lowest_joint = float(lowest_joint)
+        self.limits = limits
+        self.thresholds = thresholds
+        # The mixture's per-link constants, bound once where the sigmas are fixed.
+        fixed = np.ndim(noise.range_sigma) == 0 and not self.eta
+        self._link_loss = nlos.bind(np.hypot(float(noise.range_sigma), bias.link_std)) \
+            if fixed else None
+        self._tag_loss = nlos.bind(np.asarray(noise.tag_sigma, float))
+
+    # -- the pieces -----------------------------------------------------------------------
+    def link_sigma(self, measurements):
+        """Return the standard deviation of each tag-anchor range (p, m), metres."""
+        sigma = np.broadcast_to(np.asarray(self.noise.range_sigma, dtype=float),
+                                measurements.ranges.shape)
+        if self.eta:
+            sigma = np.hypot(sigma, self.eta * np.nan_to_num(measurements.ranges))
+        if self.bias.link_std:
+            sigma = np.hypot(sigma, self.bias.link_std)
+        return sigma
+
+    def _excess(self, joints, measurements):
+        """Range excesses in sigmas: tag-anchor (p, m) and tag-tag (p, p), NaN unmeasured."""
+        predicted = self.model.ranges(joints)
+        links = (measurements.ranges - predicted) / self.link_sigma(measurements)
+        between = _norm(joints[:, None] - joints[None, :])
+        tag_links = (measurements.tag_ranges - between) / self.noise.tag_sigma
+        return links, tag_links
+
+    def _mixture(self, excess, sigma):
+        """NLOS mixture (cost, slope, posterior) of tag-anchor excesses in sigmas."""
+        if self._link_loss is not None:
+            return self._link_loss(excess)
+        return self.nlos.loss(excess, sigma)
+
+    def _joint_cost(self, which, positions, measurements, joints, slew):
+        """
+        Loss of what sees joint ``which[i]`` if it were at ``positions[i]`` (n, 3).
+
+        Its tag's ranges (NLOS mixture), its tag-tag ranges, and the inclinometers of the
+        two sections it ends and starts, the other joints staying where they are. Shape (n,).
+        """
+        p = self.model.n_sections
+        ranges = measurements.ranges[which]
+        valid = np.isfinite(ranges)
+        sigma = self.link_sigma(measurements)[which]
+        distance = _norm(positions[:, None, :] - self.model.anchors)
+        excess = np.where(valid, (ranges - distance) / sigma, 0.0)
+        total = np.sum(np.where(valid, self._mixture(excess, sigma)[0], 0.0), axis=1)
+        gaps = _norm(positions[:, None, :] - joints[None, :, :])   # (n, p)
+        for measured in (measurements.tag_ranges[which], measurements.tag_ranges[:, which].T):
+            seen = np.isfinite(measured) & (np.arange(p) != which[:, None])
+            error = np.where(seen, (measured - gaps) / self.noise.tag_sigma, 0.0)
+            total = total + 0.5 * np.sum(error ** 2, axis=1)
+        along = np.array([np.cos(slew), np.sin(slew), 0.0])
+        chain = np.vstack([self.model.pivot(slew), joints, joints[-1:]])
+        for section, steps in ((which, positions - chain[which]),
+                               (which + 1, chain[which + 2] - positions)):
+            inside = section < p
+            measured = measurements.pitches[np.minimum(section, p - 1)]
+            seen = inside & np.isfinite(measured)
+            error = wrap_angle(np.arctan2(steps[:, 2], steps @ along) - _zero_nan(measured))
+            total = total + np.where(seen, 0.5 * (error / self.noise.pitch_sigma) ** 2, 0.0)
+        return total
+
+    def consistency(self, joints, measurements):
+        """
+        Chi-square and binomial tests of the residuals; (failures, values, kept links).
+
+        Returns
+        -------
+        failures : list of str
+        values : dict
+        kept : (ndarray, ndarray)
+            The tag-anchor (p, m) and tag-tag (p, p) links taken as line-of-sight.
+
+        """
+        alpha = self.limits.false_alarm
+        links, tag_links = self._excess(joints, measurements)
+        measured, tag_measured = np.isfinite(links), np.isfinite(tag_links)
+        sigma = self.link_sigma(measurements)
+        blocked = measured & (self._mixture(_zero_nan(links), sigma)[2] > 0.5)
+        tag_blocked = tag_measured.copy()
+        if tag_measured.any():
+            tag_blocked &= self._tag_loss(_zero_nan(tag_links))[2] > 0.5
+        kept, tag_kept = measured & ~blocked, tag_measured & ~tag_blocked
+        p = self.model.n_sections
+        statistic = float(np.sum(links[kept] ** 2) + np.sum(tag_links[tag_kept] ** 2))
+        dof = max(int(kept.sum() + tag_kept.sum()) - (p + 1), 1)
+        limit = float(_chi_square_limit(alpha, dof))
+        n_links = int(measured.sum() + tag_measured.sum())
+        n_blocked = int(blocked.sum() + tag_blocked.sum())
+        failures = []
+        if statistic > limit:
+            failures.append(f'range residuals chi-square {statistic:.1f} > {limit:.1f}')
+        if _binomial_tail(n_blocked, n_links, self.nlos.fraction) < alpha:
+            failures.append(f'{n_blocked} of {n_links} links look blocked')
+        # Blocked links: as many, and as long, as the NLOS prior makes believable.
+        metres = np.where(blocked, _zero_nan(links) * sigma, 0.0)
+        tag_metres = np.where(tag_blocked, _zero_nan(tag_links) * self.noise.tag_sigma, 0.0)
+        total = float(metres.sum() + tag_metres.sum())
+        if _excess_tail(total, n_blocked, self.nlos.gamma) < alpha:
+            failures.append(f'blocked links {total:.1f} m too long in all')
+        tag_statistic = np.sum(np.where(kept, links, 0.0) ** 2, axis=1)
+        tag_limit = _chi_square_limit(alpha / p, np.maximum(kept.sum(axis=1), 1))
+        blocked_count = blocked.sum(axis=1)
+        tag_tail = np.minimum(
+            _binomial_tail(blocked_count, measured.sum(axis=1), self.nlos.fraction),
+            _excess_tail(metres.sum(axis=1), blocked_count, self.nlos.gamma))
+        bad_tags = np.flatnonzero((tag_statistic > tag_limit) | (tag_tail < alpha / p))
+        if bad_tags.size:
+            failures.append('ranges of joint(s) ' + ', '.join(str(k + 1) for k in bad_tags)
+                            + ' not explained by the noise')
+        los_metres = (links * sigma)[kept]
+        values = {'chi_square': statistic, 'chi_square_limit': limit, 'links': n_links,
+                  'nlos_links': blocked, 'nlos_tag_links': tag_blocked,
+                  'tag_chi_square': tag_statistic,
+                  'los_residual_rms': float(np.sqrt(np.mean(los_metres ** 2)))
+                  if los_metres.size else 0.0}
+        return failures, values, (kept, tag_kept)
+
+    def bound(self, joints, measurements, kept, angles):
+        """
+        Cramér–Rao bound at the estimate from the line-of-sight links and the angles.
+
+        ``angles``: the estimate's (slew, pitches), radians. The frame's own: a motion
+        model's prediction is not trusted to make a posture valid (its process noise is
+        itself a guess).
+        """
+        return self.bounds(joints, measurements, kept, angles)[0]
+
+    def bounds(self, joints, measurements, kept, angles):
+        """
+        Return :meth:`bound`, and that bound with the unknown common range bias added.
+
+        Both count each link's own bias in its sigma; the second is the first when no
+        common bias is unknown or the first is infinite.
+        """
+        slew, pitches = angles
+        ranges, tag_ranges = kept
+        used = Measurements(np.where(ranges, measurements.ranges, np.nan),
+                            np.where(tag_ranges, measurements.tag_ranges, np.nan),
+                            measurements.pitches, measurements.slew)
+        noise = self.noise
+        if self.eta or self.bias.link_std:
+            noise = type(noise)(self.link_sigma(measurements), noise.tag_sigma,
+                                noise.pitch_sigma, noise.slew_sigma)
+        residuals = Residuals(self.model, used, noise)
+        jacobian = residuals.jacobian(np.r_[slew, pitches])
+        random = bound_from_information(self.model, slew, pitches, jacobian.T @ jacobian)
+        if not self.common_covariance.any() or not math.isfinite(random.rmse):
+            return random, random
+        links = np.arange(residuals.size) < np.count_nonzero(residuals.link_mask)
+        common = (bias_design(residuals.measured[links]), self.common_covariance)
+        added = bias_covariance(jacobian, residuals.sigma, links, random.parameter_covariance,
+                                common=common)
+        return random, bound_from_covariance(self.model, slew, pitches,
+                                             random.parameter_covariance + added)
+
+    def reach(self, reference, elapsed, reference_std):
+        """
+        How far each joint can have moved in ``elapsed`` seconds from ``reference``.
+
+        Every angle turning at ``max_angular_rate`` moves joint k by at most the rate times
+        its lever: its distance from the slew axis, plus its distance from each joint at or
+        inside it (pivot included). Plus three times the reference's own standard
+        deviation ``reference_std`` (p,). Shape (p,), metres.
+        """
+        chain = np.vstack([self.model.pivot_of(reference), reference])
+        radius = _norm(reference[:, :2] - self.model.base[:2])
+        inside = np.tril(_norm(chain[:, None] - chain[None, :]), k=-1)   # joint k: row k + 1
+        levers = inside[1:].sum(axis=1)
+        return (self.limits.max_angular_rate * elapsed * (radius + levers)
+                + 3.0 * np.asarray(reference_std))
+
+    def point_bound(self, joints, measurements, kept, biased=False):
+        """
+        Per-joint standard deviations (p,) of joints located each from its own ranges.
+
+        The bound of a method that does not hold the boom to its p + 1 angles (EPP1, EPP2,
+        the per-tag baselines): each joint's 3-D Fisher information from its kept links;
+        infinite for a joint with fewer than three, or with anchors on one line. With
+        ``biased``, the bias common to all links is added, as in :meth:`bounds`.
+        """
+        units = joints[:, None, :] - self.model.anchors                         # (p, m, 3)
+        units /= np.maximum(_norm(units), 1e-12)[..., None]
+        weights = np.where(kept[0], self.link_sigma(measurements) ** -2.0, 0.0)
+        information = np.einsum('km,kmi,kmj->kij', weights, units, units)
+        std = np.full(self.model.n_sections, np.inf)
+        for k, matrix in enumerate(information):
+            values, vectors = np.linalg.eigh(matrix)
+            if values[0] > 1e-12 * max(values[-1], 1e-300):
+                covariance = (vectors / values) @ vectors.T
+                if biased and self.common_covariance.any():
+                    design = bias_design(np.nan_to_num(measurements.ranges[k]))
+                    through = covariance @ (units[k] * weights[k][:, None]).T @ design
+                    covariance = covariance + through @ self.common_covariance @ through.T
+                std[k] = math.sqrt(np.trace(covariance))
+        return std
+
+    def _near(self, joint_std):
+        """Per joint, metres: alternatives closer than this do not matter (p,)."""
+        return np.maximum(self.limits.ambiguity_distance,
+                          3.0 * np.nan_to_num(joint_std, posinf=0.0))
+
+    def fold_spread(self, joints, measurements, slew):
+        """
+        Return how far each inner joint's fold lies when about as likely, metres (p,).
+
+        A fold within ``ambiguity_distance`` is not ambiguous now, but a joint no range
+        pins (a silent tag) keeps its fold from frame to frame, and the boom can bend the
+        two folds apart within any one frame's reach: the reference posture must allow the
+        joint at either (:meth:`reach`), or time would rule out the right one.
+        """
+        p = self.model.n_sections
+        positions = fold_alternatives(self.model, joints)                   # (p - 1, 3)
+        which = np.arange(p - 1)
+        costs = self._joint_cost(np.r_[np.arange(p), which], np.vstack([joints, positions]),
+                                 measurements, joints, slew)
+        close = costs[p:] - costs[which] < math.log(self.limits.ambiguity_odds)
+        spread = np.zeros(p)
+        spread[which[close]] = _norm(positions[close] - joints[which[close]])
+        return spread
+
+    def ambiguous_joints(self, joints, measurements, joint_std, slew, reach=None):
+        """
+        Joints (0-based) with another position about as likely, and one such position.
+
+        A fold of an inner joint, or the tip at another pitch, counts when its ranges make
+        it no more than ``ambiguity_odds`` times less likely than the estimate, when it is
+        further than ``ambiguity_distance`` and three predicted standard deviations
+        ``joint_std`` (p,) away, and, given how far each joint can have moved since the
+        last accepted posture (``reach``: that posture and the distances, see
+        :meth:`reach`), when it could have got there.
+        """
+        near = self._near(joint_std)
+        p = self.model.n_sections
+        tip = self._tip_circle(joints, slew)
+        positions = np.vstack([fold_alternatives(self.model, joints), tip])
+        which = np.r_[np.arange(p - 1), np.full(len(tip), p - 1)]
+        keep = _norm(positions - joints[which]) > near[which]
+        if reach is not None:
+            keep &= _norm(positions - reach[0][which]) <= reach[1][which]
+        if not keep.any():
+            return {}
+        positions, which = positions[keep], which[keep]
+        joint_index = np.arange(p)
+        costs = self._joint_cost(np.r_[joint_index, which], np.vstack([joints, positions]),
+                                 measurements, joints, slew)
+        margin = costs[p:] - costs[which]
+        found = {}
+        for k in np.unique(which[margin < math.log(self.limits.ambiguity_odds)]):
+            rivals = np.flatnonzero(which == k)
+            found[int(k)] = positions[rivals[np.argmin(margin[rivals])]]
+        return found
+
+    def mirrors(self, joints, slew):
+        """
+        Return the whole boom reflected where the anchors cannot tell it from its image.
+
+        Across the vertical plane through the slew axis that best fits the anchors (a
+        valid posture, slew mirrored), and across the plane that best fits the anchors in
+        space (kept when it stays above ``lowest_joint``). Anchors spread in every
+        direction tell both apart; anchors near one line or plane do not. Shape (k, p, 3).
+        """
+        anchors = self.model.anchors
+        horizontal = anchors[:, :2] - self.model.base[:2]
+        direction = np.linalg.svd(horizontal, full_matrices=False)[2][0]
+        across = np.r_[-direction[1], direction[0], 0.0]
+        centre = np.r_[self.model.base[:2], 0.0]
+        mirrored = [joints - 2.0 * ((joints - centre) @ across)[:, None] * across]
+        centred = anchors - anchors.mean(axis=0)
+        normal = np.linalg.svd(centred, full_matrices=False)[2][-1]
+        image = joints - 2.0 * ((joints - anchors.mean(axis=0)) @ normal)[:, None] * normal
+        if image[:, 2].min() >= self.lowest_joint:
+            mirrored.append(image)
+        return np.array(mirrored)
+
+    def posture_cost(self, postures, measurements):
+        """Loss of every measurement of the frame at each posture (n, p, 3): shape (n,)."""
+        valid = np.isfinite(measurements.ranges)
+        sigma = self.link_sigma(measurements)
+        distance = _norm(postures[:, :, None, :] - self.model.anchors)         # (n, p, m)
+        excess = np.where(valid, (measurements.ranges - distance) / sigma, 0.0)
+        cost = np.where(valid, self._mixture(excess, sigma)[0], 0.0).sum(axis=(1, 2))
+        tag_valid = np.isfinite(measurements.tag_ranges)
+        if tag_valid.any():
+            gaps = _norm(postures[:, :, None, :] - postures[:, None, :, :])
+            error = np.where(tag_valid, (measurements.tag_ranges - gaps)
+                             / self.noise.tag_sigma, 0.0)
+            cost = cost + 0.5 * np.sum(error ** 2, axis=(1, 2))
+        angles_seen = np.isfinite(measurements.pitches).any() or np.isfinite(measurements.slew)
+        for i, posture in enumerate(postures if angles_seen else []):
+            slew, pitches = angles_from_joints(self.model, posture)
+            pitch_error = wrap_angle(pitches - _zero_nan(measurements.pitches))
+            cost[i] += 0.5 * np.sum(np.where(np.isfinite(measurements.pitches),
+                                             pitch_error / self.noise.pitch_sigma, 0.0) ** 2)
+            if np.isfinite(measurements.slew):
+                cost[i] += 0.5 * (wrap_angle(slew - measurements.slew)
+                                  / self.noise.slew_sigma) ** 2
+        return cost
+
+    def ambiguous_postures(self, joints, measurements, joint_std, slew, reach=None,
+                           alternatives=()):
+        """
+        Joints (0-based) that another whole posture, about as likely, puts elsewhere.
+
+        The candidates are the boom's :meth:`mirrors` and the method's own
+        ``alternatives`` (other fits its search found, (p, 3) each); the rules are those of
+        :meth:`ambiguous_joints`, and with a ``reach`` every joint must be within it.
+        """
+        candidates = [self.mirrors(joints, slew)]
+        candidates += [np.asarray(a, dtype=float)[None] for a in alternatives]
+        candidates = np.concatenate(candidates)
+        near = self._near(joint_std)
+        far = _norm(candidates - joints) > near                               # (n, p)
+        keep = far.any(axis=1)
+        if reach is not None:
+            keep &= np.all(_norm(candidates - reach[0]) <= reach[1], axis=1)
+        if not keep.any():
+            return set()
+        costs = self.posture_cost(np.concatenate([joints[None], candidates[keep]]),
+                                  measurements)
+        rivals = costs[1:] - costs[0] < math.log(self.limits.ambiguity_odds)
+        return set(np.flatnonzero(far[keep][rivals].any(axis=0)).tolist())
+
+    def _tip_circle(self, joints, slew):
+        """Positions of the tip at pitches all round its hinge, in the boom's plane."""
+        p = self.model.n_sections
+        hinge = joints[-2] if p > 1 else self.model.pivot(slew)
+        grid = np.linspace(-np.pi, np.pi, TIP_CANDIDATES, endpoint=False)
+        return hinge + self.model.arm_lengths[-1] * (
+            np.cos(grid)[:, None] * [np.cos(slew), np.sin(slew), 0.0]
+            + np.sin(grid)[:, None] * [0.0, 0.0, 1.0])
+
+    # -- the verdict ----------------------------------------------------------------------
+    def judge(self, joints, measurements, reference=None, elapsed=None, reference_std=None,
+              alternatives=(), chain=True, timed_joints=None, rivals=()):
+        """
+        Return the :class:`Verdict` on an estimate of one frame.
+
+        Parameters
+        ----------
+        joints : ndarray, shape (p, 3)
+            The estimate, metres.
+        measurements : Measurements
+            The frame it was estimated from.
+        reference : ndarray, shape (p, 3), optional
+            The last accepted posture, ``elapsed`` seconds before, with its predicted
+            joint standard deviations ``reference_std`` (p,): what the boom could have
+            reached since rules out alternatives and jumps.
+        elapsed : float, optional
+            Seconds since ``reference``.
+        reference_std : ndarray, shape (p,), optional
+            Predicted standard deviation of each of ``reference``'s joints, metres.
+        alternatives : sequence of ndarray, shape (p, 3)
+            Other postures the method found that fit the frame (its search's runners-up).
+        chain : bool
+            Whether the method holds the boom to its p + 1 angles (the chain's bound is
+            then its uncertainty); else each joint's own 3-D bound is
+            (:meth:`point_bound`).
+        timed_joints : ndarray, shape (p, 3), optional
+            Each tag's joint when it ranged (TDMA slots on a moving boom), for the
+            residuals; ``joints`` by default.
+        rivals : sequence of ndarray, shape (p, 3)
+            Postures the method itself holds about as likely, all frames considered (a
+            tracker's fold hypotheses): a joint further than ``ambiguity_distance`` from
+            one is ambiguous, whatever its own uncertainty.
+
+        Returns
+        -------
+        Verdict
+
+        """
+        checks = []                 # (level, status, message), worst kept
+        values = {}
+        reach = None if reference is None else (
+            reference, self.reach(reference, elapsed, reference_std))
+        angles = angles_from_joints(self.model, joints)
+        self._plausibility(joints, angles[0], reach, elapsed, checks, values)
+        kept = self._consistency(joints if timed_joints is None else timed_joints,
+                                 measurements, checks, values)
+        if chain:
+            joint_std, total_std = (bound.joint_std for bound in self.bounds(
+                joints, measurements, kept, angles))
+        else:
+            joint_std = self.point_bound(joints, measurements, kept)
+            total_std = self.point_bound(joints, measurements, kept, biased=True)
+        # Postures are weighed where each tag was when it ranged (a moving boom, TDMA).
+        shift = 0.0 if timed_joints is None else np.asarray(timed_joints) - joints
+        seen = joints + shift
+        values['noise_rmse'] = float(np.sqrt(np.mean(joint_std ** 2)))
+        self._observability(total_std, checks, values)
+        values['reach_std'] = np.maximum(joint_std,
+                                         self.fold_spread(seen, measurements, angles[0]))
+        ambiguous = set(self.ambiguous_joints(seen, measurements, joint_std, angles[0], reach))
+        ambiguous |= self.ambiguous_postures(seen, measurements, joint_std, angles[0], reach,
+                                             [np.asarray(a) + shift for a in alternatives])
+        for rival in rivals:
+            far = _norm(np.asarray(rival, dtype=float) - joints) > self.limits.ambiguity_distance
+            ambiguous |= set(np.flatnonzero(far).tolist())
+        values['ambiguous_joints'] = sorted(k + 1 for k in ambiguous)
+        if ambiguous:
+            checks.append((ERROR, 'ambiguous', 'joint(s) ' + ', '.join(
+                str(k + 1) for k in sorted(ambiguous)) + ' could be elsewhere: another '
+                'posture fits about as well'))
+        return _verdict(checks, values)
+
+    def _consistency(self, joints, measurements, checks, values):
+        """Append the residual checks to ``checks``; return the links judged clear."""
+        failures, found, kept = self.consistency(joints, measurements)
+        values.update(found)
+        if failures:
+            checks.append((ERROR, 'inconsistent', '; '.join(failures)))
+        t = self.thresholds
+        rms = values['los_residual_rms']
+        if rms > t.residual_error:
+            checks.append((ERROR, 'inconsistent', f'line-of-sight range residual {rms:.2f} m'))
+        elif rms > t.residual_warn:
+            checks.append((WARN, 'ok', f'line-of-sight range residual {rms:.2f} m'))
+        return kept
+
+    def _observability(self, joint_std, checks, values):
+        """Append the predicted uncertainty against the thresholds to ``checks``."""
+        t = self.thresholds
+        rmse = float(np.sqrt(np.mean(joint_std ** 2)))
+        values.update(predicted_rmse=rmse, joint_std=joint_std)
+        if not math.isfinite(rmse) or rmse > t.predicted_rmse_error:
+            checks.append((ERROR, 'unobservable', f'predicted RMSE {rmse:.2f} m'))
+        elif rmse > t.predicted_rmse_warn:
+            checks.append((WARN, 'ok', f'predicted RMSE {rmse:.2f} m'))
+
+    def _across_plane(self, joints, slew):
+        """Signed distances (p,) of the joints from the vertical plane of ``slew``."""
+        pivot = self.model.pivot(slew)
+        return (joints[:, :2] - pivot[:2]) @ np.array([-np.sin(slew), np.cos(slew)])
+
+    def _plausibility(self, joints, slew, reach, elapsed, checks, values):
+        """Ground, section lengths, the boom's plane and speed, appended to ``checks``."""
+        t = self.thresholds
+        lowest = float(joints[:, 2].min())
+        if lowest < self.lowest_joint:
+            checks.append((ERROR, 'implausible',
+                           f'a joint {lowest:.2f} m high, below lowest_joint'))
+        length_error = float(np.max(np.abs(self.model.section_lengths(joints)
+                                           - self.model.arm_lengths)))
+        if length_error > t.arm_length_error:
+            checks.append((ERROR, 'implausible', f'a section {length_error:.2f} m off length'))
+        elif length_error > t.arm_length_warn:
+            checks.append((WARN, 'ok', f'a section {length_error:.3f} m off length'))
+        # The boom is in one vertical plane through the slew axis (the paper's Feature II);
+        # the 3-D methods do not impose it, and off it the ranges see little.
+        off_plane = float(np.max(np.abs(self._across_plane(joints, slew))))
+        values['off_plane'] = off_plane
+        if off_plane > t.arm_length_error:
+            checks.append((ERROR, 'implausible', f'a joint {off_plane:.2f} m off the boom plane'))
+        elif off_plane > t.arm_length_warn:
+            checks.append((WARN, 'ok', f'a joint {off_plane:.3f} m off the boom plane'))
+        if reach is not None:
+            moved = _norm(joints - reach[0])
+            values['moved'] = float(moved.max())
+            jumped = np.flatnonzero(moved > reach[1])
+            if jumped.size:
+                checks.append((ERROR, 'implausible', f'joint {jumped[0] + 1} moved '
+                               f'{moved[jumped[0]]:.1f} m in {elapsed:.2f} s'))
+
+
+def _verdict(checks, values):
+    """Return the :class:`Verdict` of (level, status, message) checks, naming the worst."""
+    if not checks:
+        return Verdict(OK, 'ok', 'tracking', values)
+    level = max(level for level, _, _ in checks)
+    worst = [check for check in checks if check[0] == level]
+    return Verdict(level, worst[0][1], '; '.join(message for _, _, message in worst), values)

@@ -1,0 +1,519 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Chain estimator: least squares over the boom's p + 1 angles (slew and one pitch each).
+
+A pump boom has exactly p + 1 degrees of freedom, so both of the paper's features (fixed
+lengths, one vertical plane) hold by construction. Levenberg–Marquardt with the analytic
+Jacobian fits the ranges, warm-started from the previous frame; it is the maximum-likelihood
+estimate under Gaussian range noise and attains the Cramér–Rao bound (``core.bounds``).
+
+NLOS ranges are always too long. Ranges are fitted under a Gaussian plus exponential-excess
+mixture (``core.nlos``): the maximum-likelihood estimate when some links are blocked, where
+a blocked link pulls the fit with a bounded force and is reported per frame as NLOS when it
+is more likely blocked than not.
+
+Tag-tag ranges, inclinometers and a slew encoder, when given, enter the same least squares
+with their own sigmas (``core.measurements``), so the paper's TPSM angles add information
+instead of being discarded.
+
+Joints stay above ``lowest_joint`` through a stiff penalty (the boom is above the ground).
+Without a previous pose the global solution is searched for: a beam search grows chains
+section by section over a grid of slews, every candidate gets a few iterations, the best are
+fitted to the end, and from the best fit each joint is folded the other way and the tip
+tried at its other well-fitting pitches until nothing fits better.
+"""
+from dataclasses import replace
+from typing import NamedTuple
+
+from epp_ros.core.model.measurements import Residuals, SensorNoise, wrap_angle
+from epp_ros.core.model.nlos import NlosMixture
+from epp_ros.core.model.plane import fit_slew, to_plane
+import numpy as np
+
+__all__ = ['ChainMethod', 'Fit', 'SearchExhausted', 'angles_from_joints', 'canonical_angles',
+           'grow_chains']
+
+
+def angles_from_joints(model, joints):
+    """Slew and pitches (radians) of the chain closest to the given joints (p, 3)."""
+    slew = fit_slew(joints, model.base)
+    slews = [slew] if model.pivot_offset == 0.0 else [slew, slew + np.pi]
+    fits = []
+    for candidate in slews:         # a pivot off the axis: on which side is it?
+        coords = to_plane(np.vstack([model.pivot(candidate), joints]), model.base, candidate)
+        steps = np.diff(coords, axis=0)
+        pitches = np.arctan2(steps[:, 1], steps[:, 0])
+        error = np.sum((model.forward_kinematics(candidate, pitches) - joints) ** 2)
+        fits.append((error, float(wrap_angle(candidate)), pitches))
+    _, slew, pitches = min(fits, key=lambda fit: fit[0])
+    return slew, pitches
+
+
+def canonical_angles(psi, pivot_offset=0.0):
+    """
+    Return the same chain with its first section pointing outward, angles in [-pi, pi).
+
+    With the pivot on the slew axis, ``(slew, pitch)`` and ``(slew + pi, pi - pitch)``
+    describe the same boom; the slew is the direction the first section points. A pivot
+    off the axis tells them apart, and only the wrapping applies.
+    """
+    psi = np.array(psi, dtype=float)
+    if pivot_offset == 0.0 and np.cos(psi[1]) < 0:
+        psi = np.r_[psi[0] + np.pi, np.pi - psi[1:]]
+    return wrap_angle(psi)
+
+
+def grow_chains(model, measurements, range_sigma, mixture, slews, lowest_joint, width=8,
+                candidates=72):
+    """
+    Chains grown section by section for each slew, keeping the ``width`` best so far.
+
+    Each section's pitch is taken from a grid (or its inclinometer), scored by the NLOS
+    loss of its tag's ranges, with joints below ``lowest_joint`` excluded. Keeping several
+    partial chains, not the single best, recovers folds that only later tags reveal and
+    tags whose best-looking pitch is pulled by a blocked link. The chain's cold start and
+    CEPP's (``core.epp``) both start from them.
+
+    Parameters
+    ----------
+    model : BoomModel
+        The boom and its anchors.
+    measurements : Measurements
+        The frame.
+    range_sigma : ndarray, shape (p, m)
+        Each tag-anchor range's standard deviation, metres.
+    mixture : NlosMixture
+        The range error model that scores a tag's ranges.
+    slews : ndarray, shape (s,)
+        Slews to grow chains at, radians.
+    lowest_joint : float
+        No joint below this height, metres.
+    width : int
+        Partial chains kept per slew.
+    candidates : int
+        Pitches of the grid over [-pi, pi) tried for a section without an inclinometer.
+
+    Returns
+    -------
+    pitches : ndarray, shape (s, width, p)
+        Candidate pitches per slew, best first.
+    cost : ndarray, shape (s, width)
+        Their loss over the ranges (inf for chains that could not stay above ground).
+
+    """
+    grid = np.linspace(-np.pi, np.pi, candidates, endpoint=False)
+    along = np.stack([np.cos(slews), np.sin(slews), np.zeros_like(slews)], axis=-1)
+    up = np.array([0.0, 0.0, 1.0])
+    joints = np.broadcast_to(model.pivot(slews)[:, None, :], (slews.size, 1, 3))
+    pitches = np.zeros((slews.size, 1, 0))
+    cost = np.zeros((slews.size, 1))
+    for k, length in enumerate(model.arm_lengths):
+        options = grid if np.isnan(measurements.pitches[k]) else measurements.pitches[k:k + 1]
+        step = length * (np.cos(options)[None, :, None] * along[:, None, :]
+                         + np.sin(options)[:, None] * up)                 # (s, c, 3)
+        ends = joints[:, :, None, :] + step[:, None, :, :]                # (s, w, c, 3)
+        added = np.where(ends[..., 2] < lowest_joint, np.inf, 0.0)
+        if np.isfinite(measurements.ranges[k]).any():
+            added = added + _tag_loss(model, mixture, k, ends, measurements, range_sigma)
+        elif options.size > 1:
+            added = added + np.abs(options)     # unseen section: prefer level
+        total = (cost[:, :, None] + added).reshape(slews.size, -1)
+        keep = np.argsort(total, axis=1)[:, :width]                       # (s, w)
+        rows = np.arange(slews.size)[:, None]
+        parent, choice = np.divmod(keep, options.size)
+        joints = ends.reshape(slews.size, -1, 3)[rows, keep]
+        pitches = np.concatenate([pitches[rows, parent],
+                                  np.broadcast_to(options, (slews.size, options.size))[
+                                      rows, choice][..., None]], axis=-1)
+        cost = total[rows, keep]
+    return pitches, cost
+
+
+def _tag_loss(model, mixture, k, ends, measurements, range_sigma):
+    """Approximate NLOS loss of tag ``k``'s measured ranges at candidate joints (..., 3)."""
+    valid = np.isfinite(measurements.ranges[k])
+    distance = np.linalg.norm(ends[..., None, :] - model.anchors[valid], axis=-1)
+    sigma = range_sigma[k, valid]
+    excess = (measurements.ranges[k, valid] - distance) / sigma
+    return mixture.approximate_loss(excess, sigma).sum(axis=-1)
+
+
+class Fit(NamedTuple):
+    """A Levenberg–Marquardt fit: where it stopped and whether it had converged there."""
+
+    psi: np.ndarray             #: (p + 1,) slew and pitches, radians
+    cost: float                 #: the loss there
+    iterations: int
+    converged: bool             #: stopped by its tolerances, not by ``max_iter``
+
+
+class SearchExhausted(RuntimeError):
+    """A global search that reached its iteration budget: the frame is not solved."""
+
+
+class ChainMethod:
+    """
+    Levenberg–Marquardt over (slew, pitch_1..pitch_p) on everything measured.
+
+    Parameters
+    ----------
+    model : BoomModel
+    sigma : float
+        Tag-anchor range standard deviation, metres: weighs the ranges against the other
+        sensors, scales the NLOS threshold and the predicted uncertainty.
+    eta : float
+        Multiplicative range noise factor (the paper's): a range r has standard deviation
+        ``sqrt(sigma^2 + (eta r)^2)``.
+    tag_sigma : float or None
+        Tag-tag range standard deviation, metres (None: ``sigma``).
+    pitch_sigma, slew_sigma : float
+        Inclinometer and slew encoder standard deviations, radians.
+    nlos_fraction : float
+        Prior probability that a range is NLOS; 0 for plain least squares.
+    nlos_gamma : float
+        Mean NLOS excess, metres.
+    tol : float
+        Stop when the step is below ``tol`` radians.
+    max_iter : int
+    slew_starts : int
+        Slews tried by the cold start.
+    screen_iterations : int
+        Iterations given to every cold start before only the best are fitted to the end.
+    search_budget : int
+        Iterations one global search may take (a cold start takes about 200, 300 at
+        most; a frame of garbage up to 600). A search that reaches it raises
+        :class:`SearchExhausted`, and the next frame's search continues where it stopped,
+        so that the time per frame stays bounded whatever arrives.
+    lowest_joint : float
+        No joint is below this height, metres (world z = 0 is the ground; the default
+        leaves room for noise). Lower it for a boom that reaches below grade.
+
+    """
+
+    prior = 'optional'          # one more start; the cold start finds the global solution
+    holds_chain = True
+    #: How far, metres, a joint may sink below ``lowest_joint`` per unit of cost.
+    GROUND_SIGMA = 0.05
+    inputs = ('ranges', 'tag_ranges', 'pitches', 'slew')
+
+    def __init__(self, model, sigma=0.1, eta=0.0, tag_sigma=None, pitch_sigma=np.radians(0.5),
+                 slew_sigma=np.radians(0.5), nlos_fraction=0.1, nlos_gamma=1.0, tol=1e-10,
+                 max_iter=50, slew_starts=16, screen_iterations=4, lowest_joint=-0.5,
+                 search_budget=400):
+        self.model = model
+        self.eta = float(eta)
+        self.noise = SensorNoise(float(sigma), float(sigma if tag_sigma is None else tag_sigma),
+                                 float(pitch_sigma), float(slew_sigma))
+        self.nlos = NlosMixture(float(nlos_fraction), float(nlos_gamma))
+        self.tol = float(tol)
+        self.max_iter = int(max_iter)
+        self.slew_starts = int(slew_starts)
+        self.screen_iterations = int(screen_iterations)
+        self.lowest_joint = float(lowest_joint)
+        if isinstance(search_budget, bool) or not isinstance(search_budget, (int, np.integer)) \
+                or search_budget < 1:
+            raise ValueError(f'search_budget: must be an integer >= 1, got {search_budget!r}')
+        self.search_budget = int(search_budget)
+        self._carry = ([], 0)           # an exhausted search: its best fits, starts screened
+        self._link_loss = (None, None)      # (Residuals, its ranges' bound NLOS loss)
+
+    def tune(self, *, sigma, eta, nlos_fraction, nlos_gamma, tag_sigma=None):
+        """
+        Take new range noise values (learned while running) from the next frame on.
+
+        ``tag_sigma`` None keeps the tag-tag ranges' sigma.
+        """
+        mixture = NlosMixture(float(nlos_fraction), float(nlos_gamma))
+        noise = SensorNoise(float(sigma), self.noise.tag_sigma if tag_sigma is None
+                            else float(tag_sigma), self.noise.pitch_sigma, self.noise.slew_sigma)
+        if not (np.isfinite(eta) and eta >= 0):
+            raise ValueError(f'eta: must be a finite number >= 0, got {eta!r}')
+        self.noise, self.nlos, self.eta = noise, mixture, float(eta)
+        self._link_loss = (None, None)
+
+    def enough_information(self, measurements):
+        """
+        Judge whether a frame can fix the p + 1 unknowns.
+
+        The tip's pitch is seen only by the tip's ranges or inclinometer.
+        """
+        tip_seen = (np.isfinite(measurements.ranges[-1]).any()
+                    or np.isfinite(measurements.tag_ranges[-1]).any()
+                    or np.isfinite(measurements.tag_ranges[:, -1]).any()
+                    or np.isfinite(measurements.pitches[-1]))
+        return bool(tip_seen) and measurements.count() >= self.model.n_sections + 1
+
+    def reset(self, joints=None):
+        """Forget an unfinished search (the warm start is the prior the chain is given)."""
+        self._carry = ([], 0)
+
+    # -- the least-squares problem --------------------------------------------------------
+    def loss(self, scaled, residuals):
+        """
+        Cost, its slope in the scaled residuals, Gauss-Newton weights, NLOS probabilities.
+
+        Ranges follow the NLOS mixture (on their excess, ``-scaled``); angles are Gaussian.
+        """
+        n = residuals.n_ranged                   # ranges come first
+        if self._link_loss[0] is not residuals:
+            self._link_loss = (residuals, self.nlos.bind(residuals.sigma[:n]))
+        cost, slope = 0.5 * scaled ** 2, scaled.copy()
+        nlos = np.zeros_like(scaled)
+        cost[:n], excess_slope, nlos[:n] = self._link_loss[1](-scaled[:n])
+        slope[:n] = -excess_slope
+        # IRLS curvature slope / residual: 1 for Gaussian rows, small on a blocked link.
+        large = np.abs(scaled) > 1.0
+        weights = np.ones_like(scaled)
+        weights[large] = np.clip(slope[large] / scaled[large], 1e-3, 1.0)
+        return float(np.sum(cost)), slope, weights, nlos
+
+    def _evaluate(self, psi, residuals):
+        """
+        Cost at ``psi`` and what a step needs: (cost, slope, weights, state).
+
+        A joint below ``lowest_joint`` adds a stiff quadratic penalty: the boom is above
+        the ground, which a fit must respect rather than be discarded for.
+        """
+        scaled, geometry = residuals.residuals(psi)
+        cost, slope, weights, _ = self.loss(scaled, residuals)
+        heights = geometry[2][:, 2]
+        depth = np.maximum(self.lowest_joint - heights, 0.0) / self.GROUND_SIGMA
+        return cost + 0.5 * float(depth @ depth), slope, weights, (geometry, depth)
+
+    def _normal_equations(self, psi, residuals, slope, weights, state):
+        """Gauss-Newton (IRLS) normal matrix and gradient at ``psi``."""
+        geometry, depth = state
+        jacobian = residuals.jacobian(psi, geometry)
+        normal = (jacobian * weights[:, None]).T @ jacobian
+        gradient = jacobian.T @ slope
+        if depth.any():
+            sinking = -self.model.joint_jacobian(psi[0], psi[1:])[depth > 0, 2, :]
+            sinking /= self.GROUND_SIGMA
+            normal += sinking.T @ sinking
+            gradient += sinking.T @ depth[depth > 0]
+        return normal, gradient
+
+    def fit(self, psi, residuals, max_iter=None):
+        """Return the Levenberg–Marquardt :class:`Fit` from ``psi`` on a :class:`Residuals`."""
+        max_iter = self.max_iter if max_iter is None else max_iter
+        cost, slope, weights, state = self._evaluate(psi, residuals)
+        damping = 1e-6
+        for iteration in range(1, max_iter + 1):
+            normal, gradient = self._normal_equations(psi, residuals, slope, weights, state)
+            while True:
+                step = -np.linalg.solve(normal + damping * np.diag(np.diag(normal) + 1e-9),
+                                        gradient)
+                trial = psi + step
+                trial_cost, trial_slope, trial_weights, trial_state = self._evaluate(trial,
+                                                                                     residuals)
+                if trial_cost <= cost or damping > 1e10:
+                    break
+                damping *= 4.0
+            if trial_cost > cost:           # no step lowers the cost: a minimum
+                return Fit(psi, cost, iteration, True)
+            stalled = cost - trial_cost <= 1e-6 * abs(trial_cost)     # of a chi-square ~ n
+            psi, cost, slope, weights = trial, trial_cost, trial_slope, trial_weights
+            state = trial_state
+            damping = max(damping / 3.0, 1e-9)
+            if stalled or np.max(np.abs(step)) <= self.tol:
+                return Fit(psi, cost, iteration, True)
+        return Fit(psi, cost, max_iter, False)
+
+    def cost(self, psi, residuals):
+        """Return the fitted loss at angles ``psi`` (p + 1,) on a :class:`Residuals`."""
+        return self._evaluate(np.asarray(psi, dtype=float), residuals)[0]
+
+    # -- starts ---------------------------------------------------------------------------
+    def _beam_starts(self, slews, measurements, range_sigma, width=8):
+        """Return :func:`grow_chains` for this chain's model, NLOS mixture and ground."""
+        return grow_chains(self.model, measurements, range_sigma, self.nlos, slews,
+                           self.lowest_joint, width)
+
+    def _tag_loss(self, k, ends, measurements, range_sigma):
+        """Approximate NLOS loss of tag ``k``'s measured ranges at candidate joints (..., 3)."""
+        return _tag_loss(self.model, self.nlos, k, ends, measurements, range_sigma)
+
+    def _cold_starts(self, measurements, guess, range_sigma, extra=16):
+        """Return start angles: the prior's, each slew's best chain, and the next best overall."""
+        starts = []
+        if guess is not None:
+            slew, pitches = angles_from_joints(self.model, guess)
+            starts.append(np.r_[slew, pitches])
+        slews = np.linspace(-np.pi, np.pi, self.slew_starts, endpoint=False)
+        if np.isfinite(measurements.slew):
+            slews = np.r_[measurements.slew, slews]
+        pitches, cost = self._beam_starts(slews, measurements, range_sigma)
+        chosen = np.zeros(cost.shape, bool)
+        chosen[:, 0] = True
+        others = np.where(chosen, np.inf, cost).ravel()
+        runners_up = np.argsort(others)[:extra]
+        chosen.flat[runners_up[np.isfinite(others[runners_up])]] = True
+        slew_index, beam_index = np.nonzero(chosen)
+        starts.extend(np.c_[slews[slew_index], pitches[slew_index, beam_index]])
+        return starts
+
+    def tip_alternatives(self, psi, measurements, range_sigma, candidates=72, most=2):
+        """
+        Return the same posture with the tip section at its other well-fitting pitches.
+
+        The tip hangs from one joint: its ranges alone place it, and with few of them two
+        pitches can fit. Returns the local minima of the tip's loss over a pitch grid, best
+        first, other than the current pitch.
+        """
+        valid = np.isfinite(measurements.ranges[-1])
+        if not valid.any() or np.isfinite(measurements.pitches[-1]):
+            return []
+        grid = np.linspace(-np.pi, np.pi, candidates, endpoint=False)
+        tip = self.model.n_sections - 1
+        hinge = self.model.forward_kinematics(psi[0], psi[1:])[tip - 1] if tip \
+            else self.model.pivot(psi[0])
+        ends = hinge + self.model.arm_lengths[tip] * (
+            np.cos(grid)[:, None] * [np.cos(psi[0]), np.sin(psi[0]), 0.0]
+            + np.sin(grid)[:, None] * [0.0, 0.0, 1.0])
+        cost = self._tag_loss(tip, ends, measurements, range_sigma)
+        minima = np.flatnonzero((cost <= np.roll(cost, 1)) & (cost <= np.roll(cost, -1)))
+        far = np.abs(wrap_angle(grid[minima] - psi[-1])) > 3 * (2 * np.pi / candidates)
+        minima = minima[far][np.argsort(cost[minima[far]])][:most]
+        return [np.r_[psi[:-1], grid[i]] for i in minima]
+
+    def folds(self, psi):
+        """
+        Return the same posture with one joint folded the other way.
+
+        Reflecting joint k across the line through its neighbours, in the boom's plane,
+        keeps every other joint and all section lengths: a common second fit when joint k
+        has few ranges.
+        """
+        pitches = psi[1:]
+        steps = self.model.arm_lengths[:, None] * np.c_[np.cos(pitches), np.sin(pitches)]
+        chords = steps[:-1] + steps[1:]            # joint k - 1 to joint k + 1, k = 1..p-1
+        axes = np.arctan2(chords[:, 1], chords[:, 0])
+        folded = []
+        for k, axis in enumerate(axes):
+            turned = psi.copy()
+            turned[1 + k:3 + k] = 2 * axis - pitches[k:k + 2]
+            folded.append(wrap_angle(turned))
+        return folded
+
+    @staticmethod
+    def _reversals(psi):
+        """
+        Return the same posture with one section pointing the other way (its pitch + pi).
+
+        Its outer joints all move, and the fit re-bends the neighbours: the second fit of a
+        section whose two ends have few ranges.
+        """
+        return [wrap_angle(psi + np.pi * (np.arange(psi.size) == k))
+                for k in range(1, psi.size)]
+
+    def _search(self, measurements, residuals, guess, range_sigma, finish=3, rounds=3):
+        """
+        Global fit from scratch: its :class:`Fit`, and the other fits it tried (psi each).
+
+        Every start takes a few iterations; the best ``finish`` are fitted to convergence.
+        From the best, single-joint folds, single-section reversals and the tip's other fits
+        are tried until none lowers the cost. The fits that lost are returned too: the
+        integrity checks ask whether any fits about as well elsewhere.
+        """
+        iterations = 0
+        screened = []
+        starts = self._cold_starts(measurements, guess, range_sigma)
+        carried, resume = self._carry
+        # Go on where the last search stopped: its best fits, then the starts it had not tried.
+        order = carried + starts[resume:]
+        for done, start in enumerate(order):
+            if iterations >= self.search_budget:
+                self._give_up(screened, resume + max(done - len(carried), 0))
+            psi, cost, used, _ = self.fit(start, residuals, max_iter=self.screen_iterations)
+            screened.append((cost, psi))
+            iterations += used
+        self._carry = ([], 0)
+        finished = []
+        for _, start in sorted(screened, key=lambda t: t[0])[:finish]:
+            fit = self.fit(start, residuals)
+            finished.append(fit)
+            iterations += fit.iterations
+        best = min(finished, key=lambda fit: fit.cost)
+        psi, cost, converged = best.psi, best.cost, best.converged
+        tried = [psi for _, psi in screened] + [fit.psi for fit in finished]
+        for _ in range(rounds):
+            improved = False
+            for start in (self.folds(psi) + self._reversals(psi)
+                          + self.tip_alternatives(psi, measurements, range_sigma)):
+                if iterations >= 2 * self.search_budget:    # a fit is in hand: keep it
+                    break
+                # Screened like the starts: only a move already fitting better is finished.
+                trial, trial_cost, used, _ = self.fit(start, residuals,
+                                                      max_iter=2 * self.screen_iterations)
+                iterations += used
+                tried.append(trial)
+                if trial_cost < cost - 1e-9:
+                    trial, trial_cost, used, converged = self.fit(trial, residuals)
+                    iterations += used
+                    psi, cost, improved = trial, trial_cost, True
+            if not improved:
+                break
+        return Fit(psi, cost, iterations, converged), tried
+
+    def _give_up(self, screened, resume, keep=3):
+        """Stop a search at its budget, keeping its best fits and where to go on from."""
+        best = [psi for _, psi in sorted(screened, key=lambda t: t[0])[:keep]]
+        self._carry = (best, resume)
+        raise SearchExhausted(f'global search stopped at its budget of {self.search_budget} '
+                              'iterations; the next frame goes on with it')
+
+    def solve(self, measurements, prior, warm=False):
+        """
+        Fit one frame.
+
+        Parameters
+        ----------
+        measurements : Measurements
+            The frame.
+        prior : ndarray, shape (p, 3), or None
+            Warm: the previous posture, fitted from and searched past only when the fit
+            is lost. Cold: one more start of the global search.
+        warm : bool
+            Whether ``prior`` is a warm start (else a cold one).
+
+        """
+        noise = self.noise
+        if self.eta:
+            distances = np.nan_to_num(measurements.ranges)
+            noise = replace(noise, range_sigma=np.hypot(noise.range_sigma, self.eta * distances))
+        residuals = Residuals(self.model, measurements, noise)
+        fit, lost, iterations, others = None, True, 0, []
+        if warm and prior is not None:
+            slew, pitches = angles_from_joints(self.model, prior)
+            fit = self.fit(np.r_[slew, pitches], residuals)
+            iterations = fit.iterations
+            lost = fit.cost > 12.5 * residuals.size     # worse than 5 sigma RMS per residual
+        if lost:
+            range_sigma = np.broadcast_to(noise.range_sigma, measurements.ranges.shape)
+            found, others = self._search(measurements, residuals, None if warm else prior,
+                                         range_sigma)
+            iterations += found.iterations
+            if fit is None or found.cost < fit.cost:
+                fit = found
+        psi = canonical_angles(fit.psi, self.model.pivot_offset)
+        joints = self.model.forward_kinematics(psi[0], psi[1:])
+        info = {'iterations': iterations, 'converged': fit.converged, 'slew': float(psi[0]),
+                'pitches': psi[1:].copy(), 'searched': lost,
+                # the search's runners-up: the integrity checks ask if they fit as well
+                'alternatives': self.model.forward_kinematics(
+                    np.array([o[0] for o in others]), np.array([o[1:] for o in others]))
+                if others else []}
+        return joints, info

@@ -1,0 +1,121 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+What ``PostureEstimator`` asks of an estimation method, and what one frame gives back.
+
+A method (``core.epp``, ``core.chain``, ``core.track``, ``core.baselines``) solves one frame
+of :class:`~epp_ros.core.model.measurements.Measurements` from a prior posture;
+``PostureEstimator`` cleans the frame, chooses the prior, judges the answer
+(``core.integrity``) and reports a :class:`FrameResult`.
+"""
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from typing import Optional, Protocol, runtime_checkable
+
+from epp_ros.core.estimation.noise_learning import RangeNoiseEstimate
+import numpy as np
+
+__all__ = ['PostureMethod', 'FrameResult']
+
+
+@runtime_checkable
+class PostureMethod(Protocol):
+    """
+    A posture estimation method.
+
+    Attributes
+    ----------
+    inputs : tuple of str
+        What it uses of a frame: ``"ranges"``, ``"tag_ranges"``, ``"pitches"``,
+        ``"slew"``, ``"range_stamps"``; the others are reported as ignored.
+    prior : str
+        ``"required"`` (it solves from a prior posture), ``"optional"`` (a prior is one
+        more start) or ``"unused"``.
+    holds_chain : bool
+        Whether its answers are always a boom of p + 1 angles (the chain's bound is then
+        their uncertainty).
+
+    Methods that can take the noise learned while running also have
+    ``tune(*, sigma, eta, nlos_fraction, nlos_gamma)``; methods with a state of their own
+    (a motion model) have ``accept()``, called when the last solve fitted its frame.
+
+    """
+
+    inputs: tuple
+    prior: str
+    holds_chain: bool
+
+    def enough_information(self, measurements):
+        """Return whether the frame can determine the posture."""
+
+    def solve(self, measurements, prior, warm=False):
+        """
+        Return the joints (p, 3) of one frame and a dict of details.
+
+        ``prior`` (p, 3) or None: the previous posture when ``warm``, else a guess.
+        """
+
+    def reset(self, joints=None):
+        """Forget what was carried from frame to frame; ``joints`` (p, 3): start there."""
+
+
+@dataclass
+class FrameResult(Mapping):
+    """
+    What one frame gave: the decision, the method's answer, and how it was reached.
+
+    Readable as a mapping (``result["valid"]``, ``result.get("chi_square")``), as
+    ``last_diagnostics`` always was: the fields below by name, then every entry of
+    ``details``. A field that is None (nothing solved) is absent from the mapping.
+    """
+
+    status: str                 #: ``"ok"``, or why the frame is not valid
+    valid: bool                 #: the posture may be used
+    level: int                  #: 0 OK, 1 WARN, 2 ERROR
+    message: str
+    method: str
+    cold_start: bool            #: solved without a previous posture
+    reacquired: bool            #: a fresh solve replaced a lost warm one
+    noise: RangeNoiseEstimate   #: the range noise in use (learned or told)
+    estimate: Optional[np.ndarray] = None   #: (p, 3) the method's answer, valid or not
+    converged: Optional[bool] = None        #: the solver met its tolerances
+    details: dict = field(default_factory=dict)
+
+    def _named(self):
+        return [f.name for f in fields(self) if f.name != 'details'
+                and getattr(self, f.name) is not None]
+
+    def __getitem__(self, key):
+        if key != 'details' and key in self.__dataclass_fields__:
+            value = getattr(self, key)
+            if value is None:
+                raise KeyError(key)
+            return value
+        return self.details[key]
+
+    def __iter__(self):
+        yield from self._named()
+        yield from (key for key in self.details if key not in self.__dataclass_fields__)
+
+    def __len__(self):
+        return sum(1 for _ in self)
+
+    @classmethod
+    def from_values(cls, values):
+        """Build from a dict of every value: the named ones taken out, the rest details."""
+        values = dict(values)
+        named = {f.name: values.pop(f.name) for f in fields(cls)
+                 if f.name != 'details' and f.name in values}
+        return cls(**named, details=values)

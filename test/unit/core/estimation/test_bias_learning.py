@@ -1,0 +1,101 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The range bias common to all links, learned while running (core.bias_learning)."""
+from epp_ros.core import PostureEstimator
+from epp_ros.core.estimation.bias_learning import BiasLearner, REFERENCE_RANGE
+from epp_ros.core.simulation.simulate import (FieldEffects, simulate_field, truck_pump,
+                                              WorkingMotion)
+import numpy as np
+import pytest
+
+MODEL = truck_pump()
+
+
+def biased_frames(offset, slope, seconds=40.0, seed=3, link_offset=0.0):
+    """Frames of the working cycle whose every range is long by offset + slope (r - r0)."""
+    curve = tuple((r, offset + slope * (r - REFERENCE_RANGE)) for r in (0.0, 100.0))
+    effects = FieldEffects(sigma=0.05, bias_curve=curve, link_offset=link_offset)
+    rng = np.random.default_rng(seed)
+    return simulate_field(MODEL, WorkingMotion(MODEL, rng), seconds, effects, rng)
+
+
+def run(estimator, frames):
+    """Return each frame's mean squared joint error (valid frames), the last diagnostics."""
+    squared = []
+    for frame in frames:
+        estimator.update(**frame.inputs())
+        result = estimator.last_diagnostics
+        if result['valid']:
+            squared.append(np.mean(np.sum((result['estimate'] - frame.joints) ** 2, axis=1)))
+    return np.array(squared), estimator.last_diagnostics
+
+
+@pytest.mark.parametrize('offset, slope', [(0.3, 0.0), (0.2, 0.008), (-0.15, 0.004)])
+def test_a_common_bias_is_learned_to_its_stated_uncertainty(offset, slope):
+    # Told that the links have no bias of their own (these have none): nothing floors
+    # what frames tell.
+    estimator = PostureEstimator(MODEL, 'chain', sigma=0.05, link_bias_std=0.0)
+    squared, _ = run(estimator, biased_frames(offset, slope))
+    learned = estimator.range_bias
+    covariance = estimator.integrity.common_covariance
+    error = learned - [offset, slope]
+    # The estimate's own uncertainty, as a z-score of the pair: chi-square(2) < 18.4 but
+    # once in 10,000 draws.
+    assert error @ np.linalg.solve(covariance, error) < 18.4
+    assert abs(error[0]) < 0.03 and abs(error[1]) < 0.002
+    # What is still unknown has shrunk from the prior's 0.25 m to centimetres.
+    assert np.sqrt(covariance[0, 0]) < 0.03
+
+
+def test_learning_the_bias_takes_most_of_its_error_away():
+    frames = biased_frames(0.3, 0.008)
+    learned, _ = run(PostureEstimator(MODEL, 'chain', sigma=0.05), frames)
+    fixed, last = run(PostureEstimator(MODEL, 'chain', sigma=0.05, learn_noise=False), frames)
+    late = slice(len(learned) // 2, None)            # once learned
+    assert np.sqrt(np.mean(learned[late])) < 0.5 * np.sqrt(np.mean(fixed[-len(learned[late]):]))
+    # Unlearned, the fit is off by the bias it absorbed, and says so.
+    assert last['predicted_rmse'] >= np.sqrt(fixed[-1]) / 3
+
+
+def test_unbiased_ranges_learn_no_bias_and_a_told_zero_is_kept():
+    estimator = PostureEstimator(MODEL, 'chain', sigma=0.05)
+    run(estimator, biased_frames(0.0, 0.0, seconds=20.0))
+    learned, covariance = estimator.range_bias, estimator.integrity.common_covariance
+    assert learned @ np.linalg.solve(covariance, learned) < 18.4
+    told = PostureEstimator(MODEL, 'chain', sigma=0.05, common_bias_std=0.0,
+                            bias_slope_std=0.0)
+    run(told, biased_frames(0.3, 0.0, seconds=5.0))
+    assert np.all(told.range_bias == 0.0) and not told.integrity.common_covariance.any()
+
+
+def test_each_links_own_bias_is_a_floor_under_what_frames_tell():
+    # Biases of each link's own do not average over frames: the learned common part keeps
+    # their share of its uncertainty, and its error stays within it.
+    frames = biased_frames(0.2, 0.0, seconds=40.0, link_offset=0.1)
+    estimator = PostureEstimator(MODEL, 'chain', sigma=0.05, link_bias_std=0.1)
+    run(estimator, frames)
+    learner = estimator._bias_learner
+    assert learner.floor()[0, 0] > 0
+    assert np.all(np.diag(estimator.integrity.common_covariance) >= np.diag(learner.floor()))
+    error = estimator.range_bias[0] - 0.2
+    assert abs(error) < 4 * np.sqrt(estimator.integrity.common_covariance[0, 0])
+
+
+def test_a_frame_with_too_few_links_teaches_nothing():
+    learner = BiasLearner(0.25, 0.01, 0.1, 6)
+    jacobian = np.eye(6)[:, :4]
+    assert not learner.observe(jacobian, np.full(6, 0.1), np.zeros(6), np.full(6, 10.0),
+                               np.arange(6))
+    assert learner.frames == 0 and not learner.estimate.any()

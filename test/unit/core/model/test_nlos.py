@@ -1,0 +1,106 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The NLOS range error model, and the chain's global search under it."""
+from epp_ros.core import PostureEstimator
+from epp_ros.core.estimation.methods.chain import ChainMethod
+from epp_ros.core.model.measurements import Measurements, Residuals
+from epp_ros.core.model.nlos import NlosMixture
+from epp_ros.core.simulation.simulate import observe, random_posture, RangeNoise, truck_pump
+import numpy as np
+import pytest
+from scipy.stats import exponnorm, norm
+
+SIGMA, FRACTION, GAMMA = 0.2, 0.2, 2.0
+
+
+def mixture_nll(excess, sigma, fraction, gamma):
+    """Negative log-density of ``excess * sigma`` from scipy's own distributions."""
+    error = excess * sigma
+    density = ((1 - fraction) * norm.pdf(error, scale=sigma)
+               + fraction * exponnorm.pdf(error, gamma / sigma, scale=sigma))
+    return -np.log(density)
+
+
+def test_loss_is_the_mixture_likelihood_up_to_a_line():
+    model = NlosMixture(FRACTION, GAMMA)
+    excess = np.linspace(-6.0, 60.0, 2001)
+    cost, slope, _ = model.loss(excess, SIGMA)
+    reference = mixture_nll(excess, SIGMA, FRACTION, GAMMA)
+    # Second differences cancel the constant and the linear shift.
+    np.testing.assert_allclose(np.diff(cost, 2), np.diff(reference, 2), atol=1e-9)
+    np.testing.assert_allclose(np.gradient(cost, excess)[1:-1], slope[1:-1], atol=2e-3)
+    zero_cost, zero_slope, _ = model.loss(np.zeros(1), SIGMA)
+    assert zero_cost == pytest.approx([0.0], abs=1e-15)
+    assert zero_slope == pytest.approx([0.0], abs=1e-15)
+
+
+def test_posterior_is_bayes_rule_and_the_pull_of_a_blocked_link_is_bounded():
+    model = NlosMixture(FRACTION, GAMMA)
+    excess = np.array([-3.0, 0.0, 1.0, 3.0, 10.0, 50.0])
+    _, slope, nlos = model.loss(excess, SIGMA)
+    error = excess * SIGMA
+    blocked = FRACTION * exponnorm.pdf(error, GAMMA / SIGMA, scale=SIGMA)
+    expected = blocked / (blocked + (1 - FRACTION) * norm.pdf(error, scale=SIGMA))
+    np.testing.assert_allclose(nlos, expected, rtol=1e-9)
+    assert nlos[0] < 0.01 and nlos[-1] > 0.999
+    assert 0 < slope[-1] < 2 * SIGMA / GAMMA       # a least-squares link would pull by 50
+
+
+def test_no_nlos_is_least_squares_and_bad_parameters_are_refused():
+    excess = np.linspace(-5, 5, 11)
+    cost, slope, nlos = NlosMixture(0.0, 1.0).loss(excess, 0.1)
+    np.testing.assert_array_equal(cost, 0.5 * excess ** 2)
+    np.testing.assert_array_equal(slope, excess)
+    assert not nlos.any()
+    for fraction, gamma in ((1.0, 1.0), (-0.1, 1.0), (0.1, 0.0), (0.1, np.nan)):
+        with pytest.raises(ValueError, match='nlos_'):
+            NlosMixture(fraction, gamma)
+
+
+@pytest.mark.parametrize('sigma', [0.05, 0.2, 1.0])
+def test_approximate_loss_stays_within_log_two_of_the_loss(sigma):
+    model = NlosMixture(0.1, 1.0)
+    excess = np.linspace(-10.0, 100.0, 5001)
+    # The likelihood per unit of excess, without the loss's constant and tilt.
+    exact = (mixture_nll(excess, sigma, model.fraction, model.gamma)
+             - np.log(np.sqrt(2 * np.pi) * sigma) + np.log1p(-model.fraction))
+    gap = exact - model.approximate_loss(excess, sigma)
+    assert np.all(gap <= 1e-9) and np.all(gap >= -np.log(2.0) - 1e-9)
+
+
+def test_cold_start_finds_the_global_fit_with_blocked_links():
+    """No fit started at the true posture ends lower than the cold start's."""
+    model = truck_pump()
+    rng = np.random.default_rng(11)
+    noise = RangeNoise(sigma=SIGMA, nlos_fraction=FRACTION, nlos_gamma=GAMMA)
+    recall = []
+    for _ in range(12):
+        slew, pitches, _ = random_posture(model, rng)
+        frame, blocked = observe(model, slew, pitches, rng, noise)
+        measurements = Measurements.ranges_only(frame['ranges'])
+        chain = ChainMethod(model, sigma=SIGMA, nlos_fraction=FRACTION, nlos_gamma=GAMMA)
+        residuals = Residuals(model, measurements, chain.noise)
+        estimator = PostureEstimator(model, 'chain', sigma=SIGMA, nlos_fraction=FRACTION,
+                                     nlos_gamma=GAMMA)
+        estimator.update(frame['ranges'])
+        info = estimator.last_diagnostics
+        found = chain.loss(residuals.residuals(np.r_[info['slew'], info['pitches']])[0],
+                           residuals)[0]
+        from_truth = chain.fit(np.r_[slew, pitches], residuals)[1]
+        assert found <= from_truth + 1e-6
+        flagged = info['nlos_links']
+        recall.append((flagged & blocked).sum() / max(blocked.sum(), 1))
+        assert (flagged & ~blocked).sum() <= 1       # LOS links are rarely taken for NLOS
+    assert np.mean(recall) > 0.5

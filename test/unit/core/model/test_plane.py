@@ -1,0 +1,121 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+from epp_ros.core.model.plane import (fit_plane_to_ranges, fit_slew, from_plane, keep_folds,
+                                      project_ranges, to_plane)
+import numpy as np
+import pytest
+
+BASE = np.array([1.0, -2.0, 3.5])
+
+
+@pytest.mark.parametrize('slew', [0.0, 0.3, np.pi / 2, -np.pi / 2, 2.5, -3.0])
+def test_fit_slew_recovers_any_direction(slew):
+    reach = np.array([2.0, 5.0, 9.0])
+    points = BASE + np.column_stack([reach * np.cos(slew), reach * np.sin(slew),
+                                     [1.0, 4.0, -2.0]])
+    assert np.isclose(np.angle(np.exp(1j * (fit_slew(points, BASE) - slew))), 0.0,
+                      atol=1e-12)
+
+
+def test_plane_round_trip_and_distances():
+    rng = np.random.default_rng(0)
+    slew = 0.7
+    coords = rng.uniform(-10, 10, (6, 2))
+    points = from_plane(coords, BASE, slew)
+    np.testing.assert_allclose(to_plane(points, BASE, slew), coords, atol=1e-12)
+    np.testing.assert_allclose(fit_slew(points[coords[:, 0] > 0], BASE), slew, atol=1e-12)
+
+
+def test_range_projection_is_exact_for_points_in_the_plane():
+    rng = np.random.default_rng(1)
+    slew = -1.1
+    tags = from_plane(rng.uniform(1, 20, (5, 2)), BASE, slew)
+    anchors = rng.uniform(-8, 8, (4, 3))
+    ranges = np.linalg.norm(tags[:, None] - anchors[None], axis=-1)
+    squared, clipped = project_ranges(ranges, anchors, BASE, slew)
+    in_plane = to_plane(anchors, BASE, slew)
+    expected = np.sum((to_plane(tags, BASE, slew)[:, None] - in_plane[None]) ** 2, axis=-1)
+    np.testing.assert_allclose(squared, expected, rtol=1e-10, atol=1e-10)
+    assert not clipped.any()
+
+
+def test_range_projection_clips_impossible_ranges_and_keeps_missing():
+    anchors = np.array([[0.0, 5.0, 0.0], [3.0, 0.0, 0.0]])
+    ranges = np.array([[2.0, np.nan]])         # 2 m to an anchor 5 m off the plane
+    squared, clipped = project_ranges(ranges, anchors, np.zeros(3), 0.0)
+    assert squared[0, 0] == 0.0 and clipped[0, 0]
+    assert np.isnan(squared[0, 1]) and not clipped[0, 1]
+
+
+@pytest.mark.parametrize('with_lengths', [False, True])
+def test_plane_fit_recovers_the_slew_of_exact_ranges(with_lengths):
+    rng = np.random.default_rng(2)
+    slew = 2.9
+    coords = np.cumsum(rng.uniform(3, 6, (4, 2)), axis=0)          # a chain rising outward
+    pivot = np.array([0.0, BASE[2]])
+    lengths = np.linalg.norm(np.diff(np.vstack([pivot, coords]), axis=0), axis=1)
+    anchors = np.column_stack([rng.uniform(-6, 6, (5, 2)), rng.uniform(0, 4, 5)])
+    ranges = np.linalg.norm(from_plane(coords, BASE, slew)[:, None] - anchors[None], axis=-1)
+    ranges[0, :3] = np.nan                     # a tag with two ranges still fits
+    start = coords + rng.normal(0, 0.3, coords.shape)
+    fitted_slew, fitted = fit_plane_to_ranges(
+        start, ranges, anchors, BASE, slew - 0.05,
+        *((pivot, lengths) if with_lengths else ()), max_iter=20, tol=1e-12)
+    assert abs(fitted_slew - slew) < 1e-9
+    np.testing.assert_allclose(fitted, coords, atol=1e-7)
+
+
+def test_plane_fit_holds_a_tag_without_ranges():
+    anchors = np.array([[5.0, 1.0, 0.0], [-3.0, 4.0, 1.0], [0.0, -5.0, 2.0], [2.0, 2.0, 6.0]])
+    coords = np.array([[4.0, 6.0], [9.0, 8.0]])
+    ranges = np.linalg.norm(from_plane(coords, BASE, 0.4)[:, None] - anchors[None], axis=-1)
+    ranges[1] = np.nan
+    start = coords + [[0.2, -0.1], [1.0, 1.0]]
+    fitted_slew, fitted = fit_plane_to_ranges(start, ranges, anchors, BASE, 0.35, max_iter=20)
+    assert np.all(np.isfinite(fitted)) and np.isfinite(fitted_slew)
+    np.testing.assert_allclose(fitted[1], start[1])
+
+
+def test_plane_fit_with_lengths_needs_the_pivot():
+    with pytest.raises(ValueError, match='pivot'):
+        fit_plane_to_ranges(np.ones((1, 2)), np.ones((1, 3)), np.zeros((3, 3)), BASE, 0.0,
+                            arm_lengths=np.ones(1))
+
+
+def _reflected(chain, i):
+    """Chain point ``i`` reflected across the line through its neighbours."""
+    inner, outer = chain[i - 1], chain[i + 1]
+    axis = (outer - inner) / np.linalg.norm(outer - inner)
+    offset = chain[i] - inner
+    return inner + 2.0 * (offset @ axis) * axis - offset
+
+
+def test_keep_folds_restores_the_reference_fold_of_free_joints_only():
+    pivot = np.array([0.5, 2.0])
+    reference = np.array([[3.0, 6.0], [8.0, 7.0], [12.0, 4.0], [15.0, 0.0]])
+    coords = reference.copy()
+    coords[1] = _reflected(np.vstack([pivot, reference]), 2)     # joint 2 folded over
+    free = np.array([False, True, False, False])
+    kept, folded = keep_folds(coords, reference, pivot, free)
+    np.testing.assert_allclose(kept, reference, atol=1e-12)
+    np.testing.assert_array_equal(folded, [False, True, False, False])
+    heard, folded = keep_folds(coords, reference, pivot, np.zeros(4, bool))
+    np.testing.assert_array_equal(heard, coords)                # heard: its ranges decide
+    assert not folded.any()
+    # A straight reference has no fold to keep; a run of free joints is left alone.
+    straight = np.array([[3.0, 6.0], [5.5, 10.0], [12.0, 4.0], [15.0, 0.0]])
+    straight[1] = 0.5 * (straight[0] + straight[2])
+    assert not keep_folds(coords, straight, pivot, free)[1].any()
+    assert not keep_folds(coords, reference, pivot, [False, True, True, False])[1].any()
