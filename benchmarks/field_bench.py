@@ -103,9 +103,11 @@ def _estimators(model, effects):
     told = {'sigma': effects.sigma, 'eta': effects.sigma_per_metre,
             'nlos_fraction': max(effects.nlos_fraction, 1e-3),
             'nlos_gamma': effects.nlos_gamma}
-    return {'chain': PostureEstimator(model, 'chain'),
-            'cepp': PostureEstimator(model, 'cepp'),
-            'track': PostureEstimator(model, 'track'),
+    # The outriggers may stand elsewhere than configured, as on a pump set up again.
+    moving = truck_outriggers(model)
+    return {'chain': PostureEstimator(model, 'chain', moving_anchors=moving),
+            'cepp': PostureEstimator(model, 'cepp', moving_anchors=moving),
+            'track': PostureEstimator(model, 'track', moving_anchors=moving),
             'chain told': PostureEstimator(model, 'chain', learn_noise=False, **told)}
 
 

@@ -378,7 +378,9 @@ def evaluate(path, config, method='cepp', out=None, salvage=False, **options):
         raise BagError(f'{path}: damaged: {damage.describe()} (--salvage uses what could '
                        'be read)')
     model = config.model()
-    run = _Evaluation(model, PostureEstimator(model, method, **options), config)
+    estimator = PostureEstimator(model, method, moving_anchors=config.moving_anchor_indices,
+                                 **options)
+    run = _Evaluation(model, estimator, config)
     with _Bag(path) as bag:
         bag.connections(RANGES, TYPES[RANGES])            # there, and of the right type
         if any(c.topic == TRUTH for c in bag.reader.connections):

@@ -157,6 +157,8 @@ def report(diagnostics, lengths):
         offset, slope = diagnostics['range_bias']
         values['range bias [m]'] = f'{offset:.4f}'
         values['range bias per metre'] = f'{slope:.5f}'
+    for anchor, shift in diagnostics.get('anchor_shifts', {}).items():   # learned, x y z
+        values[f'anchor {anchor} shift [m]'] = '{:.3f} {:.3f} {:.3f}'.format(*shift)
     if 'noise_rmse' in diagnostics:         # the predicted RMSE without the common bias
         values['noise RMSE [m]'] = f'{diagnostics["noise_rmse"]:.4f}'
     if 'nlos_links' in diagnostics:

@@ -111,6 +111,9 @@ SETTINGS = {
                              'after the offsets, m: adds to the predicted RMSE.', 0.0, 10.0),
     'bias_slope_std': _told('bias_slope_std', 'Std of the growth of that common bias with '
                             'range, m per m.', 0.0, 1.0),
+    'anchor_std': _told('anchor_std', 'Std per axis of how far each anchor off the truck body '
+                        '(not in body_anchors) may stand from where configured, m; > 0: its '
+                        'shift is learned while running (learn_noise).', 0.0, 10.0),
     'max_angular_rate': Setting(IntegrityLimits.max_angular_rate, 'Fastest slew or pitch '
                                 'rate of the boom, rad/s: rules out jumps and folds.', True,
                                 1e-4, 100.0),
@@ -128,7 +131,7 @@ OPTION_OF = {'range_sigma': 'sigma', 'nlos_fraction': 'nlos_fraction',
              'nlos_gamma': 'nlos_gamma', 'tag_sigma': 'tag_sigma', 'pitch_sigma': 'pitch_sigma',
              'slew_sigma': 'slew_sigma', 'lowest_joint': 'lowest_joint',
              'link_bias_std': 'link_bias_std', 'common_bias_std': 'common_bias_std',
-             'bias_slope_std': 'bias_slope_std'}
+             'bias_slope_std': 'bias_slope_std', 'anchor_std': 'anchor_std'}
 
 
 def parameter_name(message):

@@ -108,7 +108,8 @@ class PostureEstimatorNode(Node):
                        for name, setting in SETTINGS.items()}
         try:
             settings = estimator_settings(self.values)
-            self.pipeline = RangePipeline(self.config, PostureEstimator(self.model, **settings))
+            self.pipeline = RangePipeline(self.config, PostureEstimator(
+                self.model, moving_anchors=self.config.moving_anchor_indices, **settings))
             self.angle_samples = self._angle_samples(self.values)
         except ImportError as exc:
             raise StartupError(f'method: {exc}') from None
@@ -193,8 +194,9 @@ class PostureEstimatorNode(Node):
             self._angle_samples(values)
             # A new method is built here, where a failure can still refuse the change (the
             # SDP baseline needs cvxpy); the change, once accepted, takes it.
-            self.next_estimator = (None if settings['method'] == self.estimator.method
-                                   else PostureEstimator(self.model, **settings))
+            self.next_estimator = None if settings['method'] == self.estimator.method \
+                else PostureEstimator(self.model, moving_anchors=self.config.moving_anchor_indices,
+                                      **settings)
         except ImportError as exc:
             return SetParametersResult(successful=False, reason=f'method: {exc}')
         except ValueError as exc:

@@ -32,6 +32,15 @@ Each link's own bias ``e`` does not average out over frames: a frame's estimate 
 Lambda)^-1 S e`` with ``S`` the frames' ``D_perp^T Sigma^-1/2`` summed (forgotten alike) over
 every link; its covariance ``link_std^2 (Lambda_0 + Lambda)^-1 S S^T (Lambda_0 +
 Lambda)^-1`` is kept beside the statistical one.
+
+An anchor off the truck body (an outrigger's) may stand elsewhere than configured: set up
+again, it is rarely where it was measured. Standing at ``a + delta`` it makes each of its
+ranges ``-u . delta`` longer to first order, ``u`` the unit vector from the configured
+anchor to the tag: a bias whose direction turns as the boom moves. Each such anchor adds
+three columns ``-u`` (on its own links' rows, zero elsewhere) to ``D`` under a prior of
+``anchor_std``, and is learned with the common bias, from the same frames. Each link's own
+bias moves the learned shift too (the floor above), and on real links so do biases that
+turn with the boom, which the shifts then take for theirs: the prior is zero unless told.
 """
 import numpy as np
 
@@ -41,15 +50,43 @@ __all__ = ['BiasLearner', 'REFERENCE_RANGE', 'bias_design']
 REFERENCE_RANGE = 20.0
 #: Frames whose information a new frame's weighs as much as (the forgetting's memory).
 MEMORY_FRAMES = 300
-#: Largest bias (m) and slope (per metre) a pump's links may carry: beyond, it is a fit gone
-#: wrong, not a bias.
+#: Largest bias (m) and slope (per metre) a pump's links may carry, and how far (m) along each
+#: axis an anchor may stand from where configured: beyond, it is a fit gone wrong.
 LIMITS = (2.0, 0.05)
+ANCHOR_LIMIT = 3.0
 
 
-def bias_design(distances):
-    """Return the bias's directions ``[1, r - REFERENCE_RANGE]`` at ``distances`` (n,): (n, 2)."""
+def bias_design(distances, directions=None, anchors=None, moving=()):
+    """
+    Return the bias's directions: ``[1, r - REFERENCE_RANGE]``, then ``-u`` per moving anchor.
+
+    Parameters
+    ----------
+    distances : array_like, shape (n,)
+        The links' distances, metres.
+    directions : array_like, shape (n, 3), optional
+        Unit vectors from each link's configured anchor to its tag; None (or a moving
+        anchor's rows NaN): its shift is not seen on those rows.
+    anchors : array_like of int, shape (n,), optional
+        Each link's anchor (index).
+    moving : sequence of int
+        The anchors whose shifts are parameters, in order.
+
+    Returns
+    -------
+    ndarray, shape (n, 2 + 3 len(moving))
+
+    """
     distances = np.asarray(distances, dtype=float)
-    return np.stack([np.ones(distances.shape), distances - REFERENCE_RANGE], axis=-1)
+    design = np.zeros(distances.shape + (2 + 3 * len(moving),))
+    design[..., 0] = 1.0
+    design[..., 1] = distances - REFERENCE_RANGE
+    if moving and directions is not None:
+        directions = np.nan_to_num(np.asarray(directions, dtype=float))
+        for block, anchor in enumerate(moving):
+            rows = np.asarray(anchors) == anchor
+            design[rows, 2 + 3 * block:5 + 3 * block] = -directions[rows]
+    return design
 
 
 class BiasLearner:
@@ -68,49 +105,76 @@ class BiasLearner:
         How many links there are (p m): the columns of ``S``.
     memory : int
         Frames a new frame's information weighs as much as.
+    anchor_std : float
+        Prior standard deviation of each moving anchor's shift along each axis, metres.
+    moving : sequence of int
+        The anchors that may stand elsewhere than configured (indices).
+    n_anchors : int
+        How many anchors there are (m): a link's flat index ``k m + j`` names anchor j.
 
     Attributes
     ----------
-    estimate : ndarray, shape (2,)
-        Offset (m) and slope (m/m) now taken off the ranges.
+    estimate : ndarray, shape (2 + 3 len(moving),)
+        Offset (m) and slope (m/m) now taken off the ranges, then each moving anchor's
+        shift (m).
 
     """
 
-    def __init__(self, common_std, slope_std, link_std, links, memory=MEMORY_FRAMES):
-        prior = np.array([common_std, slope_std], dtype=float)
+    def __init__(self, common_std, slope_std, link_std, links, memory=MEMORY_FRAMES,
+                 anchor_std=0.0, moving=(), n_anchors=1):
+        self.moving = tuple(int(j) for j in moving)
+        self.n_anchors = int(n_anchors)
+        prior = np.array([common_std, slope_std, *[anchor_std] * (3 * len(self.moving))],
+                         dtype=float)
+        size = prior.size
+        self.limits = np.r_[LIMITS, np.full(3 * len(self.moving), ANCHOR_LIMIT)]
         self.fixed = ~(prior > 0)                  # a zero std: not learned, stays at 0
         self.prior_information = np.diag(np.where(self.fixed, 0.0, 1.0 / np.where(
             prior > 0, prior, 1.0) ** 2))
         self.link_std = float(link_std)
         self.forget = 1.0 - 1.0 / float(memory)
-        self.information = np.zeros((2, 2))
-        self.weighted = np.zeros(2)                # information times the estimate
-        self.through = np.zeros((2, int(links)))    # S: how each link's bias gets in
-        self.estimate = np.zeros(2)
+        self.information = np.zeros((size, size))
+        self.weighted = np.zeros(size)                # information times the estimate
+        self.through = np.zeros((size, int(links)))    # S: how each link's bias gets in
+        self.estimate = np.zeros(size)
         self.frames = 0
 
-    def correction(self, distances):
-        """Return the bias (m) to take off ranges of ``distances`` (any shape), metres."""
-        return bias_design(distances) @ self.estimate
+    def correction(self, distances, directions=None):
+        """
+        Return the bias (m) to take off the (p, m) ranges of ``distances``, metres.
+
+        ``directions`` (p, m, 3): unit vectors from each anchor to each tag; None: the
+        anchors' shifts are left out.
+        """
+        distances = np.asarray(distances, dtype=float)
+        anchors = np.broadcast_to(np.arange(distances.shape[-1]), distances.shape)
+        design = bias_design(distances.ravel(), None if directions is None else
+                             np.reshape(directions, (-1, 3)), anchors.ravel(), self.moving)
+        return (design @ self.estimate).reshape(distances.shape)
+
+    @property
+    def anchor_shifts(self):
+        """Return each moving anchor's learned shift (len(moving), 3), metres."""
+        return self.estimate[2:].reshape(-1, 3)
 
     def covariance(self):
-        """Return what is not known of the bias (2, 2): the estimate's and the links' share."""
+        """Return what is not known of the bias (q, q): the estimate's and the links' share."""
         return self._statistical() + self.floor()
 
     def _statistical(self):
-        """Return ``(Lambda_0 + Lambda)^-1`` on the free parameters, zero elsewhere (2, 2)."""
+        """Return ``(Lambda_0 + Lambda)^-1`` on the free parameters, zero elsewhere (q, q)."""
         total = self.prior_information + self.information
         free = ~self.fixed
-        covariance = np.zeros((2, 2))
+        covariance = np.zeros(total.shape)
         covariance[np.ix_(free, free)] = np.linalg.inv(total[np.ix_(free, free)])
         return covariance
 
     def floor(self):
-        """Return the covariance (2, 2) the links' own biases leave in what is learned."""
+        """Return the covariance (q, q) the links' own biases leave in what is learned."""
         carried = self._statistical() @ self.through
         return self.link_std ** 2 * carried @ carried.T
 
-    def observe(self, jacobian, sigma, residuals, distances, links):
+    def observe(self, jacobian, sigma, residuals, distances, links, directions=None):
         """
         Add a frame's accepted fit; return whether the estimate changed.
 
@@ -126,31 +190,41 @@ class BiasLearner:
             Fitted distances of those links, metres.
         links : ndarray of int, shape (n,)
             Which links they are (flat indices of the (p, m) ranges).
+        directions : ndarray, shape (n, 3), optional
+            Unit vectors from those links' anchors to their tags at the fit; None: the
+            anchors' shifts learn nothing from this frame.
 
         """
         free = ~self.fixed
-        if not free.any() or residuals.size <= jacobian.shape[1] + 2:
+        if directions is None:
+            free[2:] = False
+        if not free.any() or residuals.size <= jacobian.shape[1] + free.sum():
             return False
-        design = bias_design(distances)[:, free] / sigma[:, None]
+        design = bias_design(distances, directions, np.asarray(links) % self.n_anchors,
+                             self.moving)[:, free] / sigma[:, None]
         projected = design - jacobian @ np.linalg.lstsq(jacobian, design, rcond=None)[0]
         information = projected.T @ projected
-        if np.linalg.cond(information) > 1e12:
+        # The common bias alone: a frame that cannot tell it is skipped. An anchor's shift
+        # is seen a direction at a time, so a frame adds what it tells and the prior and
+        # other frames the rest.
+        if not np.all(np.isfinite(information)) or (
+                free.sum() == 2 and np.linalg.cond(information) > 1e12):
             return False
-        found = np.linalg.solve(information, -projected.T @ residuals)
+        # Information times the frame's own estimate, estimate + found, without solving.
+        told = information @ self.estimate[free] - projected.T @ residuals
         through = np.zeros((free.sum(), self.through.shape[1]))
         through[:, links] = projected.T / sigma                  # D_perp^T Sigma^-1/2, 1/m
-        self._add(information, self.estimate[free] + found, through)
+        self._add(free, information, told, through)
         return True
 
-    def _add(self, information, value, through):
-        """Fold in one frame's information on the free parameters, its estimate and S."""
-        free = ~self.fixed
+    def _add(self, free, information, told, through):
+        """Fold in one frame's information on the ``free`` parameters, what it tells, S."""
         forget = self.forget if self.frames else 0.0
         block = np.ix_(free, free)
         self.information[block] = forget * self.information[block] + information
-        self.weighted[free] = forget * self.weighted[free] + information @ value
+        self.weighted[free] = forget * self.weighted[free] + told
         self.through[free] = forget * self.through[free] + through
         self.frames += 1
         total = self.prior_information[block] + self.information[block]
         estimate = np.linalg.solve(total, self.weighted[free])
-        self.estimate[free] = np.clip(estimate, -np.array(LIMITS)[free], np.array(LIMITS)[free])
+        self.estimate[free] = np.clip(estimate, -self.limits[free], self.limits[free])

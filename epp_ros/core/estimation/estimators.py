@@ -59,7 +59,7 @@ RANGE_METHODS = [name for name, cls in METHODS.items() if 'ranges' in cls.inputs
 ESTIMATOR_OPTIONS = {'sigma': 0.1, 'eta': 0.0, 'tag_sigma': None, 'pitch_sigma': np.radians(0.5),
                      'slew_sigma': np.radians(0.5), 'nlos_fraction': 0.1, 'nlos_gamma': 1.0,
                      'lowest_joint': -0.5, 'link_bias_std': 0.1, 'common_bias_std': 0.25,
-                     'bias_slope_std': 0.01}
+                     'bias_slope_std': 0.01, 'anchor_std': 0.0}
 
 
 def accepted_options(method):
@@ -81,6 +81,17 @@ def _constructor_names(method):
     return names
 
 
+def _anchor_indices(anchors, count):
+    """Return ``anchors`` as sorted unique indices below ``count``; ValueError otherwise."""
+    try:
+        indices = sorted({int(j) for j in anchors})
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'moving_anchors: must be anchor indices, got {anchors!r}') from exc
+    if any(j < 0 or j >= count for j in indices):
+        raise ValueError(f'moving_anchors: must be in [0, {count}), got {list(anchors)!r}')
+    return tuple(indices)
+
+
 def _told(options):
     """Return the estimator options with their defaults, checked (ValueError naming the option)."""
     told = {name: options.get(name, default) for name, default in ESTIMATOR_OPTIONS.items()}
@@ -88,7 +99,7 @@ def _told(options):
         if value is not None and not (isinstance(value, (int, float, np.integer, np.floating))
                                       and np.isfinite(value)):
             raise ValueError(f'{name}: must be a finite number, got {value!r}')
-    for name in ('eta', 'link_bias_std', 'common_bias_std', 'bias_slope_std'):
+    for name in ('eta', 'link_bias_std', 'common_bias_std', 'bias_slope_std', 'anchor_std'):
         if told[name] < 0:
             raise ValueError(f'{name}: must be >= 0, got {told[name]}')
     if told['tag_sigma'] is None:
@@ -96,13 +107,13 @@ def _told(options):
     return told
 
 
-def _integrity(model, told, limits, thresholds):
-    """Return the :class:`Integrity` of the noise the estimator is told."""
+def _integrity(model, told, limits, thresholds, moving=()):
+    """Return the :class:`Integrity` of the noise the estimator is told (``moving``: anchors)."""
     noise = SensorNoise(float(told['sigma']), float(told['tag_sigma']),
                         float(told['pitch_sigma']), float(told['slew_sigma']))
     nlos = NlosMixture(float(told['nlos_fraction']), float(told['nlos_gamma']))
     bias = RangeBiasPrior(float(told['link_bias_std']), float(told['common_bias_std']),
-                          float(told['bias_slope_std']))
+                          float(told['bias_slope_std']), float(told['anchor_std']), moving)
     return Integrity(model, noise, nlos, told['eta'], told['lowest_joint'], limits, thresholds,
                      bias)
 
@@ -136,6 +147,12 @@ class PostureEstimator:
         values, and the range bias common to all links (``core.bias_learning``), starting
         from none; the solver and the integrity checks then use what was learned. False:
         the told values stay (benchmarks that tell the truth).
+    moving_anchors : sequence of int
+        The anchors off the truck body (outriggers') that may stand elsewhere than
+        configured, by ``anchor_std`` per axis: with ``anchor_std`` > 0 their shifts are
+        learned with the common bias (``learn_noise``) and, until learned, add to the
+        predicted joint standard deviations. Empty (the default): every anchor is where
+        configured.
     **options
         What the estimator is told, for every method (``ESTIMATOR_OPTIONS``): ``sigma``
         (tag-anchor range standard deviation, 0.1 m), ``eta`` (multiplicative range
@@ -145,7 +162,8 @@ class PostureEstimator:
         (0.25 m) and ``bias_slope_std`` (0.01 m/m): what is not known of the ranges' biases
         once the model's offsets are taken off, each link's own and the part common to
         all, an offset and a growth with range (uncalibrated DW1000-class links: see
-        ``core.bounds.RangeBiasPrior``); they add to the predicted joint standard
+        ``core.bounds.RangeBiasPrior``), and ``anchor_std`` (0 m per axis, for the
+        ``moving_anchors``); they add to the predicted joint standard
         deviations the thresholds judge, and with ``learn_noise`` the common part is
         learned and taken off the ranges (``core.bias_learning``). And the method's own:
         ``prior_weight`` (weight of tag-tag distances from the previous pose, default 0;
@@ -185,10 +203,11 @@ class PostureEstimator:
 
     def __init__(self, model, method='cepp', *, integrity=IntegrityLimits(),
                  thresholds=Thresholds(), reset_after_failures=10, learn_noise=True,
-                 **options):
+                 moving_anchors=(), **options):
         if method not in METHODS:
             raise ValueError(f'method must be one of {sorted(METHODS)}, got {method!r}')
         self.model = model
+        self.moving_anchors = _anchor_indices(moving_anchors, model.n_anchors)
         self.method = method
         self._settings = {}
         self._learner = None
@@ -233,7 +252,7 @@ class PostureEstimator:
         if not isinstance(learn_noise, (bool, np.bool_)):
             raise ValueError(f'learn_noise: must be true or false, got {learn_noise!r}')
         told = _told(options)
-        checks = _integrity(self.model, told, integrity, thresholds)
+        checks = _integrity(self.model, told, integrity, thresholds, self.moving_anchors)
         own = _constructor_names(method)
         solver = METHODS[method](self.model, **{name: value for name, value
                                                 in {**options, **told}.items() if name in own})
@@ -242,14 +261,17 @@ class PostureEstimator:
         configured = RangeNoiseEstimate(told['sigma'], told['eta'], told['nlos_fraction'],
                                         told['nlos_gamma'])
         same_bias = all(told[name] == self._told.get(name) for name in (
-            'link_bias_std', 'common_bias_std', 'bias_slope_std')) if self._learner else False
+            'link_bias_std', 'common_bias_std', 'bias_slope_std', 'anchor_std')) \
+            if self._learner else False
         keep = (learn_noise and self._learner is not None
                 and self._learner.configured == configured and same_bias)
         if not keep:            # what was learned from other told values starts over
             self._learner = NoiseLearner(configured) if learn_noise else None
             self._bias_learner = BiasLearner(
                 told['common_bias_std'], told['bias_slope_std'], told['link_bias_std'],
-                self.model.n_sections * self.model.n_anchors) if learn_noise else None
+                self.model.n_sections * self.model.n_anchors, anchor_std=told['anchor_std'],
+                moving=self.moving_anchors, n_anchors=self.model.n_anchors) \
+                if learn_noise else None
         self._told = told
         self._settings = {'integrity': integrity, 'thresholds': thresholds,
                           'reset_after_failures': reset_after_failures,
@@ -273,7 +295,7 @@ class PostureEstimator:
         if self._settings['options'].get('tag_sigma') is None:
             told['tag_sigma'] = estimate.sigma          # tag-tag ranges are UWB ranges too
         self.integrity = _integrity(self.model, told, self._settings['integrity'],
-                                    self._settings['thresholds'])
+                                    self._settings['thresholds'], self.moving_anchors)
         self._share_bias()
         if hasattr(self._solver, 'tune'):
             self._solver.tune(**estimate.as_options())
@@ -286,14 +308,29 @@ class PostureEstimator:
     @property
     def range_bias(self):
         """Return the common range bias taken off (offset m, slope m/m at 20 m), or zeros."""
-        return np.zeros(2) if self._bias_learner is None else self._bias_learner.estimate.copy()
+        return np.zeros(2) if self._bias_learner is None else self._bias_learner.estimate[:2]
+
+    @property
+    def anchor_shifts(self):
+        """Return how far each of ``moving_anchors`` stands from where configured (n, 3), m."""
+        if self._bias_learner is None:
+            return np.zeros((len(self.moving_anchors), 3))
+        return self._bias_learner.anchor_shifts.copy()
 
     def _unbiased(self, measurements):
-        """Return ``measurements`` with the learned common bias taken off the ranges."""
+        """
+        Return ``measurements`` with the learned bias taken off the ranges.
+
+        An anchor's shift lengthens its ranges along the directions to the tags: those of
+        the last posture that fitted its frame (none yet: the shifts wait).
+        """
         if self._bias_learner is None or not self._bias_learner.estimate.any():
             return measurements
         ranges = measurements.ranges
-        return replace(measurements, ranges=ranges - self._bias_learner.correction(ranges))
+        warm = self._warm
+        directions = None if warm is None else self.integrity.anchor_directions(warm)
+        return replace(measurements, ranges=ranges - self._bias_learner.correction(
+            ranges, directions))
 
     def _learn_bias(self, joints, info, measurements, verdict):
         """
@@ -313,10 +350,12 @@ class PostureEstimator:
         residuals = Residuals(self.model, Measurements.ranges_only(
             np.where(kept, measurements.ranges, np.nan)), SensorNoise(sigma))
         slew, pitches = angles_from_joints(self.model, joints)
-        fitted = self.model.ranges(info.get('timed_joints', joints))[kept]
+        timed = info.get('timed_joints', joints)
+        fitted = self.model.ranges(timed)[kept]
         scaled = (fitted - measurements.ranges[kept]) / sigma[kept]
         if self._bias_learner.observe(residuals.jacobian(np.r_[slew, pitches]), sigma[kept],
-                                      scaled, fitted, np.flatnonzero(kept)):
+                                      scaled, fitted, np.flatnonzero(kept),
+                                      self.integrity.anchor_directions(timed)[kept]):
             self._share_bias()
 
     def reset(self, joints=None):
@@ -394,6 +433,7 @@ class PostureEstimator:
         valid = np.isfinite(measurements.ranges)
         diagnostics = {'method': self.method, 'noise': self.noise,
                        'range_bias': self.range_bias,
+                       'anchor_shifts': dict(zip(self.moving_anchors, self.anchor_shifts)),
                        'missing_links': int(p * m - valid.sum()),
                        'implausible_links': implausible, 'cold_start': self._warm is None,
                        'reacquired': False, 'iterations': 0,

@@ -405,7 +405,10 @@ class Integrity:
         if not self.common_covariance.any() or not math.isfinite(random.rmse):
             return random, random
         links = np.arange(residuals.size) < np.count_nonzero(residuals.link_mask)
-        common = (bias_design(residuals.measured[links]), self.common_covariance)
+        tags, anchors = np.nonzero(residuals.link_mask)
+        directions = self.anchor_directions(joints)[tags, anchors]
+        common = (bias_design(residuals.measured[links], directions, anchors, self.bias.moving),
+                  self.common_covariance)
         added = bias_covariance(jacobian, residuals.sigma, links, random.parameter_covariance,
                                 common=common)
         return random, bound_from_covariance(self.model, slew, pitches,
@@ -427,6 +430,11 @@ class Integrity:
         return (self.limits.max_angular_rate * elapsed * (radius + levers)
                 + 3.0 * np.asarray(reference_std))
 
+    def anchor_directions(self, joints):
+        """Return unit vectors (p, m, 3) from each anchor to each joint."""
+        units = joints[:, None, :] - self.model.anchors
+        return units / np.maximum(_norm(units), 1e-12)[..., None]
+
     def point_bound(self, joints, measurements, kept, biased=False):
         """
         Per-joint standard deviations (p,) of joints located each from its own ranges.
@@ -436,8 +444,7 @@ class Integrity:
         infinite for a joint with fewer than three, or with anchors on one line. With
         ``biased``, the bias common to all links is added, as in :meth:`bounds`.
         """
-        units = joints[:, None, :] - self.model.anchors                         # (p, m, 3)
-        units /= np.maximum(_norm(units), 1e-12)[..., None]
+        units = self.anchor_directions(joints)
         weights = np.where(kept[0], self.link_sigma(measurements) ** -2.0, 0.0)
         information = np.einsum('km,kmi,kmj->kij', weights, units, units)
         std = np.full(self.model.n_sections, np.inf)
@@ -446,7 +453,8 @@ class Integrity:
             if values[0] > 1e-12 * max(values[-1], 1e-300):
                 covariance = (vectors / values) @ vectors.T
                 if biased and self.common_covariance.any():
-                    design = bias_design(np.nan_to_num(measurements.ranges[k]))
+                    design = bias_design(np.nan_to_num(measurements.ranges[k]), units[k],
+                                         np.arange(self.model.n_anchors), self.bias.moving)
                     through = covariance @ (units[k] * weights[k][:, None]).T @ design
                     covariance = covariance + through @ self.common_covariance @ through.T
                 std[k] = math.sqrt(np.trace(covariance))

@@ -68,14 +68,21 @@ class RangeBiasPrior:
     model's offsets are taken off (the simulator's pumps). Uncalibrated DW1000-class links
     have a common part of ~0.2-0.4 m at a boom's ranges, growing by ~1 cm per metre, and
     ~0.1 m of each link's own (``simulate.FIELD_EFFECTS['real_uwb']``).
+
+    An anchor in ``moving`` (off the truck body) may stand up to ``anchor_std`` (metres, per
+    axis) from where configured: each of its ranges then carries ``-u . delta``, ``u`` the
+    unit vector from the anchor to the tag (``core.estimation.bias_learning``).
     """
 
     link_std: float = 0.0
     common_std: float = 0.0
     slope_std: float = 0.0
+    anchor_std: float = 0.0
+    moving: tuple = ()
 
     def __post_init__(self):
-        for name in ('link_std', 'common_std', 'slope_std'):
+        object.__setattr__(self, 'moving', tuple(int(j) for j in self.moving))
+        for name in ('link_std', 'common_std', 'slope_std', 'anchor_std'):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float, np.integer,
                                                                  np.floating)) \
@@ -85,11 +92,17 @@ class RangeBiasPrior:
 
     def __bool__(self):
         """Whether any bias is unknown."""
-        return self.link_std > 0 or self.common_std > 0 or self.slope_std > 0
+        return self.link_std > 0 or self.common_std > 0 or self.slope_std > 0 or (
+            self.anchor_std > 0 and bool(self.moving))
 
     def common_covariance(self):
-        """Return the covariance (2, 2) of the common offset (m) and slope (m/m)."""
-        return np.diag([self.common_std ** 2, self.slope_std ** 2])
+        """
+        Return the covariance (q, q) of the common offset (m), slope (m/m), anchor shifts (m).
+
+        ``q = 2 + 3 len(moving)``, as ``bias_learning.bias_design``'s columns.
+        """
+        anchors = [self.anchor_std ** 2] * (3 * len(self.moving))
+        return np.diag([self.common_std ** 2, self.slope_std ** 2, *anchors])
 
 
 def bias_covariance(jacobian, sigma, links, information_inverse, link_std=0.0, common=None):

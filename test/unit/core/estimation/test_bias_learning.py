@@ -15,8 +15,8 @@
 """The range bias common to all links, learned while running (core.bias_learning)."""
 from epp_ros.core import PostureEstimator
 from epp_ros.core.estimation.bias_learning import BiasLearner, REFERENCE_RANGE
-from epp_ros.core.simulation.simulate import (FieldEffects, simulate_field, truck_pump,
-                                              WorkingMotion)
+from epp_ros.core.simulation.simulate import (FieldEffects, FieldSimulator, simulate_field,
+                                              truck_outriggers, truck_pump, WorkingMotion)
 import numpy as np
 import pytest
 
@@ -99,3 +99,72 @@ def test_a_frame_with_too_few_links_teaches_nothing():
     assert not learner.observe(jacobian, np.full(6, 0.1), np.zeros(6), np.full(6, 10.0),
                                np.arange(6))
     assert learner.frames == 0 and not learner.estimate.any()
+
+
+def moved_outriggers(seconds=60.0, seed=5, shift=0.2):
+    """Return the true anchors and the frames of a pump whose outriggers stand elsewhere."""
+    effects = FieldEffects(sigma=0.05, anchor_shift=shift, moving_anchors=truck_outriggers(MODEL))
+    rng = np.random.default_rng(seed)
+    simulator = FieldSimulator(MODEL, effects, rng)
+    motion = WorkingMotion(MODEL, rng)
+    frames = [simulator.frame(motion, stamp) for stamp in np.arange(0.0, seconds, 0.1)]
+    return simulator.true_anchors, frames
+
+
+def test_outriggers_that_stand_elsewhere_are_learned_to_their_stated_uncertainty():
+    true_anchors, frames = moved_outriggers()
+    moving = truck_outriggers(MODEL)
+    estimator = PostureEstimator(MODEL, 'chain', sigma=0.05, link_bias_std=0.0,
+                                 anchor_std=0.1, moving_anchors=moving)
+    squared, diagnostics = run(estimator, frames)
+    shift = (true_anchors - MODEL.anchors)[list(moving)]
+    assert np.min(np.linalg.norm(shift, axis=1)) > 0.1      # the case moves every one
+    learned = estimator.anchor_shifts
+    covariance = estimator.integrity.common_covariance[2:, 2:]
+    error = (learned - shift).ravel()
+    # The shifts' own uncertainty, as one z-score: chi-square(12) < 36.1 but once in 3,000.
+    assert error @ np.linalg.solve(covariance, error) < 36.1
+    assert np.sqrt(np.mean(error ** 2)) < 0.02
+    assert set(diagnostics['anchor_shifts']) == set(moving)
+    # Taken off the ranges, the shifts leave the boom at the noise's accuracy.
+    late = squared[len(squared) // 2:]
+    assert np.sqrt(np.mean(late)) < 0.15
+
+
+def test_unlearned_outriggers_publish_nothing_far_off_and_say_how_unsure_they_are():
+    _, frames = moved_outriggers(seconds=30.0)
+    told = PostureEstimator(MODEL, 'chain', sigma=0.05, learn_noise=False, anchor_std=0.1,
+                            moving_anchors=truck_outriggers(MODEL))
+    ignorant = PostureEstimator(MODEL, 'chain', sigma=0.05, learn_noise=False,
+                                moving_anchors=truck_outriggers(MODEL))
+    for frame in frames:
+        told.update(**frame.inputs())
+        ignorant.update(**frame.inputs())
+        for estimator in (told, ignorant):
+            assert not np.any(np.isnan(estimator.last_diagnostics['joint_std']))
+        # Told that the outriggers may be 0.1 m off, the predicted joint spread is wider.
+        assert told.last_diagnostics['predicted_rmse'] > ignorant.last_diagnostics[
+            'predicted_rmse']
+        if told.last_diagnostics['valid']:
+            error = np.sqrt(np.mean(np.sum((told.last_diagnostics['estimate']
+                                            - frame.joints) ** 2, axis=1)))
+            assert error < 1.0 or told.last_diagnostics['predicted_rmse'] > error / 3
+
+
+def test_no_moving_anchor_or_no_anchor_std_keeps_the_common_bias_alone():
+    estimator = PostureEstimator(MODEL, 'chain', sigma=0.05)
+    assert estimator.anchor_shifts.shape == (0, 3)
+    assert estimator.integrity.common_covariance.shape == (2, 2)
+    # Moving anchors with no anchor_std (the default): the same postures, nothing learned.
+    _, frames = moved_outriggers(seconds=10.0)
+    fixed = PostureEstimator(MODEL, 'chain', sigma=0.05, moving_anchors=truck_outriggers(MODEL))
+    for frame in frames:
+        fixed.update(**frame.inputs())
+        estimator.update(**frame.inputs())
+        assert np.array_equal(fixed.last_diagnostics['estimate'],
+                              estimator.last_diagnostics['estimate'])
+    assert not fixed.anchor_shifts.any() and fixed.anchor_shifts.shape == (4, 3)
+    with pytest.raises(ValueError, match='moving_anchors'):
+        PostureEstimator(MODEL, 'chain', moving_anchors=[MODEL.n_anchors])
+    with pytest.raises(ValueError, match='anchor_std'):
+        PostureEstimator(MODEL, 'chain', anchor_std=-0.1)
