@@ -87,6 +87,7 @@ from epp_ros.core.estimation.noise_learning import NoiseLearner, RangeNoiseEstim
 from epp_ros.core.model.boom import ANCHOR_SEPARATION
 from epp_ros.core.model.measurements import Measurements, Residuals
 from epp_ros.core.model.nlos import NlosMixture
+from epp_ros.core.model.noise import DEFAULT_NOISE
 from epp_ros.core.solvers.block_arrow import eliminate, least_squares, normal_equations
 import numpy as np
 from scipy.special import expit
@@ -1054,8 +1055,10 @@ def _anchor_rms(problem, q):
 
 
 def calibrate(model, ranges, *, stamps=None, tag_ranges=None, anchor_ranges=None,
-              fixed_anchors=(0,), sigma=0.1, eta=0.0, tag_sigma=None, anchor_sigma=None,
-              prior_sigma=0.5, nlos_fraction=0.1, nlos_gamma=1.0, nlos_duration=None,
+              fixed_anchors=(0,), sigma=DEFAULT_NOISE.sigma, eta=DEFAULT_NOISE.eta,
+              tag_sigma=None, anchor_sigma=None, prior_sigma=0.5,
+              nlos_fraction=DEFAULT_NOISE.nlos_fraction, nlos_gamma=DEFAULT_NOISE.nlos_gamma,
+              nlos_duration=None,
               learn_noise=False, start=None, max_iter=100, tol=1e-10, refits=3,
               hypotheses=4, anchor_tolerance=ANCHOR_TOLERANCE,
               offset_tolerance=OFFSET_TOLERANCE, link_std=None, fit_arm_lengths=False):

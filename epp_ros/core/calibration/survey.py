@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 import operator
 
 from epp_ros.core.model.nlos import NlosMixture
+from epp_ros.core.model.noise import DEFAULT_NOISE
 import numpy as np
 
 __all__ = ['SurveyResult', 'survey_anchors', 'AnchorPairs', 'ANCHOR_TOLERANCE',
@@ -447,8 +448,10 @@ def _measured_pairs(rounds, free):
     return int(np.triu(heard, 1).sum())
 
 
-def survey_anchors(model, anchor_ranges, *, fixed_anchors=(0,), sigma=0.1, prior_sigma=0.5,
-                   offsets=True, offset_sigma=0.5, nlos_fraction=0.1, nlos_gamma=1.0,
+def survey_anchors(model, anchor_ranges, *, fixed_anchors=(0,), sigma=DEFAULT_NOISE.sigma,
+                   prior_sigma=0.5, offsets=True, offset_sigma=0.5,
+                   nlos_fraction=DEFAULT_NOISE.nlos_fraction,
+                   nlos_gamma=DEFAULT_NOISE.nlos_gamma,
                    max_iter=100, tol=1e-10, anchor_tolerance=ANCHOR_TOLERANCE,
                    offset_tolerance=OFFSET_TOLERANCE):
     """

@@ -25,8 +25,9 @@ positions (p, 3), keeping the previous estimate as the warm start. Methods:
 - the paper's baselines (``core.baselines``): ``srls`` (each tag alone), ``sdp`` (the
   Biswas–Ye relaxation; needs the optional cvxpy) and ``tpsm`` (angle sensors only).
 """
-from dataclasses import replace
+from dataclasses import asdict, fields, replace
 import inspect
+import numbers
 import time
 
 from epp_ros.core.estimation.bias_learning import BiasLearner
@@ -40,6 +41,7 @@ from epp_ros.core.estimation.posture_method import FrameResult
 from epp_ros.core.model.bounds import RangeBiasPrior
 from epp_ros.core.model.measurements import Measurements, plausible_limits, Residuals, SensorNoise
 from epp_ros.core.model.nlos import NlosMixture
+from epp_ros.core.model.noise import DEFAULT_NOISE, NoiseModel
 from epp_ros.core.solvers.multilateration import cold_start_guess
 import numpy as np
 
@@ -55,11 +57,9 @@ RANGE_METHODS = [name for name, cls in METHODS.items() if 'ranges' in cls.inputs
 
 
 #: Options of the estimator itself, given to every method that accepts them: what it is
-#: told about the noise (which the integrity checks use for every method) and the ground.
-ESTIMATOR_OPTIONS = {'sigma': 0.1, 'eta': 0.0, 'tag_sigma': None, 'pitch_sigma': np.radians(0.5),
-                     'slew_sigma': np.radians(0.5), 'nlos_fraction': 0.1, 'nlos_gamma': 1.0,
-                     'lowest_joint': -0.5, 'link_bias_std': 0.1, 'common_bias_std': 0.25,
-                     'bias_slope_std': 0.01, 'anchor_std': 0.0}
+#: told about the noise (``NoiseModel``, which the integrity checks use for every method)
+#: and the ground.
+ESTIMATOR_OPTIONS = {**asdict(DEFAULT_NOISE), 'lowest_joint': -0.5}
 
 
 def accepted_options(method):
@@ -81,6 +81,9 @@ def _constructor_names(method):
     return names
 
 
+NOISE_FIELDS = tuple(field.name for field in fields(NoiseModel))
+
+
 def _anchor_indices(anchors, count):
     """Return ``anchors`` as sorted unique indices below ``count``; ValueError otherwise."""
     try:
@@ -94,17 +97,12 @@ def _anchor_indices(anchors, count):
 
 def _told(options):
     """Return the estimator options with their defaults, checked (ValueError naming the option)."""
-    told = {name: options.get(name, default) for name, default in ESTIMATOR_OPTIONS.items()}
-    for name, value in told.items():
-        if value is not None and not (isinstance(value, (int, float, np.integer, np.floating))
-                                      and np.isfinite(value)):
-            raise ValueError(f'{name}: must be a finite number, got {value!r}')
-    for name in ('eta', 'link_bias_std', 'common_bias_std', 'bias_slope_std', 'anchor_std'):
-        if told[name] < 0:
-            raise ValueError(f'{name}: must be >= 0, got {told[name]}')
-    if told['tag_sigma'] is None:
-        told['tag_sigma'] = told['sigma']
-    return told
+    noise = NoiseModel(**{name: options[name] for name in NOISE_FIELDS if name in options})
+    lowest = options.get('lowest_joint', ESTIMATOR_OPTIONS['lowest_joint'])
+    if isinstance(lowest, bool) or not isinstance(lowest, numbers.Real) \
+            or not np.isfinite(lowest):
+        raise ValueError(f'lowest_joint: must be a finite number, got {lowest!r}')
+    return {**noise.told(), 'lowest_joint': float(lowest)}
 
 
 def _integrity(model, told, limits, thresholds, moving=()):

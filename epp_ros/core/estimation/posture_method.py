@@ -91,7 +91,23 @@ class FrameResult(Mapping):
     noise: RangeNoiseEstimate   #: the range noise in use (learned or told)
     estimate: Optional[np.ndarray] = None   #: (p, 3) the method's answer, valid or not
     converged: Optional[bool] = None        #: the solver met its tolerances
-    details: dict = field(default_factory=dict)
+    iterations: Optional[int] = None        #: the solver's iterations
+    solve_time: Optional[float] = None      #: seconds the frame took
+    # What was measured, and what was taken off it.
+    missing_links: Optional[int] = None     #: tag-anchor ranges the frame lacked
+    implausible_links: Optional[int] = None   #: ranges set aside as impossible
+    ignored_inputs: Optional[list] = None   #: inputs the method does not use, by name
+    range_bias: Optional[np.ndarray] = None   #: (2,) the common bias taken off: m, m/m
+    anchor_shifts: Optional[dict] = None    #: {anchor: (3,) m}, each moving anchor's shift
+    # How well the answer fits, and how well it is known (the integrity checks').
+    range_residual_rms: Optional[float] = None   #: m, fitted minus measured ranges
+    section_lengths: Optional[np.ndarray] = None   #: (p,) m, of the answer
+    arm_length_error: Optional[np.ndarray] = None  #: (p,) m, against the model's
+    predicted_rmse: Optional[float] = None  #: m, the bound at the answer, biases included
+    joint_std: Optional[np.ndarray] = None  #: (p,) m, each joint's predicted std
+    noise_rmse: Optional[float] = None      #: m, the bound without the common bias
+    nlos_links: Optional[np.ndarray] = None   #: (p, m) bool, links judged NLOS
+    details: dict = field(default_factory=dict)   #: the method's and the checks' extras
 
     def _named(self):
         return [f.name for f in fields(self) if f.name != 'details'

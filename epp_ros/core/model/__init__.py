@@ -19,6 +19,7 @@ from .bounds import (bias_covariance, Bound, bound_from_covariance, bound_from_i
 from .measurements import (Measurements, plausible_limits, range_spikes, Residuals, SensorNoise,
                            SPIKE_M, wrap_angle)
 from .nlos import LinkLoss, NlosMixture
+from .noise import DEFAULT_NOISE, NoiseModel
 from .plane import (fit_plane_to_ranges, fit_slew, from_plane, keep_folds, project_ranges,
                     slew_step, to_plane)
 from .poses import boom_frames, boom_quaternions, rotation_to_quaternion
@@ -27,6 +28,6 @@ __all__ = ['BoomModel', 'MAX_RANGE_OFFSET', 'fisher_information', 'Bound', 'crlb
            'bound_from_information', 'bound_from_covariance', 'RangeBiasPrior', 'bias_covariance',
            'posterior_information', 'posterior_crlb', 'SensorNoise', 'Measurements', 'Residuals',
            'plausible_limits', 'range_spikes', 'SPIKE_M', 'wrap_angle', 'NlosMixture', 'LinkLoss',
-           'fit_slew', 'fit_plane_to_ranges', 'slew_step', 'to_plane', 'from_plane',
-           'project_ranges', 'keep_folds', 'boom_frames', 'rotation_to_quaternion',
-           'boom_quaternions']
+           'NoiseModel', 'DEFAULT_NOISE', 'fit_slew', 'fit_plane_to_ranges', 'slew_step',
+           'to_plane', 'from_plane', 'project_ranges', 'keep_folds', 'boom_frames',
+           'rotation_to_quaternion', 'boom_quaternions']

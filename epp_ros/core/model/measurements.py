@@ -24,6 +24,7 @@ least squares and the Cramér–Rao bound (``core.bounds``) share it.
 from dataclasses import dataclass
 import warnings
 
+from epp_ros.core.model.noise import DEFAULT_NOISE
 import numpy as np
 
 __all__ = ['SensorNoise', 'Measurements', 'Residuals', 'plausible_limits', 'range_spikes',
@@ -41,10 +42,10 @@ def wrap_angle(angle):
 class SensorNoise:
     """Standard deviations of the measurements (Gaussian, independent)."""
 
-    range_sigma: float = 0.1                #: m, tag-anchor ranges; a scalar or (p, m)
-    tag_sigma: float = 0.1                  #: m, tag-tag ranges
-    pitch_sigma: float = np.radians(0.5)    #: rad, inclinometers
-    slew_sigma: float = np.radians(0.5)     #: rad, slew encoder
+    range_sigma: float = DEFAULT_NOISE.sigma        #: m, tag-anchor ranges; scalar or (p, m)
+    tag_sigma: float = DEFAULT_NOISE.sigma          #: m, tag-tag ranges
+    pitch_sigma: float = DEFAULT_NOISE.pitch_sigma  #: rad, inclinometers
+    slew_sigma: float = DEFAULT_NOISE.slew_sigma    #: rad, slew encoder
 
     def __post_init__(self):
         for name in ('range_sigma', 'tag_sigma', 'pitch_sigma', 'slew_sigma'):

@@ -40,6 +40,7 @@ from typing import NamedTuple
 
 from epp_ros.core.model.measurements import Residuals, SensorNoise, wrap_angle
 from epp_ros.core.model.nlos import NlosMixture
+from epp_ros.core.model.noise import DEFAULT_NOISE
 from epp_ros.core.model.plane import fit_slew, to_plane
 import numpy as np
 
@@ -209,8 +210,10 @@ class ChainMethod:
     GROUND_SIGMA = 0.05
     inputs = ('ranges', 'tag_ranges', 'pitches', 'slew')
 
-    def __init__(self, model, sigma=0.1, eta=0.0, tag_sigma=None, pitch_sigma=np.radians(0.5),
-                 slew_sigma=np.radians(0.5), nlos_fraction=0.1, nlos_gamma=1.0, tol=1e-10,
+    def __init__(self, model, sigma=DEFAULT_NOISE.sigma, eta=DEFAULT_NOISE.eta, tag_sigma=None,
+                 pitch_sigma=DEFAULT_NOISE.pitch_sigma, slew_sigma=DEFAULT_NOISE.slew_sigma,
+                 nlos_fraction=DEFAULT_NOISE.nlos_fraction, nlos_gamma=DEFAULT_NOISE.nlos_gamma,
+                 tol=1e-10,
                  max_iter=50, slew_starts=16, screen_iterations=4, lowest_joint=-0.5,
                  search_budget=400):
         self.model = model

@@ -35,6 +35,7 @@ from numbers import Integral, Real
 from epp_ros.core.estimation.methods.chain import grow_chains
 from epp_ros.core.model.measurements import Measurements
 from epp_ros.core.model.nlos import NlosMixture
+from epp_ros.core.model.noise import DEFAULT_NOISE, NoiseModel
 from epp_ros.core.model.plane import (fit_plane_to_ranges, fit_slew, from_plane, keep_folds,
                                       project_ranges, slew_step, to_plane)
 from epp_ros.core.solvers.edm import align_to_known, refine_stress, squared_distances
@@ -46,18 +47,8 @@ __all__ = ['EPP1', 'EPP2', 'CEPP']
 
 def _checked_noise(sigma, eta, nlos_fraction, nlos_gamma):
     """Return the range noise as floats; ValueError naming the argument when it is invalid."""
-    values = {'sigma': sigma, 'eta': eta, 'nlos_fraction': nlos_fraction,
-              'nlos_gamma': nlos_gamma}
-    for name, value in values.items():
-        if isinstance(value, bool) or not isinstance(value, Real) or not np.isfinite(value):
-            raise ValueError(f'{name}: must be a finite number, got {value!r}')
-    for name in ('sigma', 'eta'):
-        if values[name] < 0:
-            raise ValueError(f'{name}: must be >= 0, got {values[name]!r}')
-    if sigma == eta == 0:
-        raise ValueError('sigma: must be > 0 when eta is 0')
-    nlos = NlosMixture(float(nlos_fraction), float(nlos_gamma))   # names its own argument
-    return float(sigma), float(eta), nlos
+    noise = NoiseModel(sigma=sigma, eta=eta, nlos_fraction=nlos_fraction, nlos_gamma=nlos_gamma)
+    return noise.sigma, noise.eta, NlosMixture(noise.nlos_fraction, noise.nlos_gamma)
 
 
 class _EDMMethod:
@@ -114,7 +105,9 @@ class _EDMMethod:
     FIXED_STRESS_WEIGHT = 1e6
 
     def __init__(self, model, prior_weight=0.0, anchor_weight=np.inf, tol=1e-6, max_iter=500,
-                 sigma=0.1, eta=0.0, nlos_fraction=0.1, nlos_gamma=1.0, irls_iterations=0,
+                 sigma=DEFAULT_NOISE.sigma, eta=DEFAULT_NOISE.eta,
+                 nlos_fraction=DEFAULT_NOISE.nlos_fraction, nlos_gamma=DEFAULT_NOISE.nlos_gamma,
+                 irls_iterations=0,
                  stress_refinement=False):
         self.model = model
         self.prior_weight = float(prior_weight)

@@ -72,3 +72,20 @@ def test_reset_seeds_the_next_frame_and_checks_the_seed(method):
     estimator.reset()
     estimator.update(MODEL.ranges(joints))
     assert estimator.last_diagnostics['cold_start']
+
+
+def test_a_frames_figures_are_typed_fields_and_details_keep_only_the_extras():
+    slew, pitches = 0.4, np.radians([50.0, 20.0, 0.0, -20.0, -40.0])
+    estimator = PostureEstimator(MODEL, 'chain', **UNBIASED)
+    estimator.update(MODEL.ranges(MODEL.forward_kinematics(slew, pitches)))
+    result = estimator.last_diagnostics
+    p, m = MODEL.n_sections, MODEL.n_anchors
+    assert result.valid and result.missing_links == 0 and result.implausible_links == 0
+    assert result.joint_std.shape == (p,) and np.all(result.joint_std > 0)
+    assert 0 < result.predicted_rmse < 0.5 and result.range_residual_rms < 1e-6
+    assert result.section_lengths.shape == result.arm_length_error.shape == (p,)
+    assert result.nlos_links.shape == (p, m) and result.range_bias.shape == (2,)
+    assert result.iterations >= 1 and result.solve_time > 0 and result.anchor_shifts == {}
+    typed = {name for name in result.__dataclass_fields__ if name != 'details'}
+    assert not typed & set(result.details)
+    assert result['predicted_rmse'] == result.predicted_rmse     # and still a mapping

@@ -1,0 +1,83 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+What the estimator is told of its measurements' errors: one home, checked once.
+
+The defaults are DW1000-class UWB links and MEMS angle sensors: a range standard deviation
+of 0.1 m (plus ``eta`` per metre), a tenth of the ranges NLOS with a mean excess of 1 m,
+and the biases left once the configured offsets are taken off (each link's own, the part
+common to all and its growth with range; ``core.model.bounds.RangeBiasPrior``). Every
+estimator option, node parameter and method default of these names reads them here.
+"""
+from dataclasses import asdict, dataclass, fields
+import math
+import numbers
+
+__all__ = ['NoiseModel', 'DEFAULT_NOISE']
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """
+    The measurement errors an estimator is told, checked when made.
+
+    Raises ValueError naming the field (as the estimator's keyword) when a value is not a
+    finite number in its range.
+    """
+
+    sigma: float = 0.1                      #: m, tag-anchor range standard deviation
+    eta: float = 0.0                        #: range standard deviation per metre of range
+    tag_sigma: float = None                 #: m, tag-tag ranges; None: ``sigma``
+    pitch_sigma: float = math.radians(0.5)  #: rad, inclinometers
+    slew_sigma: float = math.radians(0.5)   #: rad, slew encoder
+    nlos_fraction: float = 0.1              #: prior probability that a range is NLOS
+    nlos_gamma: float = 1.0                 #: m, mean NLOS excess
+    link_bias_std: float = 0.1              #: m, each link's own bias
+    common_bias_std: float = 0.25           #: m, the bias common to every link
+    bias_slope_std: float = 0.01            #: m per m, its growth with range
+    anchor_std: float = 0.0                 #: m per axis, where a moving anchor may stand
+
+    def __post_init__(self):
+        for field in fields(self):
+            value = getattr(self, field.name)
+            if value is None and field.name == 'tag_sigma':
+                continue
+            if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+                    or not math.isfinite(value):
+                raise ValueError(f'{field.name}: must be a finite number, got {value!r}')
+            low, strict = _RANGES.get(field.name, (0.0, False))
+            if value < low or strict and value == low:
+                raise ValueError(f'{field.name}: must be {">" if strict else ">="} {low:g}, '
+                                 f'got {value!r}')
+            object.__setattr__(self, field.name, float(value))
+        if self.nlos_fraction >= 1.0:
+            raise ValueError(f'nlos_fraction: must be < 1, got {self.nlos_fraction!r}')
+
+    def told(self):
+        """Return the fields as a dict, ``tag_sigma`` resolved to ``sigma`` when None."""
+        values = asdict(self)
+        if values['tag_sigma'] is None:
+            values['tag_sigma'] = values['sigma']
+        return values
+
+
+#: (lowest value, whether it is excluded) of the fields that must be positive; the others
+#: are >= 0.
+_RANGES = {'sigma': (0.0, True), 'tag_sigma': (0.0, True), 'pitch_sigma': (0.0, True),
+           'slew_sigma': (0.0, True), 'nlos_gamma': (0.0, True)}
+
+#: The defaults, for the methods' and the calibration's keyword defaults.
+DEFAULT_NOISE = NoiseModel()
