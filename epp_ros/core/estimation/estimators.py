@@ -306,7 +306,9 @@ class PostureEstimator:
     @property
     def range_bias(self):
         """Return the common range bias taken off (offset m, slope m/m at 20 m), or zeros."""
-        return np.zeros(2) if self._bias_learner is None else self._bias_learner.estimate[:2]
+        if self._bias_learner is None:
+            return np.zeros(2)
+        return self._bias_learner.estimate[:2].copy()
 
     @property
     def anchor_shifts(self):

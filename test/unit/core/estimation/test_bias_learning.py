@@ -168,3 +168,14 @@ def test_no_moving_anchor_or_no_anchor_std_keeps_the_common_bias_alone():
         PostureEstimator(MODEL, 'chain', moving_anchors=[MODEL.n_anchors])
     with pytest.raises(ValueError, match='anchor_std'):
         PostureEstimator(MODEL, 'chain', anchor_std=-0.1)
+
+
+def test_a_frames_reported_bias_stays_what_it_was_at_that_frame():
+    estimator = PostureEstimator(MODEL, 'chain', sigma=0.05)
+    frames = biased_frames(0.3, 0.0, seconds=10.0)
+    estimator.update(**frames[40].inputs())
+    reported = estimator.last_diagnostics['range_bias']
+    kept = reported.copy()
+    for frame in frames[41:]:
+        estimator.update(**frame.inputs())
+    assert np.array_equal(reported, kept) and not np.array_equal(estimator.range_bias, kept)
