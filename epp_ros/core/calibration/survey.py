@@ -50,6 +50,7 @@ import operator
 
 from epp_ros.core.model.nlos import NlosMixture
 from epp_ros.core.model.noise import DEFAULT_NOISE
+from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt, marquardt_step
 import numpy as np
 
 __all__ = ['SurveyResult', 'survey_anchors', 'AnchorPairs', 'ANCHOR_TOLERANCE',
@@ -288,35 +289,28 @@ class _Survey:
 def _fit(problem, x, max_iter, tol):
     """Levenberg-Marquardt on the robust cost plus the prior from ``x``; x, parts, iterations."""
     prior_information = np.diag(problem.prior ** -2.0)
-    cost, gradient, information, parts = problem.state(x)
-    damping, iterations, converged = 1e-6, 0, False
-    while iterations < max_iter:
-        iterations += 1
-        hessian = information + prior_information
-        while True:
-            step = -np.linalg.solve(hessian + damping * np.diag(np.diag(hessian)), gradient)
-            trial = problem.state(x + step)
-            if trial[0] <= cost or damping > 1e10:
-                break
-            damping *= 4.0
-        if trial[0] > cost:
-            converged = True
-            break
-        stalled = cost - trial[0] <= 1e-12 * max(abs(trial[0]), 1e-300)
-        x = x + step
-        cost, gradient, information, parts = trial
+
+    def evaluate(x):
+        cost, gradient, information, parts = problem.state(x)
+        return cost, (gradient, information, parts)
+
+    def turn(x, cost, state):
+        # The gauge's curved valley, in one move.
         turned = problem.align(x)
-        if turned is not None:      # the gauge's curved valley, in one move
-            trial = problem.state(turned)
+        if turned is not None:
+            trial = evaluate(turned)
             if trial[0] <= cost:
-                x, (cost, gradient, information, parts) = turned, trial
-        # No floor near 1e-9: what only the prior resolves has a curvature many orders
-        # below the ranges', and a damping scaled by the diagonal would freeze it.
-        damping = max(damping / 3.0, 1e-15)
-        if stalled or np.max(np.abs(step), initial=0.0) <= tol:
-            converged = True
-            break
-    return x, information, parts, iterations, converged
+                return (turned,) + trial
+        return x, cost, state
+
+    # No ridge and no damping floor near 1e-9: what only the prior resolves has a curvature
+    # many orders below the ranges', and a damping scaled by the diagonal would freeze it.
+    fit = levenberg_marquardt(
+        x, evaluate, lambda x, state: (state[1] + prior_information, state[0]),
+        max_iter=max_iter, tol=tol, step=marquardt_step(ridge=0.0), stall=1e-12,
+        damping_floor=1e-15, refine=turn)
+    _, information, parts = fit.state
+    return fit.x, information, parts, fit.iterations, fit.converged
 
 
 def _posterior(problem, information, parts):

@@ -22,6 +22,7 @@ frame by frame (a Schur complement, as in bundle adjustment), which leaves a sma
 system in the shared parameters; the frames' steps follow from it. ``core.calibrate`` is
 the user: the frames of a recording, the anchors and range offsets shared.
 """
+from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt
 import numpy as np
 
 __all__ = ['normal_equations', 'eliminate', 'damped_step', 'least_squares']
@@ -87,34 +88,21 @@ def least_squares(problem, psi, q, frames, max_iter, tol):
     converged.
     """
     mask = problem.mask[frames]
+    shape = psi.shape
 
-    def state(psi, q):
-        scaled, angle, shared = problem.evaluate(psi, problem.x0 + problem.basis @ q, frames)
+    def evaluate(x):
+        angles, q = x[:psi.size].reshape(shape), x[psi.size:]
+        scaled, angle, shared = problem.evaluate(angles, problem.x0 + problem.basis @ q, frames)
         cost, slope, weights, _ = problem.robust(scaled, mask, frames)
         shared_cost, shared_gradient, shared_information, _ = problem.shared_terms(q)
         return (float(cost.sum()) + shared_cost,
                 (angle, shared, slope, weights, shared_gradient, shared_information))
 
-    cost, parts = state(psi, q)
-    damping, iterations, converged = 1e-6, 0, False
-    while iterations < max_iter:
-        iterations += 1
-        normal = normal_equations(*parts)
-        while True:
-            step_a, step_q = damped_step(normal, damping)
-            trial_psi, trial_q = psi + step_a, q + step_q
-            trial_cost, trial_parts = state(trial_psi, trial_q)
-            if trial_cost <= cost or damping > 1e10:
-                break
-            damping *= 4.0
-        if trial_cost > cost:
-            converged = True
-            break
-        stalled = cost - trial_cost <= 1e-10 * max(abs(trial_cost), 1e-300)
-        largest = max(np.max(np.abs(step_a)), np.max(np.abs(step_q), initial=0.0))
-        psi, q, cost, parts = trial_psi, trial_q, trial_cost, trial_parts
-        damping = max(damping / 3.0, 1e-9)
-        if stalled or largest <= tol:
-            converged = True
-            break
-    return psi, q, cost, iterations, converged
+    def step(normal, damping):
+        return np.concatenate([part.ravel() for part in damped_step(normal, damping)])
+
+    fit = levenberg_marquardt(np.r_[psi.ravel(), q], evaluate,
+                              lambda x, parts: normal_equations(*parts), max_iter=max_iter,
+                              tol=tol, step=step, stall=1e-10)
+    return (fit.x[:psi.size].reshape(shape), fit.x[psi.size:], fit.cost, fit.iterations,
+            fit.converged)

@@ -42,6 +42,7 @@ from epp_ros.core.model.measurements import Residuals, SensorNoise, wrap_angle
 from epp_ros.core.model.nlos import NlosMixture
 from epp_ros.core.model.noise import DEFAULT_NOISE
 from epp_ros.core.model.plane import fit_slew, to_plane
+from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt
 import numpy as np
 
 __all__ = ['ChainMethod', 'Fit', 'SearchExhausted', 'angles_from_joints', 'canonical_angles',
@@ -285,7 +286,7 @@ class ChainMethod:
 
     def _evaluate(self, psi, residuals):
         """
-        Cost at ``psi`` and what a step needs: (cost, slope, weights, state).
+        Cost at ``psi`` and what a step needs: (cost, (slope, weights, state)).
 
         A joint below ``lowest_joint`` adds a stiff quadratic penalty: the boom is above
         the ground, which a fit must respect rather than be discarded for.
@@ -294,7 +295,7 @@ class ChainMethod:
         cost, slope, weights, _ = self.loss(scaled, residuals)
         heights = geometry[2][:, 2]
         depth = np.maximum(self.lowest_joint - heights, 0.0) / self.GROUND_SIGMA
-        return cost + 0.5 * float(depth @ depth), slope, weights, (geometry, depth)
+        return cost + 0.5 * float(depth @ depth), (slope, weights, (geometry, depth))
 
     def _normal_equations(self, psi, residuals, slope, weights, state):
         """Gauss-Newton (IRLS) normal matrix and gradient at ``psi``."""
@@ -311,29 +312,11 @@ class ChainMethod:
 
     def fit(self, psi, residuals, max_iter=None):
         """Return the Levenberg–Marquardt :class:`Fit` from ``psi`` on a :class:`Residuals`."""
-        max_iter = self.max_iter if max_iter is None else max_iter
-        cost, slope, weights, state = self._evaluate(psi, residuals)
-        damping = 1e-6
-        for iteration in range(1, max_iter + 1):
-            normal, gradient = self._normal_equations(psi, residuals, slope, weights, state)
-            while True:
-                step = -np.linalg.solve(normal + damping * np.diag(np.diag(normal) + 1e-9),
-                                        gradient)
-                trial = psi + step
-                trial_cost, trial_slope, trial_weights, trial_state = self._evaluate(trial,
-                                                                                     residuals)
-                if trial_cost <= cost or damping > 1e10:
-                    break
-                damping *= 4.0
-            if trial_cost > cost:           # no step lowers the cost: a minimum
-                return Fit(psi, cost, iteration, True)
-            stalled = cost - trial_cost <= 1e-6 * abs(trial_cost)     # of a chi-square ~ n
-            psi, cost, slope, weights = trial, trial_cost, trial_slope, trial_weights
-            state = trial_state
-            damping = max(damping / 3.0, 1e-9)
-            if stalled or np.max(np.abs(step)) <= self.tol:
-                return Fit(psi, cost, iteration, True)
-        return Fit(psi, cost, max_iter, False)
+        result = levenberg_marquardt(
+            psi, lambda x: self._evaluate(x, residuals),
+            lambda x, parts: self._normal_equations(x, residuals, *parts),
+            max_iter=self.max_iter if max_iter is None else max_iter, tol=self.tol)
+        return Fit(result.x, result.cost, result.iterations, result.converged)
 
     def cost(self, psi, residuals):
         """Return the fitted loss at angles ``psi`` (p + 1,) on a :class:`Residuals`."""

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 
 from epp_ros.core.estimation.methods.chain import angles_from_joints, canonical_angles, ChainMethod
 from epp_ros.core.model.measurements import Residuals, wrap_angle
+from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt
 import numpy as np
 from scipy.stats import chi2
 
@@ -296,33 +297,13 @@ class TrackMethod:
         """
         max_iter = self.chain.max_iter if max_iter is None else max_iter
         prior_information = _inverse(predicted.covariance)
-        state = predicted.state.copy()
-        cost, slope, weights, rows = self._evaluate(state, predicted, prior_information,
-                                                    residuals, delays)
-        damping, iterations, converged = 1e-6, 0, True
-        for iterations in range(1, max_iter + 1):
-            normal, gradient = self._normal_equations(state, predicted, prior_information,
-                                                      slope, weights, rows)
-            while True:
-                step = -np.linalg.solve(normal + damping * np.diag(np.diag(normal) + 1e-9),
-                                        gradient)
-                trial = state + step
-                trial_eval = self._evaluate(trial, predicted, prior_information, residuals,
-                                            delays)
-                if trial_eval[0] <= cost or damping > 1e10:
-                    break
-                damping *= 4.0
-            if trial_eval[0] > cost:
-                break
-            stalled = cost - trial_eval[0] <= 1e-6 * abs(trial_eval[0])
-            state, (cost, slope, weights, rows) = trial, trial_eval
-            damping = max(damping / 3.0, 1e-9)
-            if stalled or np.max(np.abs(step)) <= self.chain.tol:
-                break
-        else:
-            converged = False
-        normal, _ = self._normal_equations(state, predicted, prior_information, slope,
-                                           weights, rows)
+        fit = levenberg_marquardt(
+            predicted.state.copy(),
+            lambda x: self._evaluate(x, predicted, prior_information, residuals, delays),
+            lambda x, parts: self._normal_equations(x, predicted, prior_information, *parts),
+            max_iter=max_iter, tol=self.chain.tol)
+        state, cost, iterations, converged = fit.x, fit.cost, fit.iterations, fit.converged
+        normal, _ = self._normal_equations(state, predicted, prior_information, *fit.state)
         covariance = _inverse(normal)
         n = self.model.n_sections + 1
         correction = state - predicted.state
@@ -347,7 +328,7 @@ class TrackMethod:
         cost += 0.5 * float(difference @ prior_information @ difference)
         depth = np.maximum(self.chain.lowest_joint - joints[:, 2], 0.0) / self.chain.GROUND_SIGMA
         cost += 0.5 * float(depth @ depth)
-        return cost, slope, weights, (jacobian, difference, depth)
+        return cost, (slope, weights, (jacobian, difference, depth))
 
     def _normal_equations(self, state, predicted, prior_information, slope, weights, rows):
         jacobian, difference, depth = rows

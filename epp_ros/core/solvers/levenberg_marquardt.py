@@ -1,0 +1,138 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The one Levenberg–Marquardt loop: the chain's fit, the tracker's update, the batch fit, the survey.
+
+Each caller owns its cost and its normal equations (robust IRLS weights, priors, a ground
+penalty, a block-arrow structure); the loop owns the damping schedule and when to stop, so
+that every fit in the package stops by the same rules:
+
+- a step is taken only if it does not raise the cost; the damping grows ×4 until one does,
+  and gives up past 1e10 (no step lowers the cost: a minimum);
+- after a step the damping shrinks ÷3, down to ``damping_floor``;
+- the fit has converged when no step lowers the cost, when the cost fell by at most
+  ``stall`` of itself, or when no parameter moved by more than ``tol``.
+"""
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ['LevenbergMarquardtResult', 'levenberg_marquardt', 'marquardt_step']
+
+#: Damping at the start, its growth on a rejected step and its fall after an accepted one.
+INITIAL_DAMPING = 1e-6
+GROWTH = 4.0
+FALL = 3.0
+#: Beyond this damping the step is too short to matter: the start is a minimum.
+MAX_DAMPING = 1e10
+
+
+@dataclass(frozen=True)
+class LevenbergMarquardtResult:
+    """
+    Where Levenberg–Marquardt stopped.
+
+    Attributes
+    ----------
+    x : ndarray
+        The parameters at the lowest cost found.
+    cost : float
+        The cost there.
+    state : object
+        What the caller's ``evaluate`` returned with that cost (residuals, weights, ...).
+    iterations : int
+        Normal equations built and solved (an accepted or the final rejected step each).
+    converged : bool
+        False when ``max_iter`` ran out first.
+
+    """
+
+    x: np.ndarray
+    cost: float
+    state: Any
+    iterations: int
+    converged: bool
+
+
+def marquardt_step(ridge=1e-9):
+    """
+    Return Marquardt's damped step for normal equations given as ``(normal, gradient)``.
+
+    The damping scales the diagonal, plus ``ridge``: a parameter no residual sees (zero on
+    the diagonal) is then held still instead of stepped by rounding. ``ridge=0`` keeps
+    directions that only a weak prior resolves free to move.
+    """
+    def step(normal_equations, damping):
+        normal, gradient = normal_equations
+        return -np.linalg.solve(normal + damping * np.diag(np.diag(normal) + ridge), gradient)
+    return step
+
+
+def levenberg_marquardt(x, evaluate, normal_equations, *, max_iter, tol, step=None, stall=1e-6,
+                        damping_floor=1e-9, refine=None):
+    """
+    Minimise a cost by Levenberg–Marquardt from ``x``.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        The start.
+    evaluate : callable
+        ``evaluate(x) -> (cost, state)``; ``state`` is what ``normal_equations`` needs.
+    normal_equations : callable
+        ``normal_equations(x, state)``: whatever ``step`` takes (by default the pair
+        ``(normal (n, n), gradient (n,))``).
+    max_iter : int
+        Iterations at most.
+    tol : float
+        Converged when no parameter moved by more than this (in ``x``'s units).
+    step : callable, optional
+        ``step(normal_equations, damping) -> dx (n,)``; by default :func:`marquardt_step`.
+    stall : float
+        Converged when an accepted step lowered the cost by at most this fraction of it.
+    damping_floor : float
+        The damping falls no lower.
+    refine : callable, optional
+        ``refine(x, cost, state) -> (x, cost, state)`` after each accepted step: a move
+        the caller knows to be good (it must not raise the cost).
+
+    Returns
+    -------
+    LevenbergMarquardtResult
+
+    """
+    step = marquardt_step() if step is None else step
+    cost, state = evaluate(x)
+    damping = INITIAL_DAMPING
+    for iteration in range(1, max_iter + 1):
+        system = normal_equations(x, state)
+        while True:
+            dx = step(system, damping)
+            trial = x + dx
+            trial_cost, trial_state = evaluate(trial)
+            if trial_cost <= cost or damping > MAX_DAMPING:
+                break
+            damping *= GROWTH
+        if trial_cost > cost:               # no step lowers the cost: a minimum
+            return LevenbergMarquardtResult(x, cost, state, iteration, True)
+        stalled = cost - trial_cost <= stall * max(abs(trial_cost), 1e-300)
+        x, cost, state = trial, trial_cost, trial_state
+        if refine is not None:
+            x, cost, state = refine(x, cost, state)
+        damping = max(damping / FALL, damping_floor)
+        if stalled or np.max(np.abs(dx), initial=0.0) <= tol:
+            return LevenbergMarquardtResult(x, cost, state, iteration, True)
+    return LevenbergMarquardtResult(x, cost, state, max_iter, False)

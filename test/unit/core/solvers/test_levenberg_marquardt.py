@@ -1,0 +1,102 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The one Levenberg–Marquardt loop: known minima, its stopping rules, its hooks."""
+from epp_ros.core.solvers import levenberg_marquardt, marquardt_step
+import numpy as np
+from scipy.optimize import least_squares
+
+
+def rosenbrock(x):
+    """Return Rosenbrock's residuals (2,) and Jacobian (2, 2): minimum 0 at (1, 1)."""
+    return np.array([10.0 * (x[1] - x[0] ** 2), 1.0 - x[0]]), \
+        np.array([[-20.0 * x[0], 10.0], [-1.0, 0.0]])
+
+
+def evaluate(x):
+    residuals, jacobian = rosenbrock(x)
+    return 0.5 * float(residuals @ residuals), (residuals, jacobian)
+
+
+def normal_equations(x, state):
+    residuals, jacobian = state
+    return jacobian.T @ jacobian, jacobian.T @ residuals
+
+
+def test_it_finds_rosenbrocks_minimum_from_the_classic_start():
+    fit = levenberg_marquardt(np.array([-1.2, 1.0]), evaluate, normal_equations,
+                              max_iter=200, tol=1e-12, stall=0.0)
+    assert fit.converged
+    np.testing.assert_allclose(fit.x, [1.0, 1.0], atol=1e-8)
+    assert fit.cost < 1e-16
+    np.testing.assert_array_equal(fit.state[0], rosenbrock(fit.x)[0])
+
+
+def test_it_agrees_with_scipy_on_a_range_fit():
+    rng = np.random.default_rng(3)
+    anchors = rng.uniform(-10.0, 10.0, (6, 3))
+    truth = np.array([1.0, 2.0, 3.0])
+    ranges = np.linalg.norm(anchors - truth, axis=1) + rng.normal(0.0, 0.05, 6)
+
+    def residuals(x):
+        return np.linalg.norm(anchors - x, axis=1) - ranges
+
+    def state(x):
+        r = residuals(x)
+        return 0.5 * float(r @ r), (r, (x - anchors) / (r + ranges)[:, None])
+
+    ours = levenberg_marquardt(np.zeros(3), state, normal_equations, max_iter=100, tol=1e-12,
+                               stall=0.0)
+    theirs = least_squares(residuals, np.zeros(3), method='lm', xtol=1e-15, ftol=1e-15)
+    np.testing.assert_allclose(ours.x, theirs.x, atol=1e-9)
+
+
+def test_a_start_at_the_minimum_stops_at_once_and_stays():
+    start = np.array([1.0, 1.0])
+    fit = levenberg_marquardt(start, evaluate, normal_equations, max_iter=50, tol=0.0)
+    assert fit.converged and fit.iterations == 1
+    np.testing.assert_array_equal(fit.x, start)
+
+
+def test_running_out_of_iterations_is_not_convergence():
+    fit = levenberg_marquardt(np.array([-1.2, 1.0]), evaluate, normal_equations, max_iter=2,
+                              tol=0.0, stall=0.0)
+    assert not fit.converged and fit.iterations == 2
+    assert fit.cost < evaluate(np.array([-1.2, 1.0]))[0]       # each step lowered the cost
+    none = levenberg_marquardt(np.array([-1.2, 1.0]), evaluate, normal_equations, max_iter=0,
+                               tol=0.0)
+    assert not none.converged and none.iterations == 0
+
+
+def test_refine_is_applied_after_each_accepted_step():
+    calls = []
+
+    def refine(x, cost, state):
+        calls.append(x.copy())
+        return x, cost, state
+
+    fit = levenberg_marquardt(np.array([-1.2, 1.0]), evaluate, normal_equations, max_iter=200,
+                              tol=1e-12, refine=refine)
+    assert fit.converged and len(calls) >= fit.iterations - 1 >= 1
+    np.testing.assert_array_equal(calls[-1], fit.x)
+
+
+def test_the_ridge_holds_still_a_parameter_no_residual_sees():
+    def unseen(x):
+        r = np.array([x[0] - 2.0])
+        return 0.5 * float(r @ r), (r, np.array([[1.0, 0.0]]))
+
+    fit = levenberg_marquardt(np.array([0.0, 5.0]), unseen, normal_equations, max_iter=20,
+                              tol=1e-12, step=marquardt_step(ridge=1e-9))
+    np.testing.assert_allclose(fit.x, [2.0, 5.0], atol=1e-9)
