@@ -39,9 +39,10 @@ from epp_ros.core.simulation import (AngleNoise, observe, random_posture, RangeN
 from epp_ros.core.solvers import cold_start_guess
 import numpy as np
 
-#: Options that make a method the one the paper published, where ours differ by default:
-#: CEPP's NLOS reweighting (H = 1 in the paper).
-AS_PUBLISHED = {'cepp': {'irls_iterations': 0}}
+#: The method the paper published under each of our names, where ours departs from it, and
+#: the options its runs here need: the paper's CEPP (H = 1, no searches) with its plane
+#: fitted to each frame, since the paper never says how a cold frame finds its plane.
+AS_PUBLISHED = {'cepp': ('cepp_paper', {'predict_slew': True})}
 #: Additive range noise of the xie3dim experiment, metres (the authors').
 XIE3DIM_SIGMA = XIE3DIM['published_sigma_m']
 #: The authors' names of their xie3dim figures, as printed here.
@@ -413,13 +414,14 @@ def method_options(method, options, sigma):
     return options if 'sigma' in options else dict(options, sigma=sigma)
 
 
-def published_options(method, options):
+def published(model, method, options):
     """
-    Return the options of a paper reproduction: the method as published, told the truth.
+    Return the estimator of a paper reproduction: the method as published, told the truth.
 
     The noise is what the suite simulates, so nothing is learned.
     """
-    return {**AS_PUBLISHED.get(method, {}), 'learn_noise': False, **options}
+    name, own = AS_PUBLISHED.get(method, (method, {}))
+    return PostureEstimator(model, name, **{**own, 'learn_noise': False, **options})
 
 
 class TruthPlaneCEPP:
@@ -448,7 +450,7 @@ class TruthPlaneCEPP:
     def __init__(self, model, truth, **options):
         self.model = model
         self.slew = fit_slew(truth, model.base)
-        self.solver = CEPP(model, irls_iterations=0, predict_slew=False, **options)
+        self.solver = CEPP(model, **options)
         self.slews = []
         self.last_diagnostics = {}
 
@@ -492,9 +494,8 @@ def variant_estimator(model, truth, variant, options, sigma):
     """
     if variant.truth_plane:
         return TruthPlaneCEPP(model, truth, sigma=sigma, **variant.options)
-    told = published_options(variant.method, method_options(
+    return published(model, variant.method, method_options(
         variant.method, {**variant.options, **options}, sigma))
-    return PostureEstimator(model, variant.method, **told)
 
 
 def xie3dim_experiment(variants, trials, seed, options=None):
@@ -653,8 +654,7 @@ def paper_manipulator():
 
 def _estimators(model, methods, options):
     """Return each method's estimator as published, with ``options[method]`` if any."""
-    return {m: PostureEstimator(model, m, **published_options(m, options.get(m, {})))
-            for m in methods}
+    return {m: published(model, m, options.get(m, {})) for m in methods}
 
 
 def _sweep_row(model, angles, kind, level, runs, methods, seed):

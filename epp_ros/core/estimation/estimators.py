@@ -18,9 +18,13 @@ Posture estimators behind one interface, chosen by name.
 ``PostureEstimator(model, method)`` turns each frame of tag-anchor ranges (p, m) into joint
 positions (p, 3), keeping the previous estimate as the warm start. Methods:
 
-- ``epp1``, ``epp2``, ``cepp``: the paper's NEDM estimators (``core.epp``): in 3-D without
-  and with the arm lengths, and in the boom's vertical plane.
-- ``chain``: least squares over the slew and the pitches (``core.chain``), at the
+- ``epp1``, ``epp2``, ``cepp_paper``: the paper's NEDM estimators as published
+  (``methods.epp``): in 3-D without and with the arm lengths, and in the boom's vertical
+  plane;
+- ``cepp`` (the default): our field CEPP (``methods.field_cepp``), the paper's with the
+  plane fitted to each frame, NLOS links discounted, silent tags held and searches beyond
+  the warm start, each an option of its own.
+- ``chain``: least squares over the slew and the pitches (``methods.chain``), at the
   Cramér–Rao bound, robust to NLOS ranges; also fuses tag-tag ranges and angle sensors.
 - the paper's baselines (``core.baselines``): ``srls`` (each tag alone), ``sdp`` (the
   Biswas–Ye relaxation; needs the optional cvxpy) and ``tpsm`` (angle sensors only).
@@ -35,6 +39,7 @@ from epp_ros.core.estimation.integrity import ERROR, Integrity, IntegrityLimits,
 from epp_ros.core.estimation.methods.baselines import SDPMethod, SRLSMethod, TPSMMethod
 from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMethod
 from epp_ros.core.estimation.methods.epp import CEPP, EPP1, EPP2
+from epp_ros.core.estimation.methods.field_cepp import FieldCEPP
 from epp_ros.core.estimation.methods.track import TrackMethod
 from epp_ros.core.estimation.noise_learning import frame_scale, NoiseLearner, RangeNoiseEstimate
 from epp_ros.core.estimation.posture_method import FrameResult
@@ -49,7 +54,7 @@ __all__ = ['PostureEstimator', 'METHODS', 'RANGE_METHODS', 'ESTIMATOR_OPTIONS',
            'accepted_options']
 
 
-METHODS = {'epp1': EPP1, 'epp2': EPP2, 'cepp': CEPP, 'chain': ChainMethod,
+METHODS = {'epp1': EPP1, 'epp2': EPP2, 'cepp_paper': CEPP, 'cepp': FieldCEPP, 'chain': ChainMethod,
            'track': TrackMethod, 'srls': SRLSMethod, 'sdp': SDPMethod, 'tpsm': TPSMMethod}
 
 #: Methods that work from UWB ranges alone (what the estimator node receives).
@@ -130,8 +135,9 @@ class PostureEstimator:
     ----------
     model : BoomModel
     method : str
-        One of ``METHODS``: ``"epp1"``, ``"epp2"``, ``"cepp"``, ``"chain"``, or a baseline,
-        ``"srls"``, ``"sdp"``, ``"tpsm"``.
+        One of ``METHODS``: ``"cepp"`` (our field CEPP), ``"chain"``, ``"track"``, the
+        paper's ``"epp1"``, ``"epp2"``, ``"cepp_paper"``, or a baseline, ``"srls"``,
+        ``"sdp"``, ``"tpsm"``.
     integrity : IntegrityLimits
         How the consistency and observability checks decide.
     thresholds : Thresholds
@@ -167,13 +173,14 @@ class PostureEstimator:
         ``prior_weight`` (weight of tag-tag distances from the previous pose, default 0;
         the paper uses 1),
         ``anchor_weight`` (inf: anchor-anchor distances fixed, the default; a number:
-        weighted), ``tol``, ``max_iter``; CEPP also ``predict_slew`` (default true; false:
-        the paper's plane from the previous pose), ``slew_iterations`` (re-solves after
-        refining the slew, default 0), ``slew_tol``, ``clip_weight``,
-        ``irls_iterations`` (NLOS reweighting, default 2; 0 is the paper's CEPP and turns
-        off the rest of this list), ``noise_weights`` (links weighted by the noise model),
-        ``silent_weight`` (a silent tag keeps the previous bends), ``cold_search`` and
-        ``fold_search`` (searches beyond the paper's start); chain:
+        weighted), ``tol``, ``max_iter``, ``irls_iterations`` (NLOS reweighting; the paper:
+        0); both CEPPs also ``predict_slew`` (the plane fitted to the frame; the paper's:
+        false, the previous pose's plane), ``slew_iterations`` (re-solves after refining
+        the slew, default 0), ``slew_tol``, ``clip_weight``; the field ``cepp`` has
+        ``predict_slew`` and ``irls_iterations`` (2) on, and ``noise_weights`` (links
+        weighted by the noise model), ``silent_weight`` (a silent tag keeps the previous
+        bends), ``cold_search`` and ``fold_search`` (searches beyond the warm start), each
+        on by default and each off on its own; chain:
         ``tol``, ``max_iter``, ``slew_starts``, ``screen_iterations``; track: the chain's,
         ``process_noise`` (starting acceleration spectral density, rad^2/s^3),
         ``adapt_process_noise``, ``max_rate``, ``max_hypotheses``; sdp: ``solver``.

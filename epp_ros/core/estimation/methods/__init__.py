@@ -12,13 +12,14 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The posture methods: the paper's EPP1/EPP2/CEPP, chain, track, baselines."""
+"""The posture methods: the paper's EPP1/EPP2/CEPP, our FieldCEPP, chain, track, baselines."""
 from .baselines import SDPMethod, SRLSMethod, TPSMMethod
 from .chain import (angles_from_joints, canonical_angles, ChainMethod, Fit, grow_chains,
                     SearchExhausted)
 from .epp import CEPP, EPP1, EPP2
+from .field_cepp import FieldCEPP
 from .track import constant_velocity, Hypothesis, TrackMethod
 
 __all__ = ['SRLSMethod', 'SDPMethod', 'TPSMMethod', 'ChainMethod', 'Fit', 'SearchExhausted',
            'angles_from_joints', 'canonical_angles', 'grow_chains', 'EPP1', 'EPP2', 'CEPP',
-           'TrackMethod', 'Hypothesis', 'constant_velocity']
+           'FieldCEPP', 'TrackMethod', 'Hypothesis', 'constant_velocity']

@@ -22,22 +22,19 @@ The paper's estimators: the posture as a nearest EDM (``core.nedm``) with the an
 Each solves one frame from a prior posture (the previous estimate or a cold start), which
 supplies the tag-tag entries of G and the embedding's start.
 
-Beyond the paper, which weights every range alike (H = 1), a method may reweight its
-tag-anchor links by iteratively reweighted least squares under the NLOS mixture
-(``core.nlos``): a link that the solution leaves much too long (a blocked path) gets a
-small entry in H and the frame is solved again. CEPP does so by default, and also weights
-the links by the range noise model, holds silent tags at the prior's shape and searches
-beyond its start (see ``CEPP``); EPP1 and EPP2 and ``irls_iterations=0`` are the paper's
-methods.
+Each is the paper's method by default. Beyond the paper, which weights every range alike
+(H = 1), a method may be asked to reweight its tag-anchor links by iteratively reweighted
+least squares under the NLOS mixture (``irls_iterations``, ``core.model.nlos``): a link
+that the solution leaves much too long (a blocked path) gets a small entry in H and the
+frame is solved again. Our field variant of CEPP, with that and more on by default, is
+``field_cepp.FieldCEPP``.
 """
-from numbers import Integral, Real
+from numbers import Integral
 
-from epp_ros.core.estimation.methods.chain import grow_chains
-from epp_ros.core.model.measurements import Measurements
 from epp_ros.core.model.nlos import NlosMixture
 from epp_ros.core.model.noise import DEFAULT_NOISE, NoiseModel
-from epp_ros.core.model.plane import (fit_plane_to_ranges, fit_slew, from_plane, keep_folds,
-                                      project_ranges, slew_step, to_plane)
+from epp_ros.core.model.plane import (fit_plane_to_ranges, fit_slew, from_plane, project_ranges,
+                                      slew_step, to_plane)
 from epp_ros.core.solvers.edm import align_to_known, refine_stress, squared_distances
 from epp_ros.core.solvers.nedm import nearest_edm
 import numpy as np
@@ -293,7 +290,7 @@ class _EDMMethod:
         solver starts from ``start`` (p, d) when given (a re-solve), else from the prior.
         ``held``, when given, is ``(weights, targets)``, both (p + 1, p + 1) over the pivot
         and the tags (base outward): squared distances held to ``targets`` with those
-        weights in H where the weight is > 0 (see ``CEPP._held_pairs``).
+        weights in H where the weight is > 0 (see ``FieldCEPP._held_pairs``).
         """
         k, p = known.shape[0], prior.shape[0]
         n = k + p
@@ -379,34 +376,19 @@ class CEPP(_EDMMethod):
     """
     EPP2 in the boom's vertical plane (the paper's CEPP).
 
-    The paper takes the plane from the prior (previous estimate or cold start), so the plane
-    never turns. Beyond the paper, the plane is first fitted to this frame's 3-D ranges
-    (``predict_slew``: Gauss-Newton on the slew and free in-plane tags, from the prior);
-    ``slew_iterations`` more times the slew is then refined from the solution and the plane
-    problem re-solved.
+    As published: the plane is the prior's (previous estimate or cold start), the ranges
+    are projected into it exactly (clipped where noise makes that impossible, the clipped
+    links down-weighted by ``clip_weight``), every range weighs alike (H = 1) and every
+    tag needs a range. Options, off by default:
 
-    Also beyond the paper, by default, NLOS links are discounted (``irls_iterations``, see
-    ``_EDMMethod``): the plane is fitted without the links that look blocked, and the plane
-    problem re-solved with each link's entry of H times its IRLS weight's square root (times
-    ``clip_weight`` where the projection was clipped).
+    - ``predict_slew``: fit the plane to this frame's 3-D ranges first (Gauss-Newton on
+      the slew and free in-plane tags, from the prior), since the paper's plane never
+      turns with a slewing boom; ``slew_iterations`` more times the slew is then refined
+      from the solution and the plane problem re-solved;
+    - ``irls_iterations``: discount NLOS links (see ``_EDMMethod``); the plane is then
+      fitted without the links that look blocked.
 
-    Further beyond the paper, each on by default and off with ``irls_iterations=0``
-    unless asked for:
-
-    - ``noise_weights``: each link's entry of H is also ``1 / (d sigma(d))`` of the range
-      noise model (``sigma(d) = hypot(sigma, eta d)``, as ``tune`` sets it), relative to
-      the frame's median link, since H weights squared distances (``_noise_factors``);
-    - ``silent_weight``: a tag with no range this frame keeps the prior's bends at and
-      next to its joint (those squared distances enter G with this weight; 0: the frame
-      is refused), and a silent joint between heard ones keeps the prior's fold;
-    - ``cold_search``: a cold frame is solved from the best chains of a beam search over
-      slews and pitches as well as from the prior, the lowest NLOS-mixture loss kept;
-    - ``fold_search``: a warm frame is solved again from its joints' other folds and its
-      tip's other pitches where their own ranges prefer them, kept on a clear win.
-
-    Fits the searches found elsewhere are returned as ``alternatives`` for the integrity
-    checks. ``irls_iterations=0`` is the paper's CEPP, with the plane from all the ranges
-    and H = 1.
+    Our field variant, with these on and more, is :class:`FieldCEPP` (method ``cepp``).
     """
 
     rank = 2
@@ -414,53 +396,10 @@ class CEPP(_EDMMethod):
     #: Gauss-Newton steps when predicting the slew: from last frame's plane, three converge
     #: it far below what the ranges resolve.
     PREDICTION_STEPS = 3
-    #: Default re-solves with the links reweighted for NLOS (0: the paper's H = 1).
-    IRLS_ITERATIONS = 2
-    #: Cold search: slews and pitches of the beam search, and its chains solved from.
-    SEARCH_SLEWS = 24
-    SEARCH_PITCHES = 36
-    SEARCH_STARTS = 3
-    #: A cold search's other fit further than this from the best (metres) is an alternative;
-    #: a start of the search nearer than ``SAME_START`` to a fit found is not solved from.
-    ALTERNATIVE_DISTANCE = 0.5
-    SAME_START = 2.0
-    #: Fold search: how much lower a folded joint's own loss must be to solve from it, how
-    #: much lower the frame's loss must be to keep that fit (nats of the NLOS mixture),
-    #: the starts tried at most, and the tip's pitches scanned.
-    FOLD_MARGIN = 1.0
-    FOLD_GAIN = 10.0
-    FOLD_STARTS = 2
-    TIP_PITCHES = 72
-    #: Default weight in H of the prior's bends next to a silent tag (0: such a frame is
-    #: refused, as by the paper's CEPP, which needs a range on every tag).
-    SILENT_WEIGHT = 1.0
 
-    def __init__(self, model, clip_weight=0.1, predict_slew=True, slew_iterations=0,
-                 slew_tol=1e-6, irls_iterations=IRLS_ITERATIONS, noise_weights=None,
-                 silent_weight=None, cold_search=None, fold_search=None, lowest_joint=-0.5,
-                 **options):
-        super().__init__(model, irls_iterations=irls_iterations, **options)
-        # Beyond the paper: on by default unless irls_iterations=0 (the paper's CEPP).
-        beyond = self.irls_iterations > 0
-        switches = {'noise_weights': noise_weights, 'cold_search': cold_search,
-                    'fold_search': fold_search}
-        for name, value in switches.items():
-            if value is None:
-                value = beyond
-            if not isinstance(value, (bool, np.bool_)):
-                raise ValueError(f'{name}: must be true or false, got {value!r}')
-            setattr(self, name, bool(value))
-        if silent_weight is None:
-            silent_weight = self.SILENT_WEIGHT if beyond else 0.0
-        if isinstance(silent_weight, bool) or not isinstance(silent_weight, Real) \
-                or not np.isfinite(silent_weight) or silent_weight < 0:
-            raise ValueError(f'silent_weight: must be a finite number >= 0, got '
-                             f'{silent_weight!r}')
-        self.silent_weight = float(silent_weight)
-        if isinstance(lowest_joint, bool) or not isinstance(lowest_joint, Real) \
-                or not np.isfinite(lowest_joint):
-            raise ValueError(f'lowest_joint: must be a finite number, got {lowest_joint!r}')
-        self.lowest_joint = float(lowest_joint)
+    def __init__(self, model, clip_weight=0.1, predict_slew=False, slew_iterations=0,
+                 slew_tol=1e-6, **options):
+        super().__init__(model, **options)
         self.clip_weight = float(clip_weight)
         if not isinstance(predict_slew, (bool, np.bool_)):
             raise ValueError(f'predict_slew: must be true or false, got {predict_slew!r}')
@@ -470,57 +409,17 @@ class CEPP(_EDMMethod):
             raise ValueError(f'slew_iterations: must be >= 0, got {slew_iterations}')
         self.slew_tol = float(slew_tol)
 
-    def enough_information(self, measurements):
-        """
-        Judge whether the frame's tag-anchor links can determine the posture.
-
-        With ``silent_weight`` a silent tag (no range this frame) is held at the prior's
-        bends, so that the others still give the posture: the frame needs ranges on two
-        tags and ``p`` in all (one tag alone would leave the boom the prior's shape swung
-        about its joint). The integrity checks judge what a silent joint is then worth.
-        """
-        if not self.silent_weight:
-            return super().enough_information(measurements)
-        valid = np.isfinite(measurements.ranges)
-        heard = int(valid.any(axis=1).sum())
-        return heard >= min(2, self.model.n_sections) and valid.sum() >= self.model.n_sections
+    def solve(self, measurements, prior, warm=False):
+        """Estimate one frame from ``prior``: the last posture (``warm``) or a cold guess."""
+        return self._solve_from(measurements, prior, warm)
 
     def _held_pairs(self, ranges, prior):
-        """
-        Weights and squared targets holding the prior's bends next to silent tags, or None.
+        """Return None: the paper holds nothing of the prior (a silent tag fails the frame)."""
+        return None
 
-        A tag with no range this frame is placed only by the section lengths: between two
-        heard neighbours it may fold either way, at the tip or next to another silent tag
-        it may swing freely. Its distance, in the prior, to the pivot or tag two along the
-        chain (the bend at the joint between them) is then a target in G of weight
-        ``silent_weight``: what the frame does not determine keeps the prior's shape, and
-        what it does (a heard neighbour) is barely pulled.
-
-        Parameters
-        ----------
-        ranges : ndarray, shape (p, m)
-            Measured tag-anchor ranges, metres, NaN where missing.
-        prior : ndarray, shape (p, 3)
-            The prior posture, metres.
-
-        Returns
-        -------
-        weights, targets : ndarray, shape (p + 1, p + 1), or None
-            Over the pivot and the tags, base outward; the weights 0 where not held.
-
-        """
-        silent = ~np.isfinite(ranges).any(axis=1)
-        if not self.silent_weight or not silent.any():
-            return None
-        chain = np.vstack([self.model.pivot_of(prior), prior])
-        targets = squared_distances(chain)
-        hold = np.r_[False, silent]                 # the pivot is never silent
-        weights = np.zeros(targets.shape)
-        ends = np.arange(targets.shape[0] - 2)
-        held = hold[ends] | hold[ends + 1] | hold[ends + 2]     # a bend at or next to one
-        weights[ends[held], ends[held] + 2] = self.silent_weight
-        weights = np.maximum(weights, weights.T)
-        return weights, targets
+    def _kept_folds(self, coords, prior_2d, pivot, ranges):
+        """Return the plane solution ``coords`` (p, 2) and the joints refolded (none here)."""
+        return coords, 0
 
     def _solve_in_plane(self, measurements, prior, slew, weights=None, warm=True):
         """
@@ -544,10 +443,9 @@ class CEPP(_EDMMethod):
             coords, info = self._solve_edm(known, columns,
                                            self._known_columns(clip_factor * link_weights),
                                            prior_2d, measurements.tag_ranges, start, held)
-            if held is not None:        # a silent joint keeps the prior's fold
-                coords, folded = keep_folds(coords, prior_2d, known[0],
-                                            ~np.isfinite(ranges).any(axis=1))
-                info['kept_folds'] = int(folded.sum())
+            if held is not None:
+                coords, info['kept_folds'] = self._kept_folds(coords, prior_2d, known[0],
+                                                              ranges)
             return from_plane(coords, base, slew), coords, info
 
         return self._reweighted(solve, ranges, weights)
@@ -581,138 +479,6 @@ class CEPP(_EDMMethod):
                 break
             dropped = blocked
         return slew, weights
-
-    def solve(self, measurements, prior, warm=False):
-        """
-        Estimate one frame from ``prior``: the last posture (``warm``) or a cold guess.
-
-        Cold, with ``cold_search``, the frame is also solved from the best chains of a
-        beam search over slews and pitches (``chain.grow_chains``), and the fit with the
-        lowest NLOS-mixture loss of its ranges kept; the others that land elsewhere are
-        returned as ``alternatives`` for the integrity checks.
-        """
-        joints, info = self._solve_from(measurements, prior, warm)
-        if warm or not self.cold_search:
-            return self._refolded(measurements, joints, info) if warm else (joints, info)
-        fits = [(self._fit_cost(joints, measurements.ranges), joints, info)]
-        iterations = dict.fromkeys(('iterations', 'inner_iterations'), 0)
-        for start in [None] + self._cold_starts(measurements.ranges):
-            if start is not None and any(np.abs(start - fit[1]).max() < self.SAME_START
-                                         for fit in fits):
-                continue                # a start near a fit found ends there too
-            found, found_info = (joints, info) if start is None else \
-                self._solve_from(measurements, start, False)
-            for key in iterations:
-                iterations[key] += found_info[key]
-            # A fit near one already found is the same minimum: the prior's is kept.
-            if all(np.abs(found - fit[1]).max() > self.ALTERNATIVE_DISTANCE for fit in fits):
-                fits.append((self._fit_cost(found, measurements.ranges), found, found_info))
-        _, joints, info = min(fits, key=lambda fit: fit[0])     # the first of equals
-        info = dict(info, searched=True, **iterations)
-        info['alternatives'] = [other for _, other, _ in fits if other is not joints]
-        return joints, info
-
-    def _refolded(self, measurements, joints, info):
-        """
-        Try the warm fit's joints at their other folds, and its tip at its other pitches.
-
-        A warm start follows the boom into the nearest minimum: after an abrupt move a
-        joint can stay folded the wrong way, or the tip at the wrong pitch, for many
-        frames. Where a joint's own ranges fit such a position better than its fitted one
-        (by ``FOLD_MARGIN`` of their loss), the frame is solved again from there, and that
-        fit kept when the loss of all the frame's ranges is lower by ``FOLD_GAIN``: a
-        clear win, as under persistent NLOS a wrong fold can fit a frame slightly better
-        and the warm start is the better guess (``fold_search``). The fit given up is
-        returned as an alternative for the integrity checks.
-        """
-        if not self.fold_search:
-            return joints, info
-        ranges = measurements.ranges
-        best = (self._fit_cost(joints, ranges), joints, info)
-        others = []
-        for start in self._fold_starts(joints, ranges):
-            found, found_info = self._solve_from(measurements, start, True)
-            info['iterations'] += found_info['iterations']
-            info['inner_iterations'] += found_info['inner_iterations']
-            cost = self._fit_cost(found, ranges)
-            if cost < best[0] - self.FOLD_GAIN:
-                others.append(best[1])
-                best = (cost, found, found_info)
-            else:
-                others.append(found)
-        if best[1] is joints:
-            return joints, info
-        _, joints, found_info = best
-        found_info = dict(found_info, iterations=info['iterations'],
-                          inner_iterations=info['inner_iterations'], refolded=True)
-        found_info['alternatives'] = [other for other in others
-                                      if np.abs(other - joints).max() > self.ALTERNATIVE_DISTANCE]
-        return joints, found_info
-
-    def _tag_loss(self, k, points, ranges):
-        """Return the NLOS-mixture loss of tag ``k``'s measured ranges at points (..., 3)."""
-        valid = np.isfinite(ranges[k])
-        sigma = np.hypot(self.sigma, self.eta * ranges[k, valid])
-        distance = np.linalg.norm(np.asarray(points)[..., None, :] - self.model.anchors[valid],
-                                  axis=-1)
-        return np.sum(self.nlos.loss((ranges[k, valid] - distance) / sigma, sigma)[0], axis=-1)
-
-    def _fold_starts(self, joints, ranges):
-        """
-        Return the fit with one heard joint folded or the tip turned, where it fits better.
-
-        At most ``FOLD_STARTS``, the largest gains first.
-        """
-        base, p = self.model.base, self.model.n_sections
-        slew = fit_slew(joints, base)
-        chain = np.vstack([[self.model.pivot_offset, base[2]], to_plane(joints, base, slew)])
-        heard = np.isfinite(ranges).any(axis=1)
-        gains = []
-        for k in np.flatnonzero(heard[:-1]):
-            inner, outer = chain[k], chain[k + 2]
-            axis = (outer - inner) / max(np.linalg.norm(outer - inner), 1e-12)
-            offset = chain[k + 1] - inner
-            folded = from_plane((inner + 2.0 * (offset @ axis) * axis - offset)[None], base, slew)
-            gains.append((self._tag_loss(k, joints[k], ranges)
-                          - self._tag_loss(k, folded[0], ranges), k, folded[0]))
-        if heard[-1]:
-            turns = np.linspace(-np.pi, np.pi, self.TIP_PITCHES, endpoint=False)
-            ends = from_plane(chain[-2] + self.model.arm_lengths[-1]
-                              * np.column_stack([np.cos(turns), np.sin(turns)]), base, slew)
-            loss = self._tag_loss(p - 1, ends, ranges)
-            minima = np.flatnonzero((loss <= np.roll(loss, 1)) & (loss <= np.roll(loss, -1)))
-            far = np.linalg.norm(ends[minima] - joints[-1], axis=1) > self.ALTERNATIVE_DISTANCE
-            if far.any():
-                best = minima[far][np.argmin(loss[minima[far]])]
-                gains.append((self._tag_loss(p - 1, joints[-1], ranges) - loss[best], p - 1,
-                              ends[best]))
-        starts = []
-        for gain, k, position in sorted(gains, key=lambda g: -g[0])[:self.FOLD_STARTS]:
-            if gain > self.FOLD_MARGIN:
-                start = joints.copy()
-                start[k] = position
-                starts.append(start)
-        return starts
-
-    def _fit_cost(self, joints, ranges):
-        """Return the NLOS-mixture loss of the measured ranges at ``joints``; inf below ground."""
-        if joints[:, 2].min() < self.lowest_joint or not np.all(np.isfinite(joints)):
-            return np.inf
-        measured = np.isfinite(ranges)
-        sigma = np.hypot(self.sigma, self.eta * ranges[measured])
-        excess = (ranges[measured] - self.model.ranges(joints)[measured]) / sigma
-        return float(np.sum(self.nlos.loss(excess, sigma)[0]))
-
-    def _cold_starts(self, ranges):
-        """Return the best postures (k, p, 3) of the chain's beam search (cold-search starts)."""
-        sigma = np.hypot(self.sigma, self.eta * np.nan_to_num(ranges))
-        slews = np.linspace(-np.pi, np.pi, self.SEARCH_SLEWS, endpoint=False)
-        pitches, costs = grow_chains(self.model, Measurements.ranges_only(ranges), sigma,
-                                     self.nlos, slews, self.lowest_joint, width=4,
-                                     candidates=self.SEARCH_PITCHES)
-        order = np.argsort(costs[:, 0])
-        best = order[np.isfinite(costs[order, 0])][:self.SEARCH_STARTS]
-        return list(self.model.forward_kinematics(slews[best], pitches[best, 0]))
 
     def _solve_from(self, measurements, prior, warm):
         """Solve the frame from ``prior``: predict the plane, solve in it; (joints, info)."""

@@ -12,9 +12,10 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The NEDM estimators' NLOS reweighting (core.epp); the paper's H = 1 kept as an option."""
+"""The paper's NEDM estimators (methods.epp) and our field CEPP (methods.field_cepp)."""
 from epp_ros.core import PostureEstimator
 from epp_ros.core.estimation.methods.epp import CEPP, EPP1, EPP2
+from epp_ros.core.estimation.methods.field_cepp import FieldCEPP
 from epp_ros.core.model.measurements import Measurements
 from epp_ros.core.simulation.simulate import truck_pump
 import numpy as np
@@ -51,8 +52,8 @@ def rmse(joints):
 
 
 def test_blocked_links_are_discounted():
-    paper, paper_info = CEPP(MODEL, irls_iterations=0).solve(frame(), PRIOR)
-    joints, info = CEPP(MODEL).solve(frame(), PRIOR)
+    paper, paper_info = CEPP(MODEL, predict_slew=True).solve(frame(), PRIOR)
+    joints, info = FieldCEPP(MODEL).solve(frame(), PRIOR)
     assert rmse(joints) < 0.3 < 1.0 < rmse(paper)
     weights = info['link_weights']
     assert weights.shape == (5, 6)
@@ -63,22 +64,38 @@ def test_blocked_links_are_discounted():
     np.testing.assert_allclose(MODEL.section_lengths(joints), MODEL.arm_lengths, atol=1e-6)
 
 
-def test_irls_iterations_0_is_the_papers_cepp():
-    joints, _ = CEPP(MODEL, irls_iterations=0).solve(frame(), PRIOR)
+def test_cepp_is_the_papers_and_field_cepp_with_its_departures_off_is_too():
+    joints, _ = CEPP(MODEL, predict_slew=True).solve(frame(), PRIOR)
     np.testing.assert_allclose(joints, PAPER_CEPP, atol=1e-4)
+    off = FieldCEPP(MODEL, irls_iterations=0, noise_weights=False, silent_weight=0.0,
+                    cold_search=False, fold_search=False)
+    np.testing.assert_array_equal(off.solve(frame(), PRIOR)[0], joints)
     # Plain least squares weights every link 1: without the noise model's weights the
     # reweighting path then is H = 1 too.
-    gaussian, info = CEPP(MODEL, nlos_fraction=0.0, noise_weights=False).solve(frame(), PRIOR)
+    gaussian, info = FieldCEPP(MODEL, nlos_fraction=0.0, noise_weights=False).solve(
+        frame(), PRIOR)
     np.testing.assert_array_equal(gaussian, joints)
     assert np.all(info['link_weights'] == 1.0) and info['irls_iterations'] == 0
+
+
+def test_the_papers_plane_is_the_priors_and_does_not_turn():
+    """As published, the plane is the prior's: 0.03 rad of slew off costs the tip ~1 m."""
+    exact = Measurements.clean(MODEL, MODEL.ranges(TRUTH))[0]
+    joints, info = CEPP(MODEL).solve(exact, PRIOR)
+    prior_slew = np.arctan2(PRIOR[-1, 1] - MODEL.base[1], PRIOR[-1, 0] - MODEL.base[0])
+    assert info['slew'] == pytest.approx(prior_slew, abs=1e-9)
+    assert np.linalg.norm(joints[-1] - TRUTH[-1]) > 0.5
+    turned, _ = CEPP(MODEL, predict_slew=True).solve(exact, PRIOR)
+    np.testing.assert_allclose(turned, TRUTH, atol=1e-3)
 
 
 def test_exact_ranges_are_not_reweighted():
     # Solved to a stationarity of 1e-9 (of the largest squared distance, ~1,600 m^2):
     # micrometres on exact ranges; the default 1e-6 leaves a few.
     for prior in (PRIOR, TRUTH):
-        paper, _ = CEPP(MODEL, irls_iterations=0, tol=1e-9).solve(frame(False, 0.0), prior)
-        joints, info = CEPP(MODEL, irls_iterations=3, tol=1e-9).solve(frame(False, 0.0), prior)
+        paper, _ = CEPP(MODEL, predict_slew=True, tol=1e-9).solve(frame(False, 0.0), prior)
+        joints, info = FieldCEPP(MODEL, irls_iterations=3, tol=1e-9).solve(frame(False, 0.0),
+                                                                           prior)
         np.testing.assert_allclose(joints, paper, atol=1e-6)
         np.testing.assert_allclose(joints, TRUTH, atol=1e-6)
         np.testing.assert_array_equal(info['link_weights'], 1.0)
@@ -87,8 +104,8 @@ def test_exact_ranges_are_not_reweighted():
 
 def test_line_of_sight_noise_is_weighted_as_the_paper_does():
     """Links a few sigmas long are barely discounted: the answer moves by millimetres."""
-    paper, _ = CEPP(MODEL, irls_iterations=0).solve(frame(False), PRIOR)
-    joints, info = CEPP(MODEL, noise_weights=False).solve(frame(False), PRIOR)
+    paper, _ = CEPP(MODEL, predict_slew=True).solve(frame(False), PRIOR)
+    joints, info = FieldCEPP(MODEL, noise_weights=False).solve(frame(False), PRIOR)
     assert np.abs(joints - paper).max() < 0.01
     assert info['link_weights'].min() > 0.8
 
@@ -103,7 +120,7 @@ def test_epp1_and_epp2_are_the_papers_unless_asked():
 
 
 def test_tune_changes_the_weighting():
-    method = CEPP(MODEL, noise_weights=False)
+    method = FieldCEPP(MODEL, noise_weights=False)
     method.tune(nlos_fraction=0.0)              # Gaussian: every weight 1
     joints, info = method.solve(frame(), PRIOR)
     np.testing.assert_allclose(joints, PAPER_CEPP, atol=1e-4)
@@ -120,7 +137,7 @@ def test_tune_changes_the_weighting():
                                          ('eta', True), ('nlos_fraction', 1.0),
                                          ('nlos_gamma', 0.0)])
 def test_tune_checks_its_inputs(name, value):
-    for method in (CEPP(MODEL), EPP2(MODEL)):
+    for method in (FieldCEPP(MODEL), EPP2(MODEL)):
         with pytest.raises(ValueError, match=f'^{name}'):
             method.tune(**{name: value})
         assert (method.sigma, method.eta, method.nlos.fraction, method.nlos.gamma) == (
@@ -130,7 +147,7 @@ def test_tune_checks_its_inputs(name, value):
 @pytest.mark.parametrize('value', [-1, 1.5, True, None])
 def test_irls_iterations_is_checked(value):
     with pytest.raises(ValueError, match='irls_iterations'):
-        CEPP(MODEL, irls_iterations=value)
+        FieldCEPP(MODEL, irls_iterations=value)
     with pytest.raises(ValueError, match='irls_iterations'):
         PostureEstimator(MODEL, 'cepp', irls_iterations=value)
 
@@ -153,7 +170,7 @@ def test_estimator_passes_the_noise_and_reports_the_weights():
 
 def test_noise_weights_follow_the_range_noise():
     ranges = frame(False).ranges
-    factors = CEPP(MODEL, sigma=0.03, eta=0.01)._noise_factors(ranges)
+    factors = FieldCEPP(MODEL, sigma=0.03, eta=0.01)._noise_factors(ranges)
     assert np.median(factors) == pytest.approx(1.0)
     order = np.argsort(ranges.ravel())              # longer links, smaller weights
     assert np.all(np.diff(factors.ravel()[order]) <= 1e-12)
@@ -164,10 +181,10 @@ def test_noise_weights_follow_the_range_noise():
     assert ratio == pytest.approx(expected)
     missing = ranges.copy()
     missing[1, 2] = np.nan
-    assert np.isnan(CEPP(MODEL)._noise_factors(missing)[1, 2])
-    assert CEPP(MODEL, noise_weights=False)._noise_factors(ranges) == 1.0
-    assert CEPP(MODEL, irls_iterations=0)._noise_factors(ranges) == 1.0
-    asked = CEPP(MODEL, irls_iterations=0, noise_weights=True)
+    assert np.isnan(FieldCEPP(MODEL)._noise_factors(missing)[1, 2])
+    assert FieldCEPP(MODEL, noise_weights=False)._noise_factors(ranges) == 1.0
+    assert CEPP(MODEL)._noise_factors(ranges) == 1.0
+    asked = FieldCEPP(MODEL, irls_iterations=0, noise_weights=True)
     assert asked._noise_factors(ranges).shape == (5, 6)
 
 
@@ -179,7 +196,7 @@ def test_noise_weights_lower_the_error_when_noise_grows_with_range():
         ranges = exact + rng.normal(0.0, 1.0, exact.shape) * (0.03 + 0.01 * exact)
         measurements = Measurements.clean(MODEL, ranges)[0]
         for weighted in squared:
-            method = CEPP(MODEL, sigma=0.03, eta=0.01, noise_weights=weighted)
+            method = FieldCEPP(MODEL, sigma=0.03, eta=0.01, noise_weights=weighted)
             squared[weighted].append(rmse(method.solve(measurements, PRIOR, warm=True)[0]) ** 2)
     assert np.mean(squared[True]) < 0.6 * np.mean(squared[False])
 
@@ -205,15 +222,27 @@ def test_stress_refinement_lowers_the_error_and_keeps_fixed_lengths():
     assert max(lengths) < 1e-2
 
 
-def test_beyond_the_paper_is_off_with_irls_iterations_0():
-    paper = CEPP(MODEL, irls_iterations=0)
-    assert not (paper.noise_weights or paper.cold_search or paper.fold_search)
-    assert paper.silent_weight == 0.0
-    method = CEPP(MODEL)
+def test_each_departure_from_the_paper_is_an_option_of_its_own():
+    paper = CEPP(MODEL)
+    assert paper.irls_iterations == 0 and not paper.predict_slew and not paper.noise_weights
+    assert not hasattr(paper, 'cold_search') and not hasattr(paper, 'silent_weight')
+    method = FieldCEPP(MODEL)
     assert method.noise_weights and method.cold_search and method.fold_search
-    assert method.silent_weight == CEPP.SILENT_WEIGHT > 0
-    asked = CEPP(MODEL, irls_iterations=0, cold_search=True, silent_weight=0.5)
+    assert method.predict_slew and method.irls_iterations == FieldCEPP.IRLS_ITERATIONS > 0
+    assert method.silent_weight == FieldCEPP.SILENT_WEIGHT > 0
+    # Turning one off leaves the others as they were (irls_iterations=0 once turned all off).
+    unweighted = FieldCEPP(MODEL, irls_iterations=0)
+    assert unweighted.noise_weights and unweighted.cold_search and unweighted.fold_search
+    assert unweighted.silent_weight == FieldCEPP.SILENT_WEIGHT
+    asked = FieldCEPP(MODEL, fold_search=False, silent_weight=0.5)
     assert asked.cold_search and asked.silent_weight == 0.5 and not asked.fold_search
+
+
+def test_the_estimator_names_the_papers_cepp_and_ours_apart():
+    assert PostureEstimator(MODEL, 'cepp')._solver.__class__ is FieldCEPP
+    assert PostureEstimator(MODEL, 'cepp_paper')._solver.__class__ is CEPP
+    with pytest.raises(ValueError, match='cold_search'):
+        PostureEstimator(MODEL, 'cepp_paper', cold_search=True)
 
 
 @pytest.mark.parametrize('name, value', [('silent_weight', -1.0), ('silent_weight', True),
@@ -223,7 +252,7 @@ def test_beyond_the_paper_is_off_with_irls_iterations_0():
                                          ('stress_refinement', 1)])
 def test_new_options_are_checked(name, value):
     with pytest.raises(ValueError, match=name):
-        CEPP(MODEL, **{name: value})
+        FieldCEPP(MODEL, **{name: value})
     with pytest.raises(ValueError, match=name):
         PostureEstimator(MODEL, 'cepp', **{name: value})
 
@@ -232,18 +261,18 @@ def test_a_silent_tag_is_held_at_the_prior_shape():
     ranges = frame(False).ranges.copy()
     ranges[2] = np.nan                              # joint 3 between heard neighbours
     measurements = Measurements.clean(MODEL, ranges)[0]
-    assert CEPP(MODEL).enough_information(measurements)
-    assert not CEPP(MODEL, irls_iterations=0).enough_information(measurements)
-    weights, targets = CEPP(MODEL)._held_pairs(ranges, PRIOR)
+    assert FieldCEPP(MODEL).enough_information(measurements)
+    assert not CEPP(MODEL).enough_information(measurements)
+    weights, targets = FieldCEPP(MODEL)._held_pairs(ranges, PRIOR)
     # The bends at joints 2, 3 and 4: pivot-joint distances two apart, (1, 3), (2, 4), (3, 5).
     held = np.argwhere(np.triu(weights) > 0)
     np.testing.assert_array_equal(held, [[1, 3], [2, 4], [3, 5]])
     np.testing.assert_allclose(targets[1, 3], np.sum((PRIOR[0] - PRIOR[2]) ** 2))
-    joints, _ = CEPP(MODEL).solve(measurements, PRIOR, warm=True)
+    joints, _ = FieldCEPP(MODEL).solve(measurements, PRIOR, warm=True)
     assert rmse(joints) < 0.5
     one = ranges.copy()
     one[1:] = np.nan                                # one tag alone: not enough
-    assert not CEPP(MODEL).enough_information(Measurements.clean(MODEL, one)[0])
+    assert not FieldCEPP(MODEL).enough_information(Measurements.clean(MODEL, one)[0])
 
 
 def test_a_tag_silent_for_seconds_keeps_its_joint_and_fold():
@@ -253,8 +282,8 @@ def test_a_tag_silent_for_seconds_keeps_its_joint_and_fold():
     pitches = np.radians([50.0, 25.0, 5.0, -20.0, -45.0]) + np.outer(
         np.linspace(0.0, 1.0, frames), np.radians([4.0, -6.0, 5.0, 3.0, -4.0]))
     rng = np.random.default_rng(11)
-    estimators = {name: PostureEstimator(MODEL, 'cepp', learn_noise=False, **options)
-                  for name, options in (('held', {}), ('paper', {'irls_iterations': 0}))}
+    estimators = {name: PostureEstimator(MODEL, method, learn_noise=False, predict_slew=True)
+                  for name, method in (('held', 'cepp'), ('paper', 'cepp_paper'))}
     worst = 0.0
     for i in range(frames):
         truth = MODEL.forward_kinematics(slews[i], pitches[i])
@@ -275,18 +304,18 @@ def test_a_tag_silent_for_seconds_keeps_its_joint_and_fold():
 
 def test_cold_search_escapes_a_bad_start():
     bad = MODEL.forward_kinematics(2.4, np.radians([10.0, -30.0, 40.0, 10.0, 60.0]))
-    joints, info = CEPP(MODEL).solve(frame(False), bad, warm=False)
+    joints, info = FieldCEPP(MODEL).solve(frame(False), bad, warm=False)
     assert rmse(joints) < 0.5 and info['searched']
-    stuck, info = CEPP(MODEL, cold_search=False).solve(frame(False), bad, warm=False)
+    stuck, info = FieldCEPP(MODEL, cold_search=False).solve(frame(False), bad, warm=False)
     assert rmse(stuck) > 5.0 and 'searched' not in info
     # Warm, the prior is trusted: no search.
-    assert 'searched' not in CEPP(MODEL).solve(frame(False), PRIOR, warm=True)[1]
+    assert 'searched' not in FieldCEPP(MODEL).solve(frame(False), PRIOR, warm=True)[1]
 
 
 def test_fold_search_turns_a_tip_stuck_at_the_wrong_pitch():
     wrong = MODEL.forward_kinematics(0.37, np.radians([51.0, 24.0, 6.0, -21.0, 60.0]))
-    joints, info = CEPP(MODEL).solve(frame(False), wrong, warm=True)
+    joints, info = FieldCEPP(MODEL).solve(frame(False), wrong, warm=True)
     assert rmse(joints) < 0.5 and info['refolded']
     assert any(np.linalg.norm(other[-1] - TRUTH[-1]) > 5.0 for other in info['alternatives'])
-    stuck, info = CEPP(MODEL, fold_search=False).solve(frame(False), wrong, warm=True)
+    stuck, info = FieldCEPP(MODEL, fold_search=False).solve(frame(False), wrong, warm=True)
     assert np.linalg.norm(stuck[-1] - TRUTH[-1]) > 5.0 and 'refolded' not in info

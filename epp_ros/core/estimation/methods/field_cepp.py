@@ -1,0 +1,307 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Our field CEPP (method ``cepp``, the node's default): the paper's CEPP with what a pump needs.
+
+The paper's CEPP (:class:`~epp_ros.core.estimation.methods.epp.CEPP`, method
+``cepp_paper``) weighs every range alike, takes its plane from the last posture, refuses a
+frame with a silent tag and trusts its warm start. On a slewing boom with blocked links and
+silent tags each of those costs metres (``docs/methods.md``). Each departure is an option
+of its own, on by default:
+
+- ``predict_slew`` and ``irls_iterations`` (2): the paper class's options, turned on;
+- ``noise_weights``: each link's entry of H is also ``1 / (d sigma(d))`` of the range
+  noise model (``sigma(d) = hypot(sigma, eta d)``, as ``tune`` sets it), relative to
+  the frame's median link, since H weights squared distances (``_noise_factors``);
+- ``silent_weight``: a tag with no range this frame keeps the prior's bends at and next
+  to its joint (those squared distances enter G with this weight; 0: the frame is
+  refused), and a silent joint between heard ones keeps the prior's fold;
+- ``cold_search``: a cold frame is solved from the best chains of a beam search over
+  slews and pitches as well as from the prior, the lowest NLOS-mixture loss kept;
+- ``fold_search``: a warm frame is solved again from its joints' other folds and its
+  tip's other pitches where their own ranges prefer them, kept on a clear win.
+
+Fits the searches found elsewhere are returned as ``alternatives`` for the integrity checks.
+"""
+from numbers import Real
+
+from epp_ros.core.estimation.methods.chain import grow_chains
+from epp_ros.core.estimation.methods.epp import CEPP
+from epp_ros.core.model.measurements import Measurements
+from epp_ros.core.model.plane import fit_slew, from_plane, keep_folds, to_plane
+from epp_ros.core.solvers.edm import squared_distances
+import numpy as np
+
+__all__ = ['FieldCEPP']
+
+
+def _switch(name, value):
+    """Return ``value`` as a bool; ValueError naming the option when it is not one."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f'{name}: must be true or false, got {value!r}')
+    return bool(value)
+
+
+def _finite(name, value, least=-np.inf):
+    """Return ``value`` as a float; ValueError naming the option when not finite and >= least."""
+    if isinstance(value, bool) or not isinstance(value, Real) or not np.isfinite(value) \
+            or value < least:
+        bound = '' if least == -np.inf else f' >= {least:g}'
+        raise ValueError(f'{name}: must be a finite number{bound}, got {value!r}')
+    return float(value)
+
+
+class FieldCEPP(CEPP):
+    """
+    The paper's CEPP with the field's departures (see the module), each one an option.
+
+    Parameters
+    ----------
+    model : BoomModel
+    predict_slew : bool
+        Fit the plane to the frame's ranges (the paper: the prior's plane).
+    irls_iterations : int
+        Re-solves with the links reweighted under the NLOS mixture (the paper: 0).
+    noise_weights, cold_search, fold_search : bool
+        See the module.
+    silent_weight : float
+        Weight in H of the prior's bends next to a silent tag (0: the frame is refused).
+    lowest_joint : float
+        No joint is below this height, metres: a search's fit below it is not kept.
+    **options
+        Of :class:`CEPP` and its base (``sigma``, ``eta``, ``nlos_*``, ``tol``, ...).
+
+    """
+
+    #: Default re-solves with the links reweighted for NLOS.
+    IRLS_ITERATIONS = 2
+    #: Cold search: slews and pitches of the beam search, and its chains solved from.
+    SEARCH_SLEWS = 24
+    SEARCH_PITCHES = 36
+    SEARCH_STARTS = 3
+    #: A cold search's other fit further than this from the best (metres) is an alternative;
+    #: a start of the search nearer than ``SAME_START`` to a fit found is not solved from.
+    ALTERNATIVE_DISTANCE = 0.5
+    SAME_START = 2.0
+    #: Fold search: how much lower a folded joint's own loss must be to solve from it, how
+    #: much lower the frame's loss must be to keep that fit (nats of the NLOS mixture),
+    #: the starts tried at most, and the tip's pitches scanned.
+    FOLD_MARGIN = 1.0
+    FOLD_GAIN = 10.0
+    FOLD_STARTS = 2
+    TIP_PITCHES = 72
+    #: Default weight in H of the prior's bends next to a silent tag.
+    SILENT_WEIGHT = 1.0
+
+    def __init__(self, model, predict_slew=True, irls_iterations=IRLS_ITERATIONS,
+                 noise_weights=True, silent_weight=SILENT_WEIGHT, cold_search=True,
+                 fold_search=True, lowest_joint=-0.5, **options):
+        super().__init__(model, predict_slew=predict_slew, irls_iterations=irls_iterations,
+                         **options)
+        self.noise_weights = _switch('noise_weights', noise_weights)
+        self.cold_search = _switch('cold_search', cold_search)
+        self.fold_search = _switch('fold_search', fold_search)
+        self.silent_weight = _finite('silent_weight', silent_weight, least=0.0)
+        self.lowest_joint = _finite('lowest_joint', lowest_joint)
+
+    def _kept_folds(self, coords, prior_2d, pivot, ranges):
+        """Return ``coords`` (p, 2) with each silent joint at the prior's fold, and how many."""
+        coords, folded = keep_folds(coords, prior_2d, pivot, ~np.isfinite(ranges).any(axis=1))
+        return coords, int(folded.sum())
+
+    def enough_information(self, measurements):
+        """
+        Judge whether the frame's tag-anchor links can determine the posture.
+
+        With ``silent_weight`` a silent tag (no range this frame) is held at the prior's
+        bends, so that the others still give the posture: the frame needs ranges on two
+        tags and ``p`` in all (one tag alone would leave the boom the prior's shape swung
+        about its joint). The integrity checks judge what a silent joint is then worth.
+        """
+        if not self.silent_weight:
+            return super().enough_information(measurements)
+        valid = np.isfinite(measurements.ranges)
+        heard = int(valid.any(axis=1).sum())
+        return heard >= min(2, self.model.n_sections) and valid.sum() >= self.model.n_sections
+
+    def _held_pairs(self, ranges, prior):
+        """
+        Weights and squared targets holding the prior's bends next to silent tags, or None.
+
+        A tag with no range this frame is placed only by the section lengths: between two
+        heard neighbours it may fold either way, at the tip or next to another silent tag
+        it may swing freely. Its distance, in the prior, to the pivot or tag two along the
+        chain (the bend at the joint between them) is then a target in G of weight
+        ``silent_weight``: what the frame does not determine keeps the prior's shape, and
+        what it does (a heard neighbour) is barely pulled.
+
+        Parameters
+        ----------
+        ranges : ndarray, shape (p, m)
+            Measured tag-anchor ranges, metres, NaN where missing.
+        prior : ndarray, shape (p, 3)
+            The prior posture, metres.
+
+        Returns
+        -------
+        weights, targets : ndarray, shape (p + 1, p + 1), or None
+            Over the pivot and the tags, base outward; the weights 0 where not held.
+
+        """
+        silent = ~np.isfinite(ranges).any(axis=1)
+        if not self.silent_weight or not silent.any():
+            return None
+        chain = np.vstack([self.model.pivot_of(prior), prior])
+        targets = squared_distances(chain)
+        hold = np.r_[False, silent]                 # the pivot is never silent
+        weights = np.zeros(targets.shape)
+        ends = np.arange(targets.shape[0] - 2)
+        held = hold[ends] | hold[ends + 1] | hold[ends + 2]     # a bend at or next to one
+        weights[ends[held], ends[held] + 2] = self.silent_weight
+        weights = np.maximum(weights, weights.T)
+        return weights, targets
+
+    def solve(self, measurements, prior, warm=False):
+        """
+        Estimate one frame from ``prior``: the last posture (``warm``) or a cold guess.
+
+        Warm, with ``fold_search``, the fit's other folds are tried (:meth:`_refolded`).
+        Cold, with ``cold_search``, the frame is also solved from the best chains of a
+        beam search over slews and pitches (``chain.grow_chains``), and the fit with the
+        lowest NLOS-mixture loss of its ranges kept; the others that land elsewhere are
+        returned as ``alternatives`` for the integrity checks.
+        """
+        joints, info = self._solve_from(measurements, prior, warm)
+        if warm or not self.cold_search:
+            return self._refolded(measurements, joints, info) if warm else (joints, info)
+        fits = [(self._fit_cost(joints, measurements.ranges), joints, info)]
+        iterations = dict.fromkeys(('iterations', 'inner_iterations'), 0)
+        for start in [None] + self._cold_starts(measurements.ranges):
+            if start is not None and any(np.abs(start - fit[1]).max() < self.SAME_START
+                                         for fit in fits):
+                continue                # a start near a fit found ends there too
+            found, found_info = (joints, info) if start is None else \
+                self._solve_from(measurements, start, False)
+            for key in iterations:
+                iterations[key] += found_info[key]
+            # A fit near one already found is the same minimum: the prior's is kept.
+            if all(np.abs(found - fit[1]).max() > self.ALTERNATIVE_DISTANCE for fit in fits):
+                fits.append((self._fit_cost(found, measurements.ranges), found, found_info))
+        _, joints, info = min(fits, key=lambda fit: fit[0])     # the first of equals
+        info = dict(info, searched=True, **iterations)
+        info['alternatives'] = [other for _, other, _ in fits if other is not joints]
+        return joints, info
+
+    def _refolded(self, measurements, joints, info):
+        """
+        Try the warm fit's joints at their other folds, and its tip at its other pitches.
+
+        A warm start follows the boom into the nearest minimum: after an abrupt move a
+        joint can stay folded the wrong way, or the tip at the wrong pitch, for many
+        frames. Where a joint's own ranges fit such a position better than its fitted one
+        (by ``FOLD_MARGIN`` of their loss), the frame is solved again from there, and that
+        fit kept when the loss of all the frame's ranges is lower by ``FOLD_GAIN``: a
+        clear win, as under persistent NLOS a wrong fold can fit a frame slightly better
+        and the warm start is the better guess (``fold_search``). The fit given up is
+        returned as an alternative for the integrity checks.
+        """
+        if not self.fold_search:
+            return joints, info
+        ranges = measurements.ranges
+        best = (self._fit_cost(joints, ranges), joints, info)
+        others = []
+        for start in self._fold_starts(joints, ranges):
+            found, found_info = self._solve_from(measurements, start, True)
+            info['iterations'] += found_info['iterations']
+            info['inner_iterations'] += found_info['inner_iterations']
+            cost = self._fit_cost(found, ranges)
+            if cost < best[0] - self.FOLD_GAIN:
+                others.append(best[1])
+                best = (cost, found, found_info)
+            else:
+                others.append(found)
+        if best[1] is joints:
+            return joints, info
+        _, joints, found_info = best
+        found_info = dict(found_info, iterations=info['iterations'],
+                          inner_iterations=info['inner_iterations'], refolded=True)
+        found_info['alternatives'] = [other for other in others
+                                      if np.abs(other - joints).max() > self.ALTERNATIVE_DISTANCE]
+        return joints, found_info
+
+    def _tag_loss(self, k, points, ranges):
+        """Return the NLOS-mixture loss of tag ``k``'s measured ranges at points (..., 3)."""
+        valid = np.isfinite(ranges[k])
+        sigma = np.hypot(self.sigma, self.eta * ranges[k, valid])
+        distance = np.linalg.norm(np.asarray(points)[..., None, :] - self.model.anchors[valid],
+                                  axis=-1)
+        return np.sum(self.nlos.loss((ranges[k, valid] - distance) / sigma, sigma)[0], axis=-1)
+
+    def _fold_starts(self, joints, ranges):
+        """
+        Return the fit with one heard joint folded or the tip turned, where it fits better.
+
+        At most ``FOLD_STARTS``, the largest gains first.
+        """
+        base, p = self.model.base, self.model.n_sections
+        slew = fit_slew(joints, base)
+        chain = np.vstack([[self.model.pivot_offset, base[2]], to_plane(joints, base, slew)])
+        heard = np.isfinite(ranges).any(axis=1)
+        gains = []
+        for k in np.flatnonzero(heard[:-1]):
+            inner, outer = chain[k], chain[k + 2]
+            axis = (outer - inner) / max(np.linalg.norm(outer - inner), 1e-12)
+            offset = chain[k + 1] - inner
+            folded = from_plane((inner + 2.0 * (offset @ axis) * axis - offset)[None], base, slew)
+            gains.append((self._tag_loss(k, joints[k], ranges)
+                          - self._tag_loss(k, folded[0], ranges), k, folded[0]))
+        if heard[-1]:
+            turns = np.linspace(-np.pi, np.pi, self.TIP_PITCHES, endpoint=False)
+            ends = from_plane(chain[-2] + self.model.arm_lengths[-1]
+                              * np.column_stack([np.cos(turns), np.sin(turns)]), base, slew)
+            loss = self._tag_loss(p - 1, ends, ranges)
+            minima = np.flatnonzero((loss <= np.roll(loss, 1)) & (loss <= np.roll(loss, -1)))
+            far = np.linalg.norm(ends[minima] - joints[-1], axis=1) > self.ALTERNATIVE_DISTANCE
+            if far.any():
+                best = minima[far][np.argmin(loss[minima[far]])]
+                gains.append((self._tag_loss(p - 1, joints[-1], ranges) - loss[best], p - 1,
+                              ends[best]))
+        starts = []
+        for gain, k, position in sorted(gains, key=lambda g: -g[0])[:self.FOLD_STARTS]:
+            if gain > self.FOLD_MARGIN:
+                start = joints.copy()
+                start[k] = position
+                starts.append(start)
+        return starts
+
+    def _fit_cost(self, joints, ranges):
+        """Return the NLOS-mixture loss of the measured ranges at ``joints``; inf below ground."""
+        if joints[:, 2].min() < self.lowest_joint or not np.all(np.isfinite(joints)):
+            return np.inf
+        measured = np.isfinite(ranges)
+        sigma = np.hypot(self.sigma, self.eta * ranges[measured])
+        excess = (ranges[measured] - self.model.ranges(joints)[measured]) / sigma
+        return float(np.sum(self.nlos.loss(excess, sigma)[0]))
+
+    def _cold_starts(self, ranges):
+        """Return the best postures (k, p, 3) of the chain's beam search (cold-search starts)."""
+        sigma = np.hypot(self.sigma, self.eta * np.nan_to_num(ranges))
+        slews = np.linspace(-np.pi, np.pi, self.SEARCH_SLEWS, endpoint=False)
+        pitches, costs = grow_chains(self.model, Measurements.ranges_only(ranges), sigma,
+                                     self.nlos, slews, self.lowest_joint, width=4,
+                                     candidates=self.SEARCH_PITCHES)
+        order = np.argsort(costs[:, 0])
+        best = order[np.isfinite(costs[order, 0])][:self.SEARCH_STARTS]
+        return list(self.model.forward_kinematics(slews[best], pitches[best, 0]))
