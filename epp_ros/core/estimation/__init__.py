@@ -17,8 +17,7 @@ from .bias_learning import bias_design, BiasLearner, REFERENCE_RANGE
 from .estimators import (accepted_options, ESTIMATOR_OPTIONS, METHODS, PostureEstimator,
                          RANGE_METHODS)
 from .frame_policy import ADMIT, CLOCK_JUMP, FramePolicy, MALFORMED, OUT_OF_ORDER
-from .integrity import (ERROR, fold_alternatives, Integrity, IntegrityLimits, OK, Thresholds,
-                        Verdict, WARN)
+from .integrity import ERROR, Integrity, IntegrityLimits, OK, Thresholds, Verdict, WARN
 from .metrics import COVERED_FRACTION, frame_rmse, joint_errors, pooled_rmse, wrong_frames, WRONG_M
 from .noise_learning import frame_scale, NoiseLearner, RangeNoiseEstimate
 from .posture_method import FrameResult, PostureMethod
@@ -26,6 +25,6 @@ from .posture_method import FrameResult, PostureMethod
 __all__ = ['BiasLearner', 'REFERENCE_RANGE', 'bias_design', 'PostureEstimator', 'METHODS',
            'RANGE_METHODS', 'ESTIMATOR_OPTIONS', 'accepted_options', 'FramePolicy', 'ADMIT',
            'OUT_OF_ORDER', 'CLOCK_JUMP', 'MALFORMED', 'OK', 'WARN', 'ERROR', 'Thresholds',
-           'IntegrityLimits', 'Verdict', 'Integrity', 'fold_alternatives', 'joint_errors',
+           'IntegrityLimits', 'Verdict', 'Integrity', 'joint_errors',
            'frame_rmse', 'pooled_rmse', 'wrong_frames', 'WRONG_M', 'COVERED_FRACTION',
            'RangeNoiseEstimate', 'NoiseLearner', 'frame_scale', 'PostureMethod', 'FrameResult']

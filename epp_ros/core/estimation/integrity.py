@@ -40,17 +40,14 @@ from epp_ros.core.estimation.bias_learning import bias_design
 from epp_ros.core.estimation.methods.chain import angles_from_joints
 from epp_ros.core.model.bounds import (bias_covariance, bound_from_covariance,
                                        bound_from_information, RangeBiasPrior)
+from epp_ros.core.model.folds import fold_alternatives, tip_circle
 from epp_ros.core.model.measurements import Measurements, Residuals, wrap_angle
 import numpy as np
 from scipy.special import betainc, gammaincc, gammainccinv
 
-__all__ = ['OK', 'WARN', 'ERROR', 'Thresholds', 'IntegrityLimits', 'Verdict', 'Integrity',
-           'fold_alternatives']
+__all__ = ['OK', 'WARN', 'ERROR', 'Thresholds', 'IntegrityLimits', 'Verdict', 'Integrity']
 
 OK, WARN, ERROR = 0, 1, 2
-
-#: Tip positions scanned for its other well-fitting pitches.
-TIP_CANDIDATES = 72
 
 
 def _chi_square_limit(alpha, dof):
@@ -191,28 +188,6 @@ class Verdict:
     def lost(self):
         """Whether a fresh (cold) solve of the frame could do better than this estimate."""
         return self.status in ('inconsistent', 'implausible')
-
-
-def fold_alternatives(model, joints):
-    """
-    Each inner joint reflected across the line through its neighbours.
-
-    Reflection keeps both adjacent section lengths and, for a boom in a vertical plane,
-    the plane: the other solution when the joint's own ranges are few or weak.
-
-    Returns
-    -------
-    alternatives : ndarray, shape (p - 1, 3)
-        Row k: joint k (0-based, k < p - 1) folded; the others stay.
-
-    """
-    chain = np.vstack([model.pivot_of(joints), joints])
-    inner, outer = chain[:-2], chain[2:]
-    axis = outer - inner
-    axis /= np.maximum(_norm(axis), 1e-12)[:, None]
-    offset = chain[1:-1] - inner
-    foot = inner + np.sum(offset * axis, axis=1)[:, None] * axis
-    return 2.0 * foot - chain[1:-1]
 
 
 class Integrity:
@@ -588,12 +563,8 @@ class Integrity:
 
     def _tip_circle(self, joints, slew):
         """Positions of the tip at pitches all round its hinge, in the boom's plane."""
-        p = self.model.n_sections
-        hinge = joints[-2] if p > 1 else self.model.pivot(slew)
-        grid = np.linspace(-np.pi, np.pi, TIP_CANDIDATES, endpoint=False)
-        return hinge + self.model.arm_lengths[-1] * (
-            np.cos(grid)[:, None] * [np.cos(slew), np.sin(slew), 0.0]
-            + np.sin(grid)[:, None] * [0.0, 0.0, 1.0])
+        hinge = joints[-2] if self.model.n_sections > 1 else self.model.pivot(slew)
+        return tip_circle(self.model, hinge, slew)[1]
 
     # -- the verdict ----------------------------------------------------------------------
     def judge(self, joints, measurements, reference=None, elapsed=None, reference_std=None,

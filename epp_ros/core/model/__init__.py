@@ -12,16 +12,17 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The boom and its sensors: geometry, the noise model, measurements, bounds."""
+"""The boom and its sensors: geometry, folds, the noise model, measurements, bounds."""
 from .boom import BoomModel, MAX_RANGE_OFFSET
 from .bounds import (bias_covariance, Bound, bound_from_covariance, bound_from_information, crlb,
                      fisher_information, posterior_crlb, posterior_information, RangeBiasPrior)
+from .folds import (fold_alternatives, folded_angles, keep_folds, reflect, tip_circle,
+                    tip_minima, TIP_PITCHES)
 from .measurements import (Measurements, plausible_limits, range_spikes, Residuals, SensorNoise,
                            SPIKE_M, wrap_angle)
 from .nlos import LinkLoss, NlosMixture
 from .noise import DEFAULT_NOISE, NoiseModel
-from .plane import (fit_plane_to_ranges, fit_slew, from_plane, keep_folds, project_ranges,
-                    slew_step, to_plane)
+from .plane import fit_plane_to_ranges, fit_slew, from_plane, project_ranges, slew_step, to_plane
 from .poses import boom_frames, boom_quaternions, rotation_to_quaternion
 
 __all__ = ['BoomModel', 'MAX_RANGE_OFFSET', 'fisher_information', 'Bound', 'crlb',
@@ -29,5 +30,6 @@ __all__ = ['BoomModel', 'MAX_RANGE_OFFSET', 'fisher_information', 'Bound', 'crlb
            'posterior_information', 'posterior_crlb', 'SensorNoise', 'Measurements', 'Residuals',
            'plausible_limits', 'range_spikes', 'SPIKE_M', 'wrap_angle', 'NlosMixture', 'LinkLoss',
            'NoiseModel', 'DEFAULT_NOISE', 'fit_slew', 'fit_plane_to_ranges', 'slew_step',
-           'to_plane', 'from_plane', 'project_ranges', 'keep_folds', 'boom_frames',
-           'rotation_to_quaternion', 'boom_quaternions']
+           'to_plane', 'from_plane', 'project_ranges', 'boom_frames',
+           'rotation_to_quaternion', 'boom_quaternions', 'TIP_PITCHES', 'reflect',
+           'fold_alternatives', 'folded_angles', 'keep_folds', 'tip_circle', 'tip_minima']

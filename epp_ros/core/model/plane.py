@@ -22,7 +22,7 @@ direction ``u = (cos theta, sin theta, 0)``. In-plane coordinates of a point x a
 import numpy as np
 
 __all__ = ['fit_slew', 'fit_plane_to_ranges', 'slew_step', 'to_plane', 'from_plane',
-           'project_ranges', 'keep_folds']
+           'project_ranges']
 
 
 def fit_slew(points, base):
@@ -210,61 +210,6 @@ def fit_plane_to_ranges(coords, ranges, anchors, base, slew, pivot=None, arm_len
         if abs(step[0]) <= tol:
             break
     return float(slew), coords
-
-
-def keep_folds(coords, reference, pivot, free, min_sine=0.05):
-    """
-    Fold back the free joints whose bend turned the other way than in ``reference``.
-
-    A joint whose own ranges are missing but whose two neighbours are placed (the pivot
-    counts) is fixed by the section lengths up to its fold: reflected across the line
-    through its neighbours it fits as well. Such a joint is reflected when its bend (the
-    turn from the inner section to the outer one) has the other sign than in
-    ``reference`` while that bend was clear (its sine at least ``min_sine``): a fold
-    no range saw happen is the reference's.
-
-    Parameters
-    ----------
-    coords : ndarray, shape (p, 2)
-        In-plane joint positions (reach, z), metres.
-    reference : ndarray, shape (p, 2)
-        The same joints before (e.g. the prior), metres.
-    pivot : ndarray, shape (2,)
-        In-plane position of the boom's pivot.
-    free : ndarray of bool, shape (p,)
-        Joints not placed by measurements of their own.
-    min_sine : float
-        Bends of ``reference`` with a smaller sine are taken as straight: either fold.
-
-    Returns
-    -------
-    coords : ndarray, shape (p, 2)
-        A copy, folded joints reflected.
-    folded : ndarray of bool, shape (p,)
-
-    """
-    chain = np.vstack([pivot, coords]).astype(float)
-    before = np.vstack([pivot, reference]).astype(float)
-    placed = np.r_[True, ~np.asarray(free, dtype=bool), False]
-    folded = np.zeros(chain.shape[0] - 1, bool)
-    for i in np.flatnonzero(~placed[1:-1]) + 1:
-        if not (placed[i - 1] and placed[i + 1]):
-            continue                    # a run of free joints: nothing fixes the others
-        now, then = _bend_sine(chain, i), _bend_sine(before, i)
-        if abs(then) >= min_sine and now * then < 0:
-            inner, outer = chain[i - 1], chain[i + 1]
-            axis = (outer - inner) / max(np.linalg.norm(outer - inner), 1e-12)
-            offset = chain[i] - inner
-            chain[i] = inner + 2.0 * (offset @ axis) * axis - offset
-            folded[i - 1] = True
-    return chain[1:], folded
-
-
-def _bend_sine(chain, i):
-    """Sine of the turn at chain point ``i`` from the section before it to the one after."""
-    inner, outer = chain[i] - chain[i - 1], chain[i + 1] - chain[i]
-    scale = np.linalg.norm(inner) * np.linalg.norm(outer)
-    return float((inner[0] * outer[1] - inner[1] * outer[0]) / scale) if scale > 1e-12 else 0.0
 
 
 def _with_sections(jacobian, residual, coords, pivot, arm_lengths):

@@ -38,6 +38,7 @@ tried at its other well-fitting pitches until nothing fits better.
 from dataclasses import replace
 from typing import NamedTuple
 
+from epp_ros.core.model.folds import folded_angles, tip_circle, tip_minima
 from epp_ros.core.model.measurements import Residuals, SensorNoise, wrap_angle
 from epp_ros.core.model.nlos import NlosMixture
 from epp_ros.core.model.noise import DEFAULT_NOISE
@@ -351,48 +352,29 @@ class ChainMethod:
         starts.extend(np.c_[slews[slew_index], pitches[slew_index, beam_index]])
         return starts
 
-    def tip_alternatives(self, psi, measurements, range_sigma, candidates=72, most=2):
+    def tip_alternatives(self, psi, measurements, range_sigma, most=2):
         """
         Return the same posture with the tip section at its other well-fitting pitches.
 
         The tip hangs from one joint: its ranges alone place it, and with few of them two
-        pitches can fit. Returns the local minima of the tip's loss over a pitch grid, best
-        first, other than the current pitch.
+        pitches can fit. Returns the local minima of the tip's loss on its circle
+        (:func:`~epp_ros.core.model.folds.tip_circle`), best first, other than the current
+        pitch.
         """
         valid = np.isfinite(measurements.ranges[-1])
         if not valid.any() or np.isfinite(measurements.pitches[-1]):
             return []
-        grid = np.linspace(-np.pi, np.pi, candidates, endpoint=False)
         tip = self.model.n_sections - 1
         hinge = self.model.forward_kinematics(psi[0], psi[1:])[tip - 1] if tip \
             else self.model.pivot(psi[0])
-        ends = hinge + self.model.arm_lengths[tip] * (
-            np.cos(grid)[:, None] * [np.cos(psi[0]), np.sin(psi[0]), 0.0]
-            + np.sin(grid)[:, None] * [0.0, 0.0, 1.0])
+        grid, ends = tip_circle(self.model, hinge, psi[0])
         cost = self._tag_loss(tip, ends, measurements, range_sigma)
-        minima = np.flatnonzero((cost <= np.roll(cost, 1)) & (cost <= np.roll(cost, -1)))
-        far = np.abs(wrap_angle(grid[minima] - psi[-1])) > 3 * (2 * np.pi / candidates)
-        minima = minima[far][np.argsort(cost[minima[far]])][:most]
-        return [np.r_[psi[:-1], grid[i]] for i in minima]
+        away = np.abs(wrap_angle(grid - psi[-1])) > 3 * (2 * np.pi / grid.size)
+        return [np.r_[psi[:-1], grid[i]] for i in tip_minima(cost, away)[:most]]
 
     def folds(self, psi):
-        """
-        Return the same posture with one joint folded the other way.
-
-        Reflecting joint k across the line through its neighbours, in the boom's plane,
-        keeps every other joint and all section lengths: a common second fit when joint k
-        has few ranges.
-        """
-        pitches = psi[1:]
-        steps = self.model.arm_lengths[:, None] * np.c_[np.cos(pitches), np.sin(pitches)]
-        chords = steps[:-1] + steps[1:]            # joint k - 1 to joint k + 1, k = 1..p-1
-        axes = np.arctan2(chords[:, 1], chords[:, 0])
-        folded = []
-        for k, axis in enumerate(axes):
-            turned = psi.copy()
-            turned[1 + k:3 + k] = 2 * axis - pitches[k:k + 2]
-            folded.append(wrap_angle(turned))
-        return folded
+        """Return the same posture with one joint folded the other way (``folded_angles``)."""
+        return folded_angles(self.model, psi)
 
     @staticmethod
     def _reversals(psi):

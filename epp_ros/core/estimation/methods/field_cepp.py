@@ -39,8 +39,9 @@ from numbers import Real
 
 from epp_ros.core.estimation.methods.chain import grow_chains
 from epp_ros.core.estimation.methods.epp import CEPP
+from epp_ros.core.model.folds import fold_alternatives, keep_folds, tip_circle, tip_minima
 from epp_ros.core.model.measurements import Measurements
-from epp_ros.core.model.plane import fit_slew, from_plane, keep_folds, to_plane
+from epp_ros.core.model.plane import fit_slew
 from epp_ros.core.solvers.edm import squared_distances
 import numpy as np
 
@@ -97,11 +98,10 @@ class FieldCEPP(CEPP):
     SAME_START = 2.0
     #: Fold search: how much lower a folded joint's own loss must be to solve from it, how
     #: much lower the frame's loss must be to keep that fit (nats of the NLOS mixture),
-    #: the starts tried at most, and the tip's pitches scanned.
+    #: and the starts tried at most.
     FOLD_MARGIN = 1.0
     FOLD_GAIN = 10.0
     FOLD_STARTS = 2
-    TIP_PITCHES = 72
     #: Default weight in H of the prior's bends next to a silent tag.
     SILENT_WEIGHT = 1.0
 
@@ -253,31 +253,22 @@ class FieldCEPP(CEPP):
         """
         Return the fit with one heard joint folded or the tip turned, where it fits better.
 
-        At most ``FOLD_STARTS``, the largest gains first.
+        At most ``FOLD_STARTS``, the largest gains first (``core.model.folds``).
         """
-        base, p = self.model.base, self.model.n_sections
-        slew = fit_slew(joints, base)
-        chain = np.vstack([[self.model.pivot_offset, base[2]], to_plane(joints, base, slew)])
+        p = self.model.n_sections
         heard = np.isfinite(ranges).any(axis=1)
-        gains = []
-        for k in np.flatnonzero(heard[:-1]):
-            inner, outer = chain[k], chain[k + 2]
-            axis = (outer - inner) / max(np.linalg.norm(outer - inner), 1e-12)
-            offset = chain[k + 1] - inner
-            folded = from_plane((inner + 2.0 * (offset @ axis) * axis - offset)[None], base, slew)
-            gains.append((self._tag_loss(k, joints[k], ranges)
-                          - self._tag_loss(k, folded[0], ranges), k, folded[0]))
+        folded = fold_alternatives(self.model, joints)
+        gains = [(self._tag_loss(k, joints[k], ranges) - self._tag_loss(k, folded[k], ranges),
+                  k, folded[k]) for k in np.flatnonzero(heard[:-1])]
         if heard[-1]:
-            turns = np.linspace(-np.pi, np.pi, self.TIP_PITCHES, endpoint=False)
-            ends = from_plane(chain[-2] + self.model.arm_lengths[-1]
-                              * np.column_stack([np.cos(turns), np.sin(turns)]), base, slew)
+            hinge = joints[-2] if p > 1 else self.model.pivot_of(joints)
+            _, ends = tip_circle(self.model, hinge, fit_slew(joints, self.model.base))
             loss = self._tag_loss(p - 1, ends, ranges)
-            minima = np.flatnonzero((loss <= np.roll(loss, 1)) & (loss <= np.roll(loss, -1)))
-            far = np.linalg.norm(ends[minima] - joints[-1], axis=1) > self.ALTERNATIVE_DISTANCE
-            if far.any():
-                best = minima[far][np.argmin(loss[minima[far]])]
-                gains.append((self._tag_loss(p - 1, joints[-1], ranges) - loss[best], p - 1,
-                              ends[best]))
+            away = np.linalg.norm(ends - joints[-1], axis=1) > self.ALTERNATIVE_DISTANCE
+            others = tip_minima(loss, away)
+            if others.size:
+                gains.append((self._tag_loss(p - 1, joints[-1], ranges) - loss[others[0]],
+                              p - 1, ends[others[0]]))
         starts = []
         for gain, k, position in sorted(gains, key=lambda g: -g[0])[:self.FOLD_STARTS]:
             if gain > self.FOLD_MARGIN:

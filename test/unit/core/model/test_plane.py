@@ -12,8 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-from epp_ros.core.model.plane import (fit_plane_to_ranges, fit_slew, from_plane, keep_folds,
-                                      project_ranges, to_plane)
+from epp_ros.core.model.plane import (fit_plane_to_ranges, fit_slew, from_plane, project_ranges,
+                                      to_plane)
 import numpy as np
 import pytest
 
@@ -92,30 +92,3 @@ def test_plane_fit_with_lengths_needs_the_pivot():
     with pytest.raises(ValueError, match='pivot'):
         fit_plane_to_ranges(np.ones((1, 2)), np.ones((1, 3)), np.zeros((3, 3)), BASE, 0.0,
                             arm_lengths=np.ones(1))
-
-
-def _reflected(chain, i):
-    """Chain point ``i`` reflected across the line through its neighbours."""
-    inner, outer = chain[i - 1], chain[i + 1]
-    axis = (outer - inner) / np.linalg.norm(outer - inner)
-    offset = chain[i] - inner
-    return inner + 2.0 * (offset @ axis) * axis - offset
-
-
-def test_keep_folds_restores_the_reference_fold_of_free_joints_only():
-    pivot = np.array([0.5, 2.0])
-    reference = np.array([[3.0, 6.0], [8.0, 7.0], [12.0, 4.0], [15.0, 0.0]])
-    coords = reference.copy()
-    coords[1] = _reflected(np.vstack([pivot, reference]), 2)     # joint 2 folded over
-    free = np.array([False, True, False, False])
-    kept, folded = keep_folds(coords, reference, pivot, free)
-    np.testing.assert_allclose(kept, reference, atol=1e-12)
-    np.testing.assert_array_equal(folded, [False, True, False, False])
-    heard, folded = keep_folds(coords, reference, pivot, np.zeros(4, bool))
-    np.testing.assert_array_equal(heard, coords)                # heard: its ranges decide
-    assert not folded.any()
-    # A straight reference has no fold to keep; a run of free joints is left alone.
-    straight = np.array([[3.0, 6.0], [5.5, 10.0], [12.0, 4.0], [15.0, 0.0]])
-    straight[1] = 0.5 * (straight[0] + straight[2])
-    assert not keep_folds(coords, straight, pivot, free)[1].any()
-    assert not keep_folds(coords, reference, pivot, [False, True, True, False])[1].any()
