@@ -23,7 +23,6 @@ from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 import re
-from typing import NamedTuple
 
 from epp_ros.app import contract
 from epp_ros.core.model import BoomModel, MAX_RANGE_OFFSET
@@ -31,7 +30,7 @@ from epp_ros.uwb.formats import device_number, FORMATS
 import numpy as np
 import yaml
 
-__all__ = ['ConfigError', 'Source', 'PumpConfig', 'LinkFrame', 'PUMP_PARAMETERS', 'PROTOCOLS',
+__all__ = ['ConfigError', 'Source', 'PumpConfig', 'PUMP_PARAMETERS', 'PROTOCOLS',
            'pump_config_from_parameters', 'load_pump_config', 'default_config_path',
            'normalise_device_id', 'device_number', 'listen_address', 'update_pump_yaml',
            'read_parameters']
@@ -89,59 +88,6 @@ class Source:
     anchor: str | None = None   #: anchor id for formats that name no device
 
 
-class LinkFrame(NamedTuple):
-    """One ``uwb/ranges`` message arranged for the estimators (:meth:`PumpConfig.link_frame`)."""
-
-    #: (p, m) tag-anchor ranges, metres, NaN where a pair is absent
-    ranges: np.ndarray
-    #: (p, p) tag-tag ranges, metres, row the measuring tag, NaN where absent
-    tag_ranges: np.ndarray
-    #: (p,) seconds before the stamp each tag's row was measured (the median of its ranges'
-    #: ages), NaN where unknown; None when the message carries no ages
-    ages: np.ndarray | None
-    #: labels that name no configured pair (ignored)
-    unknown: int
-
-    def range_stamps(self, stamp):
-        """
-        Return when each tag's row was measured, as ``PostureEstimator.update`` takes it.
-
-        Parameters
-        ----------
-        stamp : float
-            The message's stamp, seconds.
-
-        Returns
-        -------
-        ndarray, shape (p,), or None
-            ``stamp - ages`` in seconds, NaN (at the stamp) where unknown; None without ages.
-
-        """
-        return None if self.ages is None else stamp - self.ages
-
-
-def _tag_ages(ranges, ages):
-    """
-    Reduce the ages of each tag's ranges to one: the median of those known.
-
-    Parameters
-    ----------
-    ranges : ndarray, shape (p, m)
-        Tag-anchor ranges, metres, NaN where absent (their ages do not count).
-    ages : ndarray, shape (p, m)
-        Their ages, seconds, NaN where unknown.
-
-    Returns
-    -------
-    ndarray, shape (p,)
-        Seconds, NaN for a tag without a range of known age.
-
-    """
-    known = np.isfinite(ranges) & np.isfinite(ages)
-    return np.array([np.median(row[mask]) if mask.any() else np.nan
-                     for row, mask in zip(ages, known)])
-
-
 @dataclass(frozen=True)
 class PumpConfig:
     """A validated pump description."""
@@ -182,11 +128,12 @@ class PumpConfig:
     @property
     def link_names(self):
         """``"<tag>:<anchor>"`` for every tag-anchor pair, tag-major (row k, column j)."""
-        return [f'{tag}:{anchor}' for tag in self.tag_names for anchor in self.anchor_names]
+        return [contract.link_name(tag, anchor) for tag in self.tag_names
+                for anchor in self.anchor_names]
 
     def tag_link_name(self, row, column):
         """``"<tag>:<tag>"`` of the range measured by tag ``row`` to tag ``column``."""
-        return f'{self.tag_names[row]}:{self.tag_names[column]}'
+        return contract.link_name(self.tag_names[row], self.tag_names[column])
 
     def link_matrices(self, names, values):
         """
@@ -219,66 +166,8 @@ class PumpConfig:
         return frame.ranges, frame.tag_ranges, frame.unknown
 
     def link_frame(self, names, values, ages=None):
-        """
-        Arrange a ``uwb/ranges`` message's ranges, and their ages, for the estimators.
-
-        Parameters
-        ----------
-        names : sequence of str
-            ``"<tag>:<anchor>"`` and ``"<tag>:<tag>"`` labels, in any order (a
-            ``contract.FRAME_NUMBER`` entry is not a link).
-        values : sequence of float
-            The ranges, metres (NaN for missing).
-        ages : sequence of float, optional
-            The message's ``effort``: seconds before its stamp each range was measured
-            (``contract.ages_of``); empty or None: every range at the stamp.
-
-        Returns
-        -------
-        LinkFrame
-            The (p, m) and (p, p) ranges, each tag's age (p,) and the unknown labels.
-
-        Raises
-        ------
-        ValueError
-            When ``values``, or a non-empty ``ages``, is not one per name.
-
-        """
-        if len(names) != len(values):
-            raise ValueError(f'{len(names)} names but {len(values)} ranges')
-        link_ages = None if ages is None else contract.ages_of(ages, len(names))
-        links, tag_links = self._link_index()
-        p, m = len(self.tag_ids), len(self.anchor_ids)
-        ranges, tag_ranges = np.full((p, m), np.nan), np.full((p, p), np.nan)
-        ages_by_link = np.full((p, m), np.nan)
-        unknown = 0
-        for i, (name, value) in enumerate(zip(names, values)):
-            if name == contract.FRAME_NUMBER:
-                continue
-            position = links.get(name)
-            if position is not None:
-                ranges.flat[position] = value
-                if link_ages is not None:
-                    ages_by_link.flat[position] = link_ages[i]
-                continue
-            position = tag_links.get(name)
-            if position is None:
-                unknown += 1
-            else:
-                tag_ranges.flat[position] = value
-        tag_ages = None if link_ages is None else _tag_ages(ranges, ages_by_link)
-        return LinkFrame(ranges, tag_ranges, tag_ages, unknown)
-
-    def _link_index(self):
-        try:
-            return self._links
-        except AttributeError:
-            p = len(self.tag_names)
-            links = ({name: i for i, name in enumerate(self.link_names)},
-                     {self.tag_link_name(row, column): row * p + column
-                      for row in range(p) for column in range(p) if row != column})
-            object.__setattr__(self, '_links', links)
-            return links
+        """Arrange a ``uwb/ranges`` message for the estimators (:func:`contract.link_frame`)."""
+        return contract.link_frame(names, values, self.tag_names, self.anchor_names, ages)
 
     def tag_index(self, device_id):
         """

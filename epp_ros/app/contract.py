@@ -49,7 +49,9 @@ Names are relative, so a namespace (``-r __ns:=/pump7``) moves a whole pump; bag
 absolute names of the root namespace (:attr:`Topic.absolute`).
 """
 from dataclasses import dataclass, replace
+from functools import lru_cache
 import math
+from typing import NamedTuple
 
 from epp_ros.core.model import boom_quaternions
 import numpy as np
@@ -57,7 +59,8 @@ import numpy as np
 __all__ = ['Topic', 'RANGES', 'RANGES_INPUT', 'RANGES_SENSOR_DATA', 'ANGLES', 'POSTURE',
            'MARKERS', 'TRUTH', 'DIAGNOSTICS', 'RAW', 'JOINT_STATES', 'ROBOT_DESCRIPTION',
            'posture_poses', 'points_of', 'joints_of', 'stamp_parts', 'stamp_seconds',
-           'range_ages', 'ages_of', 'ANCHOR_RANGES', 'anchor_range_names',
+           'range_ages', 'ages_of', 'LINK_SEPARATOR', 'link_name', 'link_ends', 'LinkFrame',
+           'link_frame', 'ANCHOR_RANGES', 'anchor_range_names',
            'frame_fields', 'anchor_round_fields',
            'anchor_range_matrix', 'FRAME_NUMBER', 'frame_number', 'FrameNumbers']
 
@@ -264,6 +267,140 @@ def ages_of(effort, count):
         return np.where(np.isfinite(ages) & (ages >= 0), ages, np.nan)
 
 
+#: Between the two device names of a link: ``"<tag>:<anchor>"``, ``"<tag>:<tag>"``,
+#: ``"<anchor>:<anchor>"`` (device names hold letters, digits and _ only).
+LINK_SEPARATOR = ':'
+
+
+def link_name(first, second):
+    """Return the name of the link ``first`` measured to ``second``: ``"<first>:<second>"``."""
+    return f'{first}{LINK_SEPARATOR}{second}'
+
+
+def link_ends(name):
+    """Return the two device names of a link's name, the measuring one first."""
+    first, _, second = str(name).partition(LINK_SEPARATOR)
+    return first, second
+
+
+class LinkFrame(NamedTuple):
+    """One ``uwb/ranges`` message arranged for the estimators (:func:`link_frame`)."""
+
+    #: (p, m) tag-anchor ranges, metres, NaN where a pair is absent
+    ranges: np.ndarray
+    #: (p, p) tag-tag ranges, metres, row the measuring tag, NaN where absent
+    tag_ranges: np.ndarray
+    #: (p,) seconds before the stamp each tag's row was measured (the median of its ranges'
+    #: ages), NaN where unknown; None when the message carries no ages
+    ages: np.ndarray | None
+    #: labels that name no configured pair (ignored)
+    unknown: int
+
+    def range_stamps(self, stamp):
+        """
+        Return when each tag's row was measured, as ``PostureEstimator.update`` takes it.
+
+        Parameters
+        ----------
+        stamp : float
+            The message's stamp, seconds.
+
+        Returns
+        -------
+        ndarray, shape (p,), or None
+            ``stamp - ages`` in seconds, NaN (at the stamp) where unknown; None without ages.
+
+        """
+        return None if self.ages is None else stamp - self.ages
+
+
+def _tag_ages(ranges, ages):
+    """
+    Reduce the ages of each tag's ranges to one: the median of those known.
+
+    Parameters
+    ----------
+    ranges : ndarray, shape (p, m)
+        Tag-anchor ranges, metres, NaN where absent (their ages do not count).
+    ages : ndarray, shape (p, m)
+        Their ages, seconds, NaN where unknown.
+
+    Returns
+    -------
+    ndarray, shape (p,)
+        Seconds, NaN for a tag without a range of known age.
+
+    """
+    known = np.isfinite(ranges) & np.isfinite(ages)
+    return np.array([np.median(row[mask]) if mask.any() else np.nan
+                     for row, mask in zip(ages, known)])
+
+
+@lru_cache(maxsize=8)
+def _link_index(tag_names, anchor_names):
+    """Return each link name's flat position in the (p, m) and the (p, p) arrays."""
+    p = len(tag_names)
+    links = {link_name(tag, anchor): i for i, (tag, anchor)
+             in enumerate((tag, anchor) for tag in tag_names for anchor in anchor_names)}
+    tag_links = {link_name(tag_names[row], tag_names[column]): row * p + column
+                 for row in range(p) for column in range(p) if row != column}
+    return links, tag_links
+
+
+def link_frame(names, values, tag_names, anchor_names, ages=None):
+    """
+    Arrange a ``uwb/ranges`` message's ranges, and their ages, for the estimators.
+
+    Parameters
+    ----------
+    names : sequence of str
+        ``"<tag>:<anchor>"`` and ``"<tag>:<tag>"`` labels, in any order (a
+        :data:`FRAME_NUMBER` entry is not a link).
+    values : sequence of float
+        The ranges, metres (NaN for missing).
+    tag_names, anchor_names : tuple of str
+        The pump's devices, by index.
+    ages : sequence of float, optional
+        The message's ``effort``: seconds before its stamp each range was measured
+        (:func:`ages_of`); empty or None: every range at the stamp.
+
+    Returns
+    -------
+    LinkFrame
+        The (p, m) and (p, p) ranges, each tag's age (p,) and the unknown labels.
+
+    Raises
+    ------
+    ValueError
+        When ``values``, or a non-empty ``ages``, is not one per name.
+
+    """
+    if len(names) != len(values):
+        raise ValueError(f'{len(names)} names but {len(values)} ranges')
+    link_ages = None if ages is None else ages_of(ages, len(names))
+    links, tag_links = _link_index(tuple(tag_names), tuple(anchor_names))
+    p, m = len(tag_names), len(anchor_names)
+    ranges, tag_ranges = np.full((p, m), np.nan), np.full((p, p), np.nan)
+    ages_by_link = np.full((p, m), np.nan)
+    unknown = 0
+    for i, (name, value) in enumerate(zip(names, values)):
+        if name == FRAME_NUMBER:
+            continue
+        position = links.get(name)
+        if position is not None:
+            ranges.flat[position] = value
+            if link_ages is not None:
+                ages_by_link.flat[position] = link_ages[i]
+            continue
+        position = tag_links.get(name)
+        if position is None:
+            unknown += 1
+        else:
+            tag_ranges.flat[position] = value
+    tag_ages = None if link_ages is None else _tag_ages(ranges, ages_by_link)
+    return LinkFrame(ranges, tag_ranges, tag_ages, unknown)
+
+
 def anchor_range_names(anchor_names, rows, columns):
     """
     Return the labels of ``uwb/anchor_ranges`` entries: ``"<anchor>:<anchor>"``.
@@ -281,7 +418,7 @@ def anchor_range_names(anchor_names, rows, columns):
         The measuring anchor's name first.
 
     """
-    return [f'{anchor_names[i]}:{anchor_names[j]}' for i, j in zip(rows, columns)]
+    return [link_name(anchor_names[i], anchor_names[j]) for i, j in zip(rows, columns)]
 
 
 def frame_fields(frame, config):
@@ -375,7 +512,7 @@ def anchor_range_matrix(anchor_names, names, values):
     ranges = np.full((len(anchor_names), len(anchor_names)), np.nan)
     unknown = 0
     for name, value in zip(names, values):
-        first, _, second = str(name).partition(':')
+        first, second = link_ends(name)
         i, j = index.get(first), index.get(second)
         if i is None or j is None or i == j:
             unknown += 1
