@@ -17,7 +17,9 @@ The pump description shared by every node and tool (``config/pump.yaml``).
 
 One schema, validated in one place: nodes pass their ROS parameter values to
 :func:`pump_config_from_parameters`, plain tools read the YAML with :func:`load_pump_config`.
-A bad description raises :class:`ConfigError` with one line naming the field.
+A bad description raises :class:`ConfigError` with one line naming the field. Writing a
+calibration back into the file is ``app.pump_yaml``; a ``uwb/ranges`` message's link names
+are the contract's (``app.contract.link_name``).
 """
 from collections import Counter
 from dataclasses import dataclass
@@ -32,8 +34,7 @@ import yaml
 
 __all__ = ['ConfigError', 'Source', 'PumpConfig', 'PUMP_PARAMETERS', 'PROTOCOLS',
            'pump_config_from_parameters', 'load_pump_config', 'default_config_path',
-           'normalise_device_id', 'device_number', 'listen_address', 'update_pump_yaml',
-           'read_parameters']
+           'normalise_device_id', 'device_number', 'listen_address', 'read_parameters']
 
 PROTOCOLS = (*FORMATS, 'auto')
 _LISTEN = re.compile(r'tcp-listen://(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+)'
@@ -503,109 +504,3 @@ def read_parameters(path=None):
     if not isinstance(values, dict):
         raise ConfigError(f"{path}: no '/**: ros__parameters:' section")
     return values
-
-
-def _yaml_number(value):
-    """Return a float as YAML 1.1 and rcl read it back: with a point, no exponent, 1 um."""
-    text = f'{float(value):.6f}'.rstrip('0')
-    text = text + '0' if text.endswith('.') else text
-    return '0.0' if float(text) == 0.0 else text
-
-
-def _yaml_list(values, column, per_line):
-    """Return a flow list of numbers, ``per_line`` a line, continued at ``column + 1``."""
-    items = [_yaml_number(v) for v in values]
-    rows = [', '.join(items[i:i + per_line]) for i in range(0, len(items), per_line)]
-    return '[' + (',\n' + ' ' * (column + 1)).join(rows) + ']'
-
-
-#: The estimator's settings a calibration determines (metres, standard deviations): what it
-#: leaves unknown of each link's own bias and of the bias common to all.
-CALIBRATED_SETTINGS = ('link_bias_std', 'common_bias_std')
-
-
-def update_pump_yaml(text, values):
-    """
-    Return a pump.yaml's text with some pump parameters replaced, all else kept.
-
-    Comments, node settings and the layout stay as written: only the values of the
-    ``/**: ros__parameters:`` entries named are rewritten (lists of numbers, three a line
-    for ``anchor_positions``); an entry not in the file is added after ``anchor_positions``.
-    Should the text not lend itself to that, the document is written anew (comments lost).
-
-    Parameters
-    ----------
-    text : str
-        A pump description as :func:`load_pump_config` reads it.
-    values : dict
-        Parameter name (of PUMP_PARAMETERS) -> list of numbers, or (of
-        :data:`CALIBRATED_SETTINGS`) -> a number >= 0.
-
-    Returns
-    -------
-    str
-        The new text; it parses to the old document with ``values`` (rounded to 1 um)
-        replaced.
-
-    Raises
-    ------
-    ConfigError
-        On unknown names, a text without the section, or a result that does not validate.
-
-    """
-    unknown = sorted(set(values) - set(PUMP_PARAMETERS) - set(CALIBRATED_SETTINGS))
-    if unknown:
-        raise ConfigError(f'unknown pump parameter(s) {unknown}')
-    for name in set(values) & set(CALIBRATED_SETTINGS):
-        if not float(values[name]) >= 0.0 or not np.isfinite(float(values[name])):
-            raise ConfigError(f'{name}: must be a finite number >= 0, got {values[name]!r}')
-    values = {name: float(_yaml_number(numbers)) if name in CALIBRATED_SETTINGS
-              else [float(_yaml_number(v)) for v in numbers]        # as written: to 1 um
-              for name, numbers in values.items()}
-    try:
-        document = yaml.safe_load(text)
-        section = document['/**']['ros__parameters']
-        section.update(values)
-    except (yaml.YAMLError, TypeError, KeyError, AttributeError):
-        raise ConfigError("no '/**: ros__parameters:' section to update") from None
-    pump_config_from_parameters({name: value for name, value in section.items()
-                                 if name in PUMP_PARAMETERS})
-    try:
-        updated = _edit_in_place(text, values)
-    except (yaml.YAMLError, ValueError, StopIteration):
-        updated = None
-    if updated is None or yaml.safe_load(updated) != document:
-        updated = yaml.safe_dump(document, default_flow_style=None, sort_keys=False)
-    return updated
-
-
-def _edit_in_place(text, values):
-    """Return ``text`` with the values replaced in place (ValueError where it cannot)."""
-    top = yaml.compose(text)
-    shared = next(v for k, v in top.value if k.value == '/**')
-    section = next(v for k, v in shared.value if k.value == 'ros__parameters')
-    if not isinstance(section, yaml.MappingNode) or section.flow_style:
-        raise ValueError('not a block mapping')
-    entries = {key.value: (key, value) for key, value in section.value}
-    if 'anchor_positions' not in entries:
-        raise ValueError('no anchor_positions to add after')
-    edits, added = [], ''       # (start, end, new text); entries added after the positions
-    column = entries['anchor_positions'][0].start_mark.column
-    for name, numbers in values.items():
-        if isinstance(numbers, float):
-            written = _yaml_number(numbers)
-        else:
-            per_line = 3 if name == 'anchor_positions' else len(numbers) or 1
-            start = entries[name][1].start_mark.column if name in entries \
-                else column + len(name) + 2
-            written = _yaml_list(numbers, start, per_line)
-        if name in entries:
-            value = entries[name][1]
-            edits.append((value.start_mark.index, value.end_mark.index, written))
-        else:
-            added += f'\n{" " * column}{name}: {written}'
-    end = entries['anchor_positions'][1].end_mark.index
-    edits.append((end, end, added))
-    for start, end, new in sorted(edits, key=lambda edit: edit[0], reverse=True):
-        text = text[:start] + new + text[end:]
-    return text

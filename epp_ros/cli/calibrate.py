@@ -559,7 +559,7 @@ def write_config(path, source_text, result):
         The text written.
 
     """
-    from epp_ros.app.config import update_pump_yaml
+    from epp_ros.app.pump_yaml import update_pump_yaml
     values = {'anchor_positions': result.anchors.ravel().tolist(),
               'anchor_offsets': result.anchor_offsets.tolist(),
               'tag_offsets': result.tag_offsets.tolist(),

@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""epp_calibrate end to end on synthesized bags, the pump.yaml writer, the bench."""
+"""epp_calibrate end to end on synthesized bags, and the calibration bench."""
 from dataclasses import replace
 import json
 import math
@@ -21,7 +21,7 @@ import sys
 
 from benchmarks import calibration_bench
 from epp_ros.app import bags
-from epp_ros.app.config import ConfigError, load_pump_config, update_pump_yaml
+from epp_ros.app.config import load_pump_config
 from epp_ros.cli import bag as bag_tool
 from epp_ros.cli import calibrate as tool
 from epp_ros.core.simulation.simulate import FieldEffects, FieldSimulator, StillMotion
@@ -212,37 +212,6 @@ def test_fixed_anchors_by_name_or_id_and_the_default_said():
     # The packaged one names them.
     indices, note = tool.fixed_anchor_indices(CONFIG, None)
     assert indices == (0, 5) and 'body_anchors' in note
-
-
-def test_update_pump_yaml_keeps_the_file_and_replaces_the_values(tmp_path):
-    text = PUMP_YAML.read_text()
-    anchors = np.array(CONFIG.anchor_positions)
-    anchors[1] += [0.1234567, -0.2, 0.05]
-    updated = update_pump_yaml(text, {'anchor_positions': anchors.ravel().tolist(),
-                                      'anchor_offsets': [0.1, 0.0, -0.05, 0.0, 0.2, 1e-9],
-                                      'tag_offsets': [0.01, 0.02, 0.03, 0.04, -0.05]})
-    # Only the values changed: every comment and setting line is still there.
-    changed = set(text.splitlines()) - set(updated.splitlines())
-    assert changed == {' ' * 23 + '2.6, 3.4, 0.4,'}
-    path = tmp_path / 'pump.yaml'
-    path.write_text(updated)
-    model = load_pump_config(path).model()
-    np.testing.assert_allclose(model.anchors, anchors, atol=1e-6)
-    np.testing.assert_allclose(model.anchor_offsets, [0.1, 0.0, -0.05, 0.0, 0.2, 0.0])
-    # Replacing again edits in place.
-    again = update_pump_yaml(updated, {'tag_offsets': [0.0] * 5})
-    assert again.count('\n    tag_offsets: [') == 1
-    assert 'tag_offsets: [0.0, 0.0, 0.0, 0.0, 0.0]' in again
-    with pytest.raises(ConfigError, match='anchor_offsets'):
-        update_pump_yaml(text, {'anchor_offsets': [0.1]})
-    with pytest.raises(ConfigError, match='unknown'):
-        update_pump_yaml(text, {'anchors': [0.1]})
-    # The estimator's settings a calibration determines: numbers, replaced in place.
-    told = update_pump_yaml(text, {'link_bias_std': 0.0123, 'common_bias_std': 0.004})
-    assert set(told.splitlines()) - set(text.splitlines()) == {
-        '    link_bias_std: 0.0123', '    common_bias_std: 0.004'}
-    with pytest.raises(ConfigError, match='link_bias_std: must be a finite number >= 0'):
-        update_pump_yaml(text, {'link_bias_std': -0.1})
 
 
 def test_calibration_bench_runs_small():
