@@ -435,7 +435,7 @@ class _Evaluation:
         if step.joints is None:
             return None
         self.published.append(stamp)
-        error = float(np.max(step.diagnostics['arm_length_error']))
+        error = float(np.max(step.diagnostics.arm_length_error))
         self.max_length_error = np.fmax(self.max_length_error, error)
         self._match('estimate', stamp, step.joints)
         return stamp, _posture_message(stamp, self.config.frame_id,

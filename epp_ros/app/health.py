@@ -48,13 +48,12 @@ def grade(diagnostics):
     message : str
 
     """
-    if not diagnostics.get('valid', False):
-        status = diagnostics.get('status', 'unknown')
-        detail = diagnostics.get('message', '')
+    if not diagnostics.valid:
+        detail = diagnostics.message
         shown = detail and not detail.startswith('no estimate')
-        return ERROR, f'no estimate: {status}' + (f' ({detail})' if shown else '')
-    level, message = diagnostics.get('level', OK), diagnostics.get('message', 'tracking')
-    if not diagnostics.get('converged', True):
+        return ERROR, f'no estimate: {diagnostics.status}' + (f' ({detail})' if shown else '')
+    level, message = diagnostics.level, diagnostics.message
+    if diagnostics.converged is False:
         return max(level, WARN), 'solver stopped before converging'
     return level, message
 
@@ -66,7 +65,7 @@ def nlos_text(nlos_links):
     Parameters
     ----------
     nlos_links : array_like of bool, shape (p, m)
-        ``last_diagnostics['nlos_links']``: row k is the tag of joint k + 1, column j anchor
+        ``last_diagnostics.nlos_links``: row k is the tag of joint k + 1, column j anchor
         j + 1.
 
     Returns
@@ -124,6 +123,31 @@ def joint_stds(values, joints):
     return stds
 
 
+def _or_nan(value):
+    return np.nan if value is None else value
+
+
+def _or_blank(value):
+    return '' if value is None else str(value)
+
+
+def _noise_values(diagnostics):
+    """Return the range noise in use and the common bias taken off, as text."""
+    values = {}
+    noise = diagnostics.noise
+    if noise is not None:                   # learned while running, or as told
+        values['range sigma [m]'] = f'{noise.sigma:.4f}'
+        values['range sigma per metre'] = f'{noise.eta:.5f}'
+        values['NLOS fraction'] = f'{noise.nlos_fraction:.3f}'
+        values['NLOS mean excess [m]'] = f'{noise.nlos_gamma:.3f}'
+        values['noise learned from links'] = str(noise.links)
+    if diagnostics.range_bias is not None:  # the common bias taken off the ranges
+        offset, slope = diagnostics.range_bias
+        values['range bias [m]'] = f'{offset:.4f}'
+        values['range bias per metre'] = f'{slope:.5f}'
+    return values
+
+
 def report(diagnostics, lengths):
     """
     Return the key values of one frame's diagnostics, as text for ``/diagnostics``.
@@ -131,45 +155,36 @@ def report(diagnostics, lengths):
     Among them ``NLOS links``, how many links the integrity checks judged NLOS, and
     ``NLOS flagged links``, which (:func:`nlos_text`).
     """
-    estimated = np.asarray(diagnostics.get('section_lengths', np.full(len(lengths), np.nan)))
-    values = {'method': diagnostics.get('method', ''), 'status': diagnostics.get('status', ''),
-              'range residual RMS [m]': f'{diagnostics.get("range_residual_rms", np.nan):.4f}',
-              'missing links': str(diagnostics.get('missing_links', '')),
-              'iterations': str(diagnostics.get('iterations', '')),
-              'solve time [ms]': f'{1e3 * diagnostics.get("solve_time", np.nan):.2f}'}
-    if 'predicted_rmse' in diagnostics:              # the Cramér–Rao bound at the estimate
-        values['predicted RMSE [m]'] = f'{diagnostics["predicted_rmse"]:.4f}'
-        for k, std in enumerate(diagnostics['joint_std'], start=1):
+    estimated = np.full(len(lengths), np.nan) if diagnostics.section_lengths is None \
+        else np.asarray(diagnostics.section_lengths)
+    values = {'method': diagnostics.method, 'status': diagnostics.status,
+              'range residual RMS [m]': f'{_or_nan(diagnostics.range_residual_rms):.4f}',
+              'missing links': _or_blank(diagnostics.missing_links),
+              'iterations': _or_blank(diagnostics.iterations),
+              'solve time [ms]': f'{1e3 * _or_nan(diagnostics.solve_time):.2f}'}
+    if diagnostics.predicted_rmse is not None:        # the Cramér–Rao bound at the estimate
+        values['predicted RMSE [m]'] = f'{diagnostics.predicted_rmse:.4f}'
+        for k, std in enumerate(diagnostics.joint_std, start=1):
             values[_joint_std_key(k, False)] = f'{std:.4f}'
-    if 'posterior_joint_std' in diagnostics:         # a motion model's own uncertainty
-        for k, std in enumerate(diagnostics['posterior_joint_std'], start=1):
+    if 'posterior_joint_std' in diagnostics.details:  # a motion model's own uncertainty
+        for k, std in enumerate(diagnostics.details['posterior_joint_std'], start=1):
             values[_joint_std_key(k, True)] = f'{std:.4f}'
-    if 'hypotheses' in diagnostics:
-        values['hypotheses'] = str(diagnostics['hypotheses'])
-    noise = diagnostics.get('noise')
-    if noise is not None:                   # learned while running, or as told
-        values['range sigma [m]'] = f'{noise.sigma:.4f}'
-        values['range sigma per metre'] = f'{noise.eta:.5f}'
-        values['NLOS fraction'] = f'{noise.nlos_fraction:.3f}'
-        values['NLOS mean excess [m]'] = f'{noise.nlos_gamma:.3f}'
-        values['noise learned from links'] = str(noise.links)
-    if 'range_bias' in diagnostics:         # the common bias taken off the ranges
-        offset, slope = diagnostics['range_bias']
-        values['range bias [m]'] = f'{offset:.4f}'
-        values['range bias per metre'] = f'{slope:.5f}'
-    for anchor, shift in diagnostics.get('anchor_shifts', {}).items():   # learned, x y z
+    if 'hypotheses' in diagnostics.details:
+        values['hypotheses'] = str(diagnostics.details['hypotheses'])
+    values.update(_noise_values(diagnostics))
+    for anchor, shift in (diagnostics.anchor_shifts or {}).items():   # learned, x y z
         values[f'anchor {anchor} shift [m]'] = '{:.3f} {:.3f} {:.3f}'.format(*shift)
-    if 'noise_rmse' in diagnostics:         # the predicted RMSE without the common bias
-        values['noise RMSE [m]'] = f'{diagnostics["noise_rmse"]:.4f}'
-    if 'nlos_links' in diagnostics:
-        blocked = np.asarray(diagnostics['nlos_links'])
+    if diagnostics.noise_rmse is not None:            # the predicted RMSE without the common bias
+        values['noise RMSE [m]'] = f'{diagnostics.noise_rmse:.4f}'
+    if diagnostics.nlos_links is not None:
+        blocked = np.asarray(diagnostics.nlos_links)
         values['NLOS links'] = str(int(np.sum(blocked)))
         values[NLOS_FLAGGED] = nlos_text(blocked)
-    if 'chi_square' in diagnostics:
-        values['range chi-square'] = (f'{diagnostics["chi_square"]:.1f} (limit '
-                                      f'{diagnostics["chi_square_limit"]:.1f})')
-    if diagnostics.get('ambiguous_joints'):
-        values['ambiguous joints'] = ' '.join(map(str, diagnostics['ambiguous_joints']))
+    if diagnostics.chi_square is not None:
+        values['range chi-square'] = (f'{diagnostics.chi_square:.1f} (limit '
+                                      f'{diagnostics.chi_square_limit:.1f})')
+    if diagnostics.ambiguous_joints:
+        values['ambiguous joints'] = ' '.join(map(str, diagnostics.ambiguous_joints))
     for k, (estimate, configured) in enumerate(zip(estimated, lengths), start=1):
         values[f'section {k} length [m]'] = f'{estimate:.4f}'
         values[f'section {k} configured [m]'] = f'{configured:.4f}'

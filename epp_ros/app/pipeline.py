@@ -135,11 +135,11 @@ class RangePipeline:
 
     def _judged(self, diagnostics):
         """Count the estimator's decision on a frame; True when it may be published."""
-        self.counts['cold_restarts'] += diagnostics.get('cold_restart', False)
-        self.counts['reacquired'] += diagnostics.get('reacquired', False)
-        if not diagnostics['valid']:
+        self.counts['cold_restarts'] += bool(diagnostics.cold_restart)
+        self.counts['reacquired'] += diagnostics.reacquired
+        if not diagnostics.valid:
             self.counts['unsolved'] += 1
-            self.counts[REJECTED + diagnostics['status']] += 1
+            self.counts[REJECTED + diagnostics.status] += 1
             return False
         self.counts['published'] += 1
         return True

@@ -278,7 +278,7 @@ class PostureEstimatorNode(Node):
                                   hardware_id=pump_id(self, self.config.frame_id))
         silent = (None if self.last_frame_time is None
                   else self._now() - self.last_frame_time)
-        if not diagnostics:
+        if diagnostics is None:
             status.level, status.message = DiagnosticStatus.WARN, 'waiting for uwb/ranges'
             values = {'method': self.estimator.method}
         else:

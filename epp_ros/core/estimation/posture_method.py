@@ -93,6 +93,7 @@ class FrameResult(Mapping):
     converged: Optional[bool] = None        #: the solver met its tolerances
     iterations: Optional[int] = None        #: the solver's iterations
     solve_time: Optional[float] = None      #: seconds the frame took
+    cold_restart: Optional[bool] = None     #: the warm start was dropped after failures
     # What was measured, and what was taken off it.
     missing_links: Optional[int] = None     #: tag-anchor ranges the frame lacked
     implausible_links: Optional[int] = None   #: ranges set aside as impossible
@@ -107,6 +108,9 @@ class FrameResult(Mapping):
     joint_std: Optional[np.ndarray] = None  #: (p,) m, each joint's predicted std
     noise_rmse: Optional[float] = None      #: m, the bound without the common bias
     nlos_links: Optional[np.ndarray] = None   #: (p, m) bool, links judged NLOS
+    chi_square: Optional[float] = None      #: the ranges' consistency statistic
+    chi_square_limit: Optional[float] = None   #: its limit at the integrity's alpha
+    ambiguous_joints: Optional[list] = None    #: joints (1-based) with another fit as good
     details: dict = field(default_factory=dict)   #: the method's and the checks' extras
 
     def _named(self):

@@ -12,6 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
+from dataclasses import replace
+
 from epp_ros.app.health import (assess, ERROR, joint_stds, nlos_pairs, nlos_text, OK, Thresholds,
                                 WARN)
 from epp_ros.core import PostureEstimator
@@ -68,7 +70,9 @@ def test_what_the_node_reports_the_tools_read_back():
     assert nlos_pairs(values['NLOS flagged links']) == [(2, 3)]
     np.testing.assert_allclose(joint_stds(values, 5), diagnostics['joint_std'], atol=1e-4)
     # A motion model's own uncertainty is preferred to the bound's; unknown is NaN.
-    _, _, values = assess(dict(diagnostics, posterior_joint_std=[0.5] * 5), MODEL.arm_lengths)
+    tracked = replace(diagnostics, details={**diagnostics.details,
+                                            'posterior_joint_std': [0.5] * 5})
+    _, _, values = assess(tracked, MODEL.arm_lengths)
     assert np.isnan(joint_stds(values, 6)[5])
     assert joint_stds(values, 5) == [0.5] * 5
 
@@ -84,7 +88,7 @@ def test_levels_follow_the_thresholds():
     diagnostics = diagnostics_of('chain', ranges, thresholds=thresholds)
     assert not diagnostics['valid'] and diagnostics['status'] == 'unobservable'
     assert assess(diagnostics, MODEL.arm_lengths)[0] == ERROR
-    diagnostics = dict(diagnostics_of('epp2', MODEL.ranges(JOINTS)), converged=False)
+    diagnostics = replace(diagnostics_of('epp2', MODEL.ranges(JOINTS)), converged=False)
     assert assess(diagnostics, MODEL.arm_lengths)[:2] == (
         WARN, 'solver stopped before converging')
 

@@ -35,11 +35,13 @@ def test_a_frame_result_reads_as_the_mapping_it_always_was():
     result = FrameResult.from_values({'status': 'ok', 'valid': True, 'level': 0,
                                       'message': 'tracking', 'method': 'chain',
                                       'cold_start': False, 'reacquired': False,
-                                      'noise': noise, 'chi_square': 3.5})
+                                      'noise': noise, 'chi_square': 3.5,
+                                      'hypotheses': 2})
     assert result.valid and result['valid'] and result['chi_square'] == 3.5
-    assert result.details == {'chi_square': 3.5}
+    assert result.chi_square == 3.5 and result['hypotheses'] == 2
+    assert result.details == {'hypotheses': 2}      # a method's extra; the rest typed
     assert 'estimate' not in result and result.get('estimate') is None   # nothing solved
-    assert 'converged' not in result and len(result) == len(dict(result)) == 9
+    assert 'converged' not in result and len(result) == len(dict(result)) == 10
     with pytest.raises(KeyError):
         result['rmse']
 
