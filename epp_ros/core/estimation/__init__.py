@@ -14,10 +14,10 @@
 
 """The online estimator over its methods, integrity and learned noise."""
 from .bias_learning import bias_design, BiasLearner, REFERENCE_RANGE
-from .estimators import (accepted_options, ESTIMATOR_OPTIONS, METHODS, PostureEstimator,
-                         RANGE_METHODS)
+from .estimators import accepted_options, ESTIMATOR_OPTIONS, PostureEstimator
 from .frame_policy import ADMIT, CLOCK_JUMP, FramePolicy, MALFORMED, OUT_OF_ORDER
 from .integrity import ERROR, Integrity, IntegrityLimits, OK, Thresholds, Verdict, WARN
+from .methods import METHODS, RANGE_METHODS
 from .metrics import COVERED_FRACTION, frame_rmse, joint_errors, pooled_rmse, wrong_frames, WRONG_M
 from .noise_learning import frame_scale, NoiseLearner, RangeNoiseEstimate
 from .posture_method import FrameResult, PostureMethod

@@ -30,17 +30,13 @@ positions (p, 3), keeping the previous estimate as the warm start. Methods:
   Biswas–Ye relaxation; needs the optional cvxpy) and ``tpsm`` (angle sensors only).
 """
 from dataclasses import asdict, fields, replace
-import inspect
 import numbers
 import time
 
 from epp_ros.core.estimation.bias_learning import BiasLearner
 from epp_ros.core.estimation.integrity import ERROR, Integrity, IntegrityLimits, OK, Thresholds
-from epp_ros.core.estimation.methods.baselines import SDPMethod, SRLSMethod, TPSMMethod
-from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMethod
-from epp_ros.core.estimation.methods.epp import CEPP, EPP1, EPP2
-from epp_ros.core.estimation.methods.field_cepp import FieldCEPP
-from epp_ros.core.estimation.methods.track import TrackMethod
+from epp_ros.core.estimation.methods.chain import angles_from_joints
+from epp_ros.core.estimation.methods.registry import make_method, method_options, METHODS
 from epp_ros.core.estimation.noise_learning import frame_scale, NoiseLearner, RangeNoiseEstimate
 from epp_ros.core.estimation.posture_method import FrameResult
 from epp_ros.core.model.bounds import RangeBiasPrior
@@ -50,15 +46,7 @@ from epp_ros.core.model.noise import DEFAULT_NOISE, NoiseModel
 from epp_ros.core.solvers.multilateration import cold_start_guess
 import numpy as np
 
-__all__ = ['PostureEstimator', 'METHODS', 'RANGE_METHODS', 'ESTIMATOR_OPTIONS',
-           'accepted_options']
-
-
-METHODS = {'epp1': EPP1, 'epp2': EPP2, 'cepp_paper': CEPP, 'cepp': FieldCEPP, 'chain': ChainMethod,
-           'track': TrackMethod, 'srls': SRLSMethod, 'sdp': SDPMethod, 'tpsm': TPSMMethod}
-
-#: Methods that work from UWB ranges alone (what the estimator node receives).
-RANGE_METHODS = [name for name, cls in METHODS.items() if 'ranges' in cls.inputs]
+__all__ = ['PostureEstimator', 'ESTIMATOR_OPTIONS', 'accepted_options']
 
 
 #: Options of the estimator itself, given to every method that accepts them: what it is
@@ -69,21 +57,7 @@ ESTIMATOR_OPTIONS = {**asdict(DEFAULT_NOISE), 'lowest_joint': -0.5}
 
 def accepted_options(method):
     """Names of the keyword options ``PostureEstimator(model, method, ...)`` takes."""
-    return set(ESTIMATOR_OPTIONS) | _constructor_names(method)
-
-
-def _constructor_names(method):
-    """Names of the options the method's own constructor (and its bases') take."""
-    names = set()
-    cls = METHODS[method]
-    for cls in cls.__mro__ + getattr(cls, 'delegates', ()):
-        if '__init__' in vars(cls):
-            names |= {name for name, parameter in
-                      inspect.signature(cls.__init__).parameters.items()
-                      if parameter.kind in (parameter.KEYWORD_ONLY,
-                                            parameter.POSITIONAL_OR_KEYWORD)
-                      and name not in ('self', 'model')}
-    return names
+    return set(ESTIMATOR_OPTIONS) | method_options(method)
 
 
 NOISE_FIELDS = tuple(field.name for field in fields(NoiseModel))
@@ -258,9 +232,7 @@ class PostureEstimator:
             raise ValueError(f'learn_noise: must be true or false, got {learn_noise!r}')
         told = _told(options)
         checks = _integrity(self.model, told, integrity, thresholds, self.moving_anchors)
-        own = _constructor_names(method)
-        solver = METHODS[method](self.model, **{name: value for name, value
-                                                in {**options, **told}.items() if name in own})
+        solver = make_method(self.model, method, {**options, **told})
         self.integrity, self._solver = checks, solver
         self.reset_after_failures = int(reset_after_failures)
         configured = RangeNoiseEstimate(told['sigma'], told['eta'], told['nlos_fraction'],

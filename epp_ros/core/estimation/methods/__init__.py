@@ -18,8 +18,10 @@ from .chain import (angles_from_joints, canonical_angles, ChainMethod, Fit, grow
                     SearchExhausted)
 from .epp import CEPP, EPP1, EPP2
 from .field_cepp import FieldCEPP
+from .registry import make_method, method_options, METHODS, RANGE_METHODS
 from .track import constant_velocity, Hypothesis, TrackMethod
 
 __all__ = ['SRLSMethod', 'SDPMethod', 'TPSMMethod', 'ChainMethod', 'Fit', 'SearchExhausted',
            'angles_from_joints', 'canonical_angles', 'grow_chains', 'EPP1', 'EPP2', 'CEPP',
-           'FieldCEPP', 'TrackMethod', 'Hypothesis', 'constant_velocity']
+           'FieldCEPP', 'METHODS', 'RANGE_METHODS', 'method_options', 'make_method',
+           'TrackMethod', 'Hypothesis', 'constant_velocity']
