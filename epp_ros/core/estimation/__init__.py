@@ -17,6 +17,7 @@ from .bias_learning import bias_design, BiasLearner, REFERENCE_RANGE
 from .estimators import accepted_options, ESTIMATOR_OPTIONS, PostureEstimator
 from .frame_policy import ADMIT, CLOCK_JUMP, FramePolicy, MALFORMED, OUT_OF_ORDER
 from .integrity import ERROR, Integrity, IntegrityLimits, OK, Thresholds, Verdict, WARN
+from .learned_errors import LearnedErrors, told_noise
 from .methods import METHODS, RANGE_METHODS
 from .metrics import COVERED_FRACTION, frame_rmse, joint_errors, pooled_rmse, wrong_frames, WRONG_M
 from .noise_learning import frame_scale, NoiseLearner, RangeNoiseEstimate
@@ -27,4 +28,5 @@ __all__ = ['BiasLearner', 'REFERENCE_RANGE', 'bias_design', 'PostureEstimator', 
            'OUT_OF_ORDER', 'CLOCK_JUMP', 'MALFORMED', 'OK', 'WARN', 'ERROR', 'Thresholds',
            'IntegrityLimits', 'Verdict', 'Integrity', 'joint_errors',
            'frame_rmse', 'pooled_rmse', 'wrong_frames', 'WRONG_M', 'COVERED_FRACTION',
-           'RangeNoiseEstimate', 'NoiseLearner', 'frame_scale', 'PostureMethod', 'FrameResult']
+           'RangeNoiseEstimate', 'NoiseLearner', 'frame_scale', 'PostureMethod', 'FrameResult',
+           'LearnedErrors', 'told_noise']

@@ -29,15 +29,15 @@ positions (p, 3), keeping the previous estimate as the warm start. Methods:
 - the paper's baselines (``core.baselines``): ``srls`` (each tag alone), ``sdp`` (the
   Biswas–Ye relaxation; needs the optional cvxpy) and ``tpsm`` (angle sensors only).
 """
-from dataclasses import asdict, fields, replace
+from dataclasses import asdict, fields
 import numbers
 import time
 
-from epp_ros.core.estimation.bias_learning import BiasLearner
 from epp_ros.core.estimation.integrity import ERROR, Integrity, IntegrityLimits, OK, Thresholds
+from epp_ros.core.estimation.learned_errors import LearnedErrors, told_noise
 from epp_ros.core.estimation.methods.chain import angles_from_joints
 from epp_ros.core.estimation.methods.registry import make_method, method_options, METHODS
-from epp_ros.core.estimation.noise_learning import frame_scale, NoiseLearner, RangeNoiseEstimate
+from epp_ros.core.estimation.noise_learning import frame_scale
 from epp_ros.core.estimation.posture_method import FrameResult
 from epp_ros.core.model.bounds import RangeBiasPrior
 from epp_ros.core.model.measurements import Measurements, plausible_limits, Residuals, SensorNoise
@@ -189,8 +189,7 @@ class PostureEstimator:
         self.moving_anchors = _anchor_indices(moving_anchors, model.n_anchors)
         self.method = method
         self._settings = {}
-        self._learner = None
-        self._bias_learner = None
+        self._learned = None            # LearnedErrors, with learn_noise
         self.last_diagnostics = None
         self._configure(integrity=integrity, thresholds=thresholds,
                         reset_after_failures=reset_after_failures, learn_noise=learn_noise,
@@ -235,36 +234,23 @@ class PostureEstimator:
         solver = make_method(self.model, method, {**options, **told})
         self.integrity, self._solver = checks, solver
         self.reset_after_failures = int(reset_after_failures)
-        configured = RangeNoiseEstimate(told['sigma'], told['eta'], told['nlos_fraction'],
-                                        told['nlos_gamma'])
-        same_bias = all(told[name] == self._told.get(name) for name in (
-            'link_bias_std', 'common_bias_std', 'bias_slope_std', 'anchor_std')) \
-            if self._learner else False
-        keep = (learn_noise and self._learner is not None
-                and self._learner.configured == configured and same_bias)
+        keep = (learn_noise and self._learned is not None
+                and self._learned.learned_from(told))
         if not keep:            # what was learned from other told values starts over
-            self._learner = NoiseLearner(configured) if learn_noise else None
-            self._bias_learner = BiasLearner(
-                told['common_bias_std'], told['bias_slope_std'], told['link_bias_std'],
-                self.model.n_sections * self.model.n_anchors, anchor_std=told['anchor_std'],
-                moving=self.moving_anchors, n_anchors=self.model.n_anchors) \
+            self._learned = LearnedErrors(self.model, told, self.moving_anchors) \
                 if learn_noise else None
         self._told = told
         self._settings = {'integrity': integrity, 'thresholds': thresholds,
                           'reset_after_failures': reset_after_failures,
                           'learn_noise': bool(learn_noise), 'options': dict(options)}
         if keep:
-            self._use_noise(self._learner.estimate)
+            self._use_noise(self._learned.noise)
         self._share_bias()
 
     @property
     def noise(self):
         """Return the range noise in use (:class:`RangeNoiseEstimate`): learned or told."""
-        if self._learner is not None:
-            return self._learner.estimate
-        told = self._told
-        return RangeNoiseEstimate(told['sigma'], told['eta'], told['nlos_fraction'],
-                                  told['nlos_gamma'])
+        return told_noise(self._told) if self._learned is None else self._learned.noise
 
     def _use_noise(self, estimate):
         """Give the solver and the integrity checks the range noise ``estimate``."""
@@ -279,22 +265,20 @@ class PostureEstimator:
 
     def _share_bias(self):
         """Tell the integrity checks what is still unknown of the learned common bias."""
-        if self._bias_learner is not None:
-            self.integrity.common_covariance = self._bias_learner.covariance()
+        if self._learned is not None:
+            self.integrity.common_covariance = self._learned.bias_covariance()
 
     @property
     def range_bias(self):
         """Return the common range bias taken off (offset m, slope m/m at 20 m), or zeros."""
-        if self._bias_learner is None:
-            return np.zeros(2)
-        return self._bias_learner.estimate[:2].copy()
+        return np.zeros(2) if self._learned is None else self._learned.range_bias
 
     @property
     def anchor_shifts(self):
         """Return how far each of ``moving_anchors`` stands from where configured (n, 3), m."""
-        if self._bias_learner is None:
+        if self._learned is None:
             return np.zeros((len(self.moving_anchors), 3))
-        return self._bias_learner.anchor_shifts.copy()
+        return self._learned.anchor_shifts
 
     def _unbiased(self, measurements):
         """
@@ -303,13 +287,11 @@ class PostureEstimator:
         An anchor's shift lengthens its ranges along the directions to the tags: those of
         the last posture that fitted its frame (none yet: the shifts wait).
         """
-        if self._bias_learner is None or not self._bias_learner.estimate.any():
+        if self._learned is None:
             return measurements
-        ranges = measurements.ranges
         warm = self._warm
-        directions = None if warm is None else self.integrity.anchor_directions(warm)
-        return replace(measurements, ranges=ranges - self._bias_learner.correction(
-            ranges, directions))
+        return self._learned.unbiased(
+            measurements, None if warm is None else self.integrity.anchor_directions(warm))
 
     def _learn_bias(self, joints, info, measurements, verdict):
         """
@@ -319,7 +301,7 @@ class PostureEstimator:
         the bias alone can make the first frames so, and only frames can shrink it. Each
         tag is where it was when it ranged (``timed_joints``), for a method that knows.
         """
-        if self._bias_learner is None or verdict.status not in ('ok', 'unobservable'):
+        if self._learned is None or verdict.status not in ('ok', 'unobservable'):
             return
         kept = np.isfinite(measurements.ranges)
         blocked = verdict.values.get('nlos_links')
@@ -332,7 +314,7 @@ class PostureEstimator:
         timed = info.get('timed_joints', joints)
         fitted = self.model.ranges(timed)[kept]
         scaled = (fitted - measurements.ranges[kept]) / sigma[kept]
-        if self._bias_learner.observe(residuals.jacobian(np.r_[slew, pitches]), sigma[kept],
+        if self._learned.observe_bias(residuals.jacobian(np.r_[slew, pitches]), sigma[kept],
                                       scaled, fitted, np.flatnonzero(kept),
                                       self.integrity.anchor_directions(timed)[kept]):
             self._share_bias()
@@ -430,7 +412,7 @@ class PostureEstimator:
         if self._warm is not None and not solved[1].get('searched'):
             solved, verdict = self._reconsider(solved, verdict, measurements, stamp,
                                                diagnostics)
-        if self._learner is not None and not self._learner.settled:
+        if self._learned is not None and not self._learned.settled:
             solved, verdict = self._bootstrap_noise(measurements, stamp, solved, verdict)
         joints, info = solved
         self._learn(joints, info, measurements, verdict)
@@ -479,13 +461,13 @@ class PostureEstimator:
         for _ in range(attempts):
             excess, fitted = self._excess(solved[1].get('timed_joints', solved[0]),
                                           measurements)
-            factor = frame_scale(excess, self._learner.estimate.link_sigma(fitted),
+            factor = frame_scale(excess, self._learned.noise.link_sigma(fitted),
                                  self._dof(solved[1]), too_short_only=False)
             if not np.isfinite(factor) or factor <= threshold:   # one frame never shrinks it
                 break
             threshold = 1.25                # once far off, settle it closely
-            self._learner.rescale(factor)
-            self._use_noise(self._learner.estimate)
+            self._learned.rescale(factor)
+            self._use_noise(self._learned.noise)
             again = self._solve(measurements, warm=self._warm is not None)
             if isinstance(again, str):
                 break
@@ -494,11 +476,11 @@ class PostureEstimator:
 
     def _learn(self, joints, info, measurements, verdict):
         """Add the frame's residuals to the noise learned, unless its fit is impossible."""
-        if self._learner is None or verdict.status == 'implausible':
+        if self._learned is None or verdict.status == 'implausible':
             return
         excess, fitted = self._excess(info.get('timed_joints', joints), measurements)
-        if self._learner.observe(excess, fitted, self._dof(info)):
-            self._use_noise(self._learner.estimate)
+        if self._learned.observe_noise(excess, fitted, self._dof(info)):
+            self._use_noise(self._learned.noise)
 
     def _frame_time(self, stamp):
         """Return the frame's time, seconds: the stamp, or one frame period after the last."""
