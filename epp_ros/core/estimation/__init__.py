@@ -22,6 +22,7 @@ from .methods import METHODS, RANGE_METHODS
 from .metrics import COVERED_FRACTION, frame_rmse, joint_errors, pooled_rmse, wrong_frames, WRONG_M
 from .noise_learning import frame_scale, NoiseLearner, RangeNoiseEstimate
 from .posture_method import FrameResult, PostureMethod
+from .reacquisition import Reacquisition
 
 __all__ = ['BiasLearner', 'REFERENCE_RANGE', 'bias_design', 'PostureEstimator', 'METHODS',
            'RANGE_METHODS', 'ESTIMATOR_OPTIONS', 'accepted_options', 'FramePolicy', 'ADMIT',
@@ -29,4 +30,4 @@ __all__ = ['BiasLearner', 'REFERENCE_RANGE', 'bias_design', 'PostureEstimator', 
            'IntegrityLimits', 'Verdict', 'Integrity', 'joint_errors',
            'frame_rmse', 'pooled_rmse', 'wrong_frames', 'WRONG_M', 'COVERED_FRACTION',
            'RangeNoiseEstimate', 'NoiseLearner', 'frame_scale', 'PostureMethod', 'FrameResult',
-           'LearnedErrors', 'told_noise']
+           'LearnedErrors', 'told_noise', 'Reacquisition']

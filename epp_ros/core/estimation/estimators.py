@@ -39,6 +39,7 @@ from epp_ros.core.estimation.methods.chain import angles_from_joints
 from epp_ros.core.estimation.methods.registry import make_method, method_options, METHODS
 from epp_ros.core.estimation.noise_learning import frame_scale
 from epp_ros.core.estimation.posture_method import FrameResult
+from epp_ros.core.estimation.reacquisition import Reacquisition
 from epp_ros.core.model.bounds import RangeBiasPrior
 from epp_ros.core.model.measurements import Measurements, plausible_limits, Residuals, SensorNoise
 from epp_ros.core.model.nlos import NlosMixture
@@ -190,6 +191,7 @@ class PostureEstimator:
         self.method = method
         self._settings = {}
         self._learned = None            # LearnedErrors, with learn_noise
+        self._reacquisition = None
         self.last_diagnostics = None
         self._configure(integrity=integrity, thresholds=thresholds,
                         reset_after_failures=reset_after_failures, learn_noise=learn_noise,
@@ -198,9 +200,6 @@ class PostureEstimator:
         self._previous = None           # (joints, stamp, joint_std) last accepted
         self._warm = None               # the last estimate that fitted its frame
         self._stamp = None
-        self._second_opinion_stamp = -np.inf
-        self._in_doubt = False
-        self._failures = 0
 
     def reconfigure(self, *, integrity=None, thresholds=None, reset_after_failures=None,
                     learn_noise=None, **options):
@@ -233,7 +232,9 @@ class PostureEstimator:
         checks = _integrity(self.model, told, integrity, thresholds, self.moving_anchors)
         solver = make_method(self.model, method, {**options, **told})
         self.integrity, self._solver = checks, solver
-        self.reset_after_failures = int(reset_after_failures)
+        if self._reacquisition is None:
+            self._reacquisition = Reacquisition()
+        self._reacquisition.reset_after_failures = int(reset_after_failures)
         keep = (learn_noise and self._learned is not None
                 and self._learned.learned_from(told))
         if not keep:            # what was learned from other told values starts over
@@ -338,7 +339,7 @@ class PostureEstimator:
                 raise ValueError(f'joints: must be finite, of shape '
                                  f'({self.model.n_sections}, 3), got {np.shape(joints)}')
         self._previous, self._warm = None, seed
-        self._failures = 0
+        self._reacquisition.succeeded()
         self._solver.reset(seed)
 
     @property
@@ -428,7 +429,7 @@ class PostureEstimator:
             return self._reject(verdict.status, diagnostics, measurements, start, joints)
         # A fold about as likely widens what later frames allow (Integrity.fold_spread).
         self._previous = (joints.copy(), stamp, verdict.values['reach_std'])
-        self._failures = 0
+        self._reacquisition.succeeded()
         return self._finish(joints, 'ok', diagnostics, measurements, start)
 
     def _excess(self, joints, measurements):
@@ -511,7 +512,7 @@ class PostureEstimator:
         the fresh fit won.
         """
         if verdict.lost:
-            if self._due_for_search():
+            if self._reacquisition.due_for_search():
                 fresh = self._solve(measurements, warm=False)
                 if not isinstance(fresh, str):
                     fresh_verdict = self._judge(fresh, measurements, stamp)
@@ -523,29 +524,17 @@ class PostureEstimator:
                 solved, measurements, stamp, verdict)
         return solved, verdict
 
-    #: Seconds between second opinions on fits that call many links blocked.
-    SECOND_OPINION_PERIOD = 1.0
-
     def _suspicious(self, verdict, measurements, stamp):
         """
-        Judge whether a fit that explains its frame does so by calling a tag's links blocked.
+        Judge whether a fit calls too many of a tag's links blocked (``Reacquisition``).
 
-        A warm fit in the wrong basin can fit that way: half of a tag's links or more
-        flagged blocked earns a fresh search, at most once a ``SECOND_OPINION_PERIOD``,
-        and every frame while the last search found another posture about as likely.
         Not for a method with a state of its own (a motion model): one frame's search
         would replace what many frames built.
         """
         blocked = verdict.values.get('nlos_links')
         if blocked is None or hasattr(self._solver, 'accept'):
             return False
-        if self._in_doubt:
-            return True
-        if stamp - self._second_opinion_stamp < self.SECOND_OPINION_PERIOD:
-            return False
-        flagged = np.sum(blocked, axis=1)
-        measured = np.sum(np.isfinite(measurements.ranges), axis=1)
-        return bool(np.any((flagged >= 2) & (2 * flagged >= measured)))
+        return self._reacquisition.suspicious(blocked, measurements.ranges, stamp)
 
     def _second_opinion(self, solved, measurements, stamp, verdict):
         """
@@ -554,9 +543,9 @@ class PostureEstimator:
         The other stays as an alternative: when it is about as likely and elsewhere, the
         frame is ambiguous. Returns (joints, info), verdict, and whether the fresh fit won.
         """
-        self._second_opinion_stamp = stamp
         fresh = self._solve(measurements, warm=False)
         if isinstance(fresh, str):
+            self._reacquisition.searched(stamp)
             return solved, verdict, False
         costs = self.integrity.posture_cost(np.array([solved[0], fresh[0]]), measurements)
         # Not to a posture the boom cannot be in (beyond its reach since the last one).
@@ -566,18 +555,8 @@ class PostureEstimator:
         best[1]['alternatives'] = (list(best[1].get('alternatives', [])) + [other[0]]
                                    + list(other[1].get('alternatives', [])))
         verdict = self._judge(best, measurements, stamp)
-        self._in_doubt = verdict.status == 'ambiguous'
+        self._reacquisition.searched(stamp, verdict.status == 'ambiguous')
         return best, verdict, moved
-
-    def _due_for_search(self):
-        """
-        Judge whether this rejected frame gets a fresh solve.
-
-        The first few in a run do, then every tenth, so that a stream of garbage does not
-        cost a search per frame.
-        """
-        failures = self._failures + 1
-        return failures & (failures - 1) == 0 or failures % 10 == 0
 
     def _solve(self, measurements, warm):
         """Return the method's (joints, info) from the warm start or a cold one; why not if not."""
@@ -595,19 +574,11 @@ class PostureEstimator:
         return joints, info
 
     def _reject(self, status, diagnostics, measurements, start, joints=None):
-        """
-        Report an invalid frame; the warm start is dropped after too many in a row.
-
-        A frame that fitted but did not determine the posture (ambiguous, unobservable)
-        does not count: its fit is a good start for the next frame.
-        """
-        if status not in ('ambiguous', 'unobservable'):
-            self._failures += 1
+        """Report an invalid frame; the warm start is dropped after too many in a row."""
         diagnostics.setdefault('level', ERROR)
         diagnostics.setdefault('message', f'no estimate: {status}')
-        if self._failures >= self.reset_after_failures:
+        if self._reacquisition.failed(status):
             self._previous = self._warm = None
-            self._failures = 0
             diagnostics['cold_restart'] = True
         estimate = self._fallback() if joints is None else joints
         self._finish(estimate, status, diagnostics, measurements, start)

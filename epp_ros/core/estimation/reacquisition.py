@@ -1,0 +1,99 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+When the estimator doubts its warm start: the re-acquisition policy, apart from the solving.
+
+A warm start follows the boom from frame to frame, and can follow it into the wrong basin.
+The policy says when a frame is also solved from scratch (a rejected frame, the first few
+in a run and then every tenth, so that garbage does not cost a search per frame; a fit
+that calls half a tag's links blocked, at most once a period, and every frame while the
+last search left the frame ambiguous) and when the warm start is dropped (after
+``reset_after_failures`` failures in a row). ``PostureEstimator`` does the solving.
+"""
+import numpy as np
+
+__all__ = ['Reacquisition']
+
+
+class Reacquisition:
+    """
+    The re-acquisition state of one estimator: failures in a row and the last search.
+
+    Parameters
+    ----------
+    reset_after_failures : int
+        Failures in a row after which the warm start is dropped.
+
+    """
+
+    #: Seconds between second opinions on fits that call many links blocked.
+    SECOND_OPINION_PERIOD = 1.0
+
+    def __init__(self, reset_after_failures=10):
+        self.reset_after_failures = reset_after_failures
+        self.failures = 0
+        self.in_doubt = False           # the last search found another fit about as likely
+        self._searched = -np.inf        # when the last second opinion was taken
+
+    def due_for_search(self):
+        """
+        Judge whether this rejected frame gets a fresh solve.
+
+        The first few in a run do, then every tenth, so that a stream of garbage does not
+        cost a search per frame.
+        """
+        failures = self.failures + 1
+        return failures & (failures - 1) == 0 or failures % 10 == 0
+
+    def suspicious(self, nlos_links, ranges, stamp):
+        """
+        Judge whether a fit that explains its frame does so by calling a tag's links blocked.
+
+        A warm fit in the wrong basin can fit that way: half of a tag's links or more
+        flagged blocked (``nlos_links`` (p, m) of the frame's ``ranges`` (p, m)) earns a
+        fresh search, at most once a ``SECOND_OPINION_PERIOD``, and every frame while the
+        last search found another posture about as likely.
+        """
+        if self.in_doubt:
+            return True
+        if stamp - self._searched < self.SECOND_OPINION_PERIOD:
+            return False
+        flagged = np.sum(nlos_links, axis=1)
+        measured = np.sum(np.isfinite(ranges), axis=1)
+        return bool(np.any((flagged >= 2) & (2 * flagged >= measured)))
+
+    def searched(self, stamp, ambiguous=None):
+        """Note a second opinion taken at ``stamp``, and whether it left the frame ambiguous."""
+        self._searched = stamp
+        if ambiguous is not None:           # None: the search failed, the doubt stands
+            self.in_doubt = bool(ambiguous)
+
+    def failed(self, status):
+        """
+        Count a rejected frame; True when the warm start must now be dropped.
+
+        A frame that fitted but did not determine the posture (ambiguous, unobservable)
+        does not count: its fit is a good start for the next frame.
+        """
+        if status not in ('ambiguous', 'unobservable'):
+            self.failures += 1
+        if self.failures >= self.reset_after_failures:
+            self.failures = 0
+            return True
+        return False
+
+    def succeeded(self):
+        """Start the count of failures in a row over (a frame accepted, or a new seed)."""
+        self.failures = 0
