@@ -26,7 +26,7 @@ positions (p, 3), keeping the previous estimate as the warm start. Methods:
   the warm start, each an option of its own.
 - ``chain``: least squares over the slew and the pitches (``methods.chain``), at the
   Cramér–Rao bound, robust to NLOS ranges; also fuses tag-tag ranges and angle sensors.
-- the paper's baselines (``core.baselines``): ``srls`` (each tag alone), ``sdp`` (the
+- the paper's baselines (``methods.baselines``): ``srls`` (each tag alone), ``sdp`` (the
   Biswas–Ye relaxation; needs the optional cvxpy) and ``tpsm`` (angle sensors only).
 """
 from dataclasses import asdict, fields
@@ -247,6 +247,11 @@ class PostureEstimator:
         if keep:
             self._use_noise(self._learned.noise)
         self._share_bias()
+
+    @property
+    def reset_after_failures(self):
+        """Return the failures in a row after which the warm start is dropped."""
+        return self._reacquisition.reset_after_failures
 
     @property
     def noise(self):
