@@ -21,7 +21,7 @@ import time
 
 from epp_ros.app import contract
 from epp_ros.app.config import default_config_path, load_pump_config
-from epp_ros.nodes.common import POSTURE_QOS, RANGES_INPUT_QOS, RANGES_QOS, to_time
+from epp_ros.nodes.messages import POSTURE_QOS, RANGES_INPUT_QOS, RANGES_QOS, to_time
 from geometry_msgs.msg import PoseArray
 import numpy as np
 import rclpy

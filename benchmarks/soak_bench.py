@@ -261,7 +261,7 @@ class _Listener:
 
     def __init__(self):
         from epp_ros.app import contract
-        from epp_ros.nodes.common import qos, RANGES_INPUT_QOS
+        from epp_ros.nodes.messages import qos, RANGES_INPUT_QOS
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import PoseArray
         import rclpy

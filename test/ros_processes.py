@@ -21,7 +21,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from epp_ros.app.config import load_pump_config
-from epp_ros.nodes.common import POSTURE_QOS, RANGES_QOS, to_seconds
+from epp_ros.nodes.messages import POSTURE_QOS, RANGES_QOS, to_seconds
 from geometry_msgs.msg import PoseArray
 import numpy as np
 import pytest

@@ -16,7 +16,7 @@
 The message contract of epp_ros: its topics, their QoS, and the layout of its messages.
 
 One home for what the nodes, the bag tools, the demo and the benchmarks must agree on. No
-ROS imports: the nodes build rclpy profiles and messages from it (``nodes/common.py``), the
+ROS imports: the nodes build rclpy profiles and messages from it (``nodes/messages.py``), the
 bag tools rosbags ones (``bags.py``), and decoding works on either kind of message.
 
 - ``uwb/ranges`` (``sensor_msgs/JointState``): ``name[i] = "<tag>:<anchor>"`` (then any

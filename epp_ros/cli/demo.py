@@ -119,7 +119,7 @@ class Monitor:
     def __init__(self):
         from diagnostic_msgs.msg import DiagnosticArray
         from epp_ros.app import contract
-        from epp_ros.nodes.common import POSTURE_QOS, RANGES_QOS
+        from epp_ros.nodes.messages import POSTURE_QOS, RANGES_QOS
         from geometry_msgs.msg import PoseArray
         import rclpy
         from sensor_msgs.msg import JointState
@@ -146,7 +146,7 @@ class Monitor:
 
     def on_truth(self, message):
         from epp_ros.app import contract
-        from epp_ros.nodes.common import to_seconds
+        from epp_ros.nodes.messages import to_seconds
         self.received += 1
         self.truth_stamps.append(to_seconds(message.header.stamp))
         self.truths.append(contract.points_of(message))
@@ -164,7 +164,7 @@ class Monitor:
         """
         from epp_ros.app import contract
         from epp_ros.core.estimation import frame_rmse, joint_errors
-        from epp_ros.nodes.common import to_seconds
+        from epp_ros.nodes.messages import to_seconds
         import numpy as np
         self.received += 1
         received_ns = info.get('received_timestamp', 0) if isinstance(info, dict) else 0

@@ -39,8 +39,9 @@ import threading
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from epp_ros.app import contract
 from epp_ros.app.config import ConfigError, listen_address, normalise_device_id, PROTOCOLS, Source
-from epp_ros.nodes.common import (declare, declare_pump_parameters, pump_id, qos, RANGES_QOS,
-                                  run_node, StartupError, to_time)
+from epp_ros.nodes.messages import qos, RANGES_QOS, to_time
+from epp_ros.nodes.parameters import declare, declare_pump_parameters, pump_id
+from epp_ros.nodes.runtime import run_node, StartupError
 from epp_ros.uwb.decoder import PeerDecoders
 from epp_ros.uwb.formats import anchor_slot_problem
 from epp_ros.uwb.frames import FrameAssembler, MAX_RANGE, MIN_RANGE

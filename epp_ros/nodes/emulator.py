@@ -45,7 +45,8 @@ from epp_ros.app.config import ConfigError, load_pump_config
 from epp_ros.cli.arguments import (add_field_options, DURATION_S, field_effects_of, FRACTION,
                                    host_port, NOISE_M, Parser, RATE_HZ, SEED, settle_noise_options)
 from epp_ros.core.simulation import FieldSimulator, make_motion, Motion, RangeNoise, working_cycle
-from epp_ros.nodes.common import posture_message, POSTURE_QOS, run_node
+from epp_ros.nodes.messages import posture_message, POSTURE_QOS
+from epp_ros.nodes.runtime import run_node
 from epp_ros.nodes.stopping import shutdown_on_signals
 from epp_ros.uwb.emulation import (anchor_lines, anchor_rounds, channel_devices, corrupt,
                                    cycle_lines, PtyOutput, reports_anchor_ranges, TcpOutput)

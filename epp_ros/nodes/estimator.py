@@ -62,10 +62,10 @@ from epp_ros.app.pipeline import RangePipeline
 from epp_ros.app.robot_description import joint_names, joint_positions, urdf
 from epp_ros.app.settings import estimator_settings, parameter_name, SETTINGS
 from epp_ros.core import METHODS, PostureEstimator
-from epp_ros.nodes.common import (declare, declare_pump_parameters, posture_markers,
-                                  posture_message, POSTURE_QOS, pump_id, qos,
-                                  RANGES_INPUT_PROFILES, RANGES_INPUT_QOS, run_node, StartupError,
-                                  to_seconds, to_time)
+from epp_ros.nodes.messages import (posture_markers, posture_message, POSTURE_QOS, qos,
+                                    RANGES_INPUT_PROFILES, RANGES_INPUT_QOS, to_seconds, to_time)
+from epp_ros.nodes.parameters import declare, declare_pump_parameters, pump_id
+from epp_ros.nodes.runtime import run_node, StartupError
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, SetParametersResult
 from rclpy.node import Node

@@ -21,7 +21,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticStatus
 from epp_ros.app.config import load_pump_config
 from epp_ros.app.contract import FRAME_NUMBER
-from epp_ros.nodes.common import to_seconds
+from epp_ros.nodes.messages import to_seconds
 import numpy as np
 import pytest
 from ros_processes import (params_with_sources, poses_to_joints, PUMP_YAML, script, start_emulator,
@@ -370,7 +370,7 @@ def test_a_listening_port_is_never_locked_by_silent_or_stray_clients(listener, p
 def test_trek_anchor_ranges_reach_uwb_anchor_ranges(listener, processes, tmp_path):
     """``ma`` lines -> uwb_driver -> ``uwb/anchor_ranges``, beside unchanged ``uwb/ranges``."""
     from epp_ros.app import contract
-    from epp_ros.nodes.common import qos
+    from epp_ros.nodes.messages import qos
     from sensor_msgs.msg import JointState
     received = []
     subscription = listener.create_subscription(JointState, contract.ANCHOR_RANGES.name,

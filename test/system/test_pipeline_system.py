@@ -19,7 +19,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticStatus
 from epp_ros.app.config import load_pump_config
 from epp_ros.core.estimation.metrics import frame_rmse
-from epp_ros.nodes.common import RANGES_QOS, to_seconds, to_time
+from epp_ros.nodes.messages import RANGES_QOS, to_seconds, to_time
 import numpy as np
 import pytest
 import rclpy
@@ -75,7 +75,7 @@ def matched_errors(listener):
 
 
 def test_markers_expire_so_a_refused_boom_leaves_the_screen():
-    from epp_ros.nodes.common import MARKER_LIFETIME, posture_markers
+    from epp_ros.nodes.messages import MARKER_LIFETIME, posture_markers
     joints = [[1.0, 0.0, 4.0], [2.0, 0.0, 5.0]]
     markers = posture_markers([0.0, 0.0, 3.5], joints, 12.5, 'pump_base').markers
     assert len(markers) == 3 and MARKER_LIFETIME == 1.0

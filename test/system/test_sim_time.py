@@ -20,7 +20,7 @@ The simulated time starts at 1000 s (1970), so that no wall-clock stamp can pass
 import subprocess
 import time
 
-from epp_ros.nodes.common import to_seconds, to_time
+from epp_ros.nodes.messages import to_seconds, to_time
 import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_processes import PUMP_YAML, script, start_emulator

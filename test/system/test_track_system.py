@@ -18,7 +18,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticStatus
 from epp_ros.app.config import load_pump_config
 from epp_ros.core import PostureEstimator
-from epp_ros.nodes.common import to_seconds, to_time
+from epp_ros.nodes.messages import to_seconds, to_time
 import numpy as np
 import pytest
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy

@@ -23,7 +23,7 @@ import time
 from epp_ros.app import bags, contract
 from epp_ros.app.config import load_pump_config
 from epp_ros.core import METHODS
-from epp_ros.nodes.common import to_seconds
+from epp_ros.nodes.messages import to_seconds
 import numpy as np
 import pytest
 from ros_processes import PUMP_YAML, script

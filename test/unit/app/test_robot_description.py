@@ -163,7 +163,7 @@ def test_epp_urdf_writes_what_the_estimator_publishes(tmp_path):
 def test_the_estimator_publishes_its_urdf_latched_and_joint_states_with_each_posture(
         listener, processes):
     """A real node: a late subscriber gets the URDF, whose kinematics match arm_posture."""
-    from epp_ros.nodes.common import qos, RANGES_QOS, to_seconds, to_time
+    from epp_ros.nodes.messages import qos, RANGES_QOS, to_seconds, to_time
     from epp_ros.app import contract
     from sensor_msgs.msg import JointState
     from std_msgs.msg import String
