@@ -464,7 +464,8 @@ class TruthPlaneCEPP:
         if guess is None:           # no tag located: a straight boom in the plane
             guess = self.model.forward_kinematics(self.slew, np.zeros(self.model.n_sections))
         prior = from_plane(to_plane(guess, base, self.slew), base, self.slew)
-        joints, info = self.solver.solve(Measurements.ranges_only(ranges), prior, warm=False)
+        # Warm: the paper's CEPP keeps the prior's plane, here the true one.
+        joints, info = self.solver.solve(Measurements.ranges_only(ranges), prior, warm=True)
         self.slews.append(info['slew'])
         lengths = self.model.section_lengths(joints)
         self.last_diagnostics = {'estimate': joints, 'slew': info['slew'],

@@ -376,7 +376,8 @@ class CEPP(_EDMMethod):
     """
     EPP2 in the boom's vertical plane (the paper's CEPP).
 
-    As published: the plane is the prior's (previous estimate or cold start), the ranges
+    As published: the plane is the previous estimate's (a cold frame, which the paper does
+    not cover, has its plane fitted to its ranges), the ranges
     are projected into it exactly (clipped where noise makes that impossible, the clipped
     links down-weighted by ``clip_weight``), every range weighs alike (H = 1) and every
     tag needs a range. Options, off by default:
@@ -450,18 +451,21 @@ class CEPP(_EDMMethod):
 
         return self._reweighted(solve, ranges, weights)
 
-    def _predicted_slew(self, ranges, prior):
+    def _predicted_slew(self, ranges, prior, warm=True):
         """
         Slew of the plane to solve in, and the links' factors in H to start from (or None).
 
-        When reweighting, the plane is fitted again without the links its fit finds more
-        likely blocked than not, up to ``irls_iterations`` times: one 1 m NLOS excess tilts
-        an unweighted fit by degrees, metres at the tip, which no weighting in the plane
+        Without ``predict_slew`` the plane is the prior's, as published, when the prior is
+        the last posture (``warm``); a cold frame has none, and the paper does not say how
+        the first frame is found, so its plane is fitted to its ranges. When reweighting,
+        the plane is fitted again without the links its fit finds more likely blocked than
+        not, up to ``irls_iterations`` times: one 1 m NLOS excess tilts an unweighted fit
+        by degrees, metres at the tip, which no weighting in the plane
         can undo. The fit's weights then start the plane's reweighting.
         """
         base = self.model.base
         slew = fit_slew(prior, base)
-        if not self.predict_slew:
+        if warm and not self.predict_slew:
             return slew, None
         coords, weights, dropped = to_plane(prior, base, slew), None, np.zeros(ranges.shape, bool)
         for attempt in range(self.irls_iterations + 1):
@@ -483,7 +487,7 @@ class CEPP(_EDMMethod):
     def _solve_from(self, measurements, prior, warm):
         """Solve the frame from ``prior``: predict the plane, solve in it; (joints, info)."""
         ranges = measurements.ranges
-        slew, weights = self._predicted_slew(ranges, prior)
+        slew, weights = self._predicted_slew(ranges, prior, warm)
         totals = {'iterations': 0, 'inner_iterations': 0, 'irls_iterations': 0}
         for attempt in range(self.slew_iterations + 1):
             # Each plane starts from the last one's weights: its blocked links are known.

@@ -78,15 +78,18 @@ def test_cepp_is_the_papers_and_field_cepp_with_its_departures_off_is_too():
     assert np.all(info['link_weights'] == 1.0) and info['irls_iterations'] == 0
 
 
-def test_the_papers_plane_is_the_priors_and_does_not_turn():
+def test_the_papers_plane_is_the_last_postures_and_does_not_turn():
     """As published, the plane is the prior's: 0.03 rad of slew off costs the tip ~1 m."""
     exact = Measurements.clean(MODEL, MODEL.ranges(TRUTH))[0]
-    joints, info = CEPP(MODEL).solve(exact, PRIOR)
+    joints, info = CEPP(MODEL).solve(exact, PRIOR, warm=True)
     prior_slew = np.arctan2(PRIOR[-1, 1] - MODEL.base[1], PRIOR[-1, 0] - MODEL.base[0])
     assert info['slew'] == pytest.approx(prior_slew, abs=1e-9)
     assert np.linalg.norm(joints[-1] - TRUTH[-1]) > 0.5
-    turned, _ = CEPP(MODEL, predict_slew=True).solve(exact, PRIOR)
+    turned, _ = CEPP(MODEL, predict_slew=True).solve(exact, PRIOR, warm=True)
     np.testing.assert_allclose(turned, TRUTH, atol=1e-3)
+    # A cold frame has no last posture: its plane is fitted to its ranges.
+    cold, _ = CEPP(MODEL).solve(exact, PRIOR, warm=False)
+    np.testing.assert_allclose(cold, TRUTH, atol=1e-3)
 
 
 def test_exact_ranges_are_not_reweighted():
