@@ -129,8 +129,7 @@ class PumpConfig:
     @property
     def link_names(self):
         """``"<tag>:<anchor>"`` for every tag-anchor pair, tag-major (row k, column j)."""
-        return [contract.link_name(tag, anchor) for tag in self.tag_names
-                for anchor in self.anchor_names]
+        return contract.link_names(self.tag_names, self.anchor_names)
 
     def tag_link_name(self, row, column):
         """``"<tag>:<tag>"`` of the range measured by tag ``row`` to tag ``column``."""

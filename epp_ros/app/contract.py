@@ -59,10 +59,9 @@ import numpy as np
 __all__ = ['Topic', 'RANGES', 'RANGES_INPUT', 'RANGES_SENSOR_DATA', 'ANGLES', 'POSTURE',
            'MARKERS', 'TRUTH', 'DIAGNOSTICS', 'RAW', 'JOINT_STATES', 'ROBOT_DESCRIPTION',
            'posture_poses', 'points_of', 'joints_of', 'stamp_parts', 'stamp_seconds',
-           'range_ages', 'ages_of', 'LINK_SEPARATOR', 'link_name', 'link_ends', 'LinkFrame',
-           'link_frame', 'ANCHOR_RANGES', 'anchor_range_names',
-           'frame_fields', 'anchor_round_fields',
-           'anchor_range_matrix', 'FRAME_NUMBER', 'frame_number', 'FrameNumbers']
+           'range_ages', 'ages_of', 'LINK_SEPARATOR', 'link_name', 'link_names', 'link_ends',
+           'LinkFrame', 'link_frame', 'ANCHOR_RANGES', 'anchor_range_names', 'frame_fields',
+           'anchor_round_fields', 'anchor_range_matrix', 'FRAME_NUMBER', 'frame_number', 'FrameNumbers']
 
 
 @dataclass(frozen=True)
@@ -277,6 +276,11 @@ def link_name(first, second):
     return f'{first}{LINK_SEPARATOR}{second}'
 
 
+def link_names(tag_names, anchor_names):
+    """Return every ``"<tag>:<anchor>"`` name, tag-major: row k, column j at k m + j."""
+    return [link_name(tag, anchor) for tag in tag_names for anchor in anchor_names]
+
+
 def link_ends(name):
     """Return the two device names of a link's name, the measuring one first."""
     first, _, second = str(name).partition(LINK_SEPARATOR)
@@ -340,8 +344,7 @@ def _tag_ages(ranges, ages):
 def _link_index(tag_names, anchor_names):
     """Return each link name's flat position in the (p, m) and the (p, p) arrays."""
     p = len(tag_names)
-    links = {link_name(tag, anchor): i for i, (tag, anchor)
-             in enumerate((tag, anchor) for tag in tag_names for anchor in anchor_names)}
+    links = {name: i for i, name in enumerate(link_names(tag_names, anchor_names))}
     tag_links = {link_name(tag_names[row], tag_names[column]): row * p + column
                  for row in range(p) for column in range(p) if row != column}
     return links, tag_links

@@ -293,8 +293,8 @@ class PostureEstimator:
         An anchor's shift lengthens its ranges along the directions to the tags: those of
         the last posture that fitted its frame (none yet: the shifts wait).
         """
-        if self._learned is None:
-            return measurements
+        if self._learned is None or not self._learned.biased:
+            return measurements             # nothing learned yet: no directions to compute
         warm = self._warm
         return self._learned.unbiased(
             measurements, None if warm is None else self.integrity.anchor_directions(warm))

@@ -98,6 +98,11 @@ class LearnedErrors:
         """Return what is still unknown of the common bias (its covariance)."""
         return self.bias_learner.covariance()
 
+    @property
+    def biased(self):
+        """Whether any common bias or anchor shift has been learned (else nothing to take off)."""
+        return bool(self.bias_learner.estimate.any())
+
     def unbiased(self, measurements, directions):
         """
         Return ``measurements`` with the learned bias taken off the ranges.
@@ -105,8 +110,6 @@ class LearnedErrors:
         ``directions`` (p, m, 3): from each anchor to each tag, of the last posture that
         fitted its frame (None: an anchor's shift waits for one).
         """
-        if not self.bias_learner.estimate.any():
-            return measurements
         ranges = measurements.ranges
         return replace(measurements,
                        ranges=ranges - self.bias_learner.correction(ranges, directions))
