@@ -61,7 +61,8 @@ __all__ = ['Topic', 'RANGES', 'RANGES_INPUT', 'RANGES_SENSOR_DATA', 'ANGLES', 'P
            'posture_poses', 'points_of', 'joints_of', 'stamp_parts', 'stamp_seconds',
            'range_ages', 'ages_of', 'LINK_SEPARATOR', 'link_name', 'link_names', 'link_ends',
            'LinkFrame', 'link_frame', 'ANCHOR_RANGES', 'anchor_range_names', 'frame_fields',
-           'anchor_round_fields', 'anchor_range_matrix', 'FRAME_NUMBER', 'frame_number', 'FrameNumbers']
+           'anchor_round_fields', 'anchor_range_matrix', 'FRAME_NUMBER', 'frame_number',
+           'FrameNumbers']
 
 
 @dataclass(frozen=True)
