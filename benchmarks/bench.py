@@ -63,6 +63,7 @@ from typing import Callable, NamedTuple
 from benchmarks import (calibration_bench, driver_bench, experiments, field_bench, fuzz_bench,
                         integrity_bench, soak_bench)
 from benchmarks.reports import bench_json, CalibrationReport, commit, markdown
+from epp_ros.app.threads import single_blas_thread
 from epp_ros.cli.arguments import integer, number, Parser
 from epp_ros.core import METHODS
 import numpy as np
@@ -230,6 +231,7 @@ def parse_args(argv):
 def main(argv=None):
     """Run the suites named on the command line; print their tables (and JSON)."""
     args = parse_args(sys.argv[1:] if argv is None else argv)
+    single_blas_thread()                # as the nodes and epp_bag run
     reports = []
     for name in args.suites:
         reports.append(SUITES[name].run(args))

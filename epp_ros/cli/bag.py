@@ -54,6 +54,7 @@ import time
 from epp_ros.app import bags, contract
 from epp_ros.app.config import ConfigError, load_pump_config
 from epp_ros.app.settings import estimator_options
+from epp_ros.app.threads import single_blas_thread
 from epp_ros.cli.arguments import (add_field_options, field_effects_of, integer, number, Parser,
                                    settle_noise_options)
 from epp_ros.core import RANGE_METHODS
@@ -450,6 +451,7 @@ COMMANDS = {'synth': run_synth, 'record': run_record, 'play': run_play, 'eval': 
 
 def main(argv=None):
     args = parse_args(sys.argv[1:] if argv is None else argv)
+    single_blas_thread()
     try:
         COMMANDS[args.command](args)
     except (bags.BagError, ConfigError) as exc:

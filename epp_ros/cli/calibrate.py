@@ -772,6 +772,8 @@ def main(argv=None):
         args = parse_args(sys.argv[1:] if argv is None else argv)
         from epp_ros.app import bags
         from epp_ros.app.config import ConfigError
+        from epp_ros.app.threads import single_blas_thread
+        single_blas_thread()
         try:
             return run(args)
         except (bags.BagError, ConfigError, CalibrationError) as exc:

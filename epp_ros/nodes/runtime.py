@@ -19,6 +19,7 @@ import re
 import sys
 import tempfile
 
+from epp_ros.app.threads import single_blas_thread
 from epp_ros.nodes.stopping import ignore_signals, shutdown_on_signals
 import rclpy
 from rclpy.exceptions import InvalidHandle
@@ -151,9 +152,11 @@ def run_node(factory, args=None, name=None):
 
     SIGINT and SIGTERM, however many and whenever, end it cleanly with status 0 (an
     RCLError once shutdown began counts as clean); a StartupError, including a parameters
-    file or ROS argument rcl cannot parse, prints one line and returns 2.
+    file or ROS argument rcl cannot parse, prints one line and returns 2. BLAS runs on
+    one thread (:mod:`epp_ros.app.threads`).
     """
     stop = shutdown_on_signals()
+    single_blas_thread()
     name = name or getattr(factory, 'node_name', factory.__name__)
     node = None
     try:

@@ -30,6 +30,7 @@ CONSOLE_SCRIPTS = {'uwb_driver', 'posture_estimator', 'uwb_emulator', 'epp_demo'
 THIRD_PARTY = {'numpy': ('numpy', 'python3-numpy'), 'scipy': ('scipy', 'python3-scipy'),
                'serial': ('pyserial', 'python3-serial'), 'yaml': ('PyYAML', 'python3-yaml'),
                'rich': ('rich', 'python3-rich'), 'rosbags': ('rosbags', 'python3-rosbags-pip'),
+               'threadpoolctl': ('threadpoolctl', 'python3-threadpoolctl'),
                'pytest': ('pytest', 'python3-pytest'),
                'hypothesis': ('hypothesis', 'python3-hypothesis'),
                'yourdfpy': ('yourdfpy', 'python3-yourdfpy-pip'),
