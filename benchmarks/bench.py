@@ -52,6 +52,10 @@ Suites:
             outriggers 0.3 m off): anchor and link-offset errors, computation time, and chain
             and track over the clean CRLB with the configured and the calibrated model on a
             fresh recording, side by side. Not default.
+  speed     CPU time per frame of each method (default chain, cepp, track) over --seconds
+            of working cycle at 10 Hz: median, p90, p99, max, against issue #30's targets;
+            the chain against scipy's bare fit; refused and garbage frames against good
+            ones; the growth with sections and anchors (exponents). Not default.
 Every table ends with the commit it was measured on. ``--option KEY=VALUE`` passes an
 option to the estimators (e.g. ``anchor_weight=inf``, ``predict_slew=false``).
 """
@@ -61,7 +65,7 @@ import sys
 from typing import Callable, NamedTuple
 
 from benchmarks import (calibration_bench, driver_bench, experiments, field_bench, fuzz_bench,
-                        integrity_bench, soak_bench)
+                        integrity_bench, soak_bench, speed_bench)
 from benchmarks.reports import bench_json, CalibrationReport, commit, markdown
 from epp_ros.app.threads import single_blas_thread
 from epp_ros.cli.arguments import integer, number, Parser
@@ -139,6 +143,11 @@ def _field(args):
     return field_bench.run(args.seconds, args.seeds, args.seed, args.trials)
 
 
+def _speed(args):
+    return speed_bench.run(args.methods or ['chain', 'cepp', 'track'], int(args.seconds * 10),
+                           args.seed)
+
+
 def _calibration(args):
     return CalibrationReport(calibration_bench.run(args.seconds, args.seeds, args.seed))
 
@@ -165,6 +174,7 @@ SUITES = {
     'fuzz': Suite(_fuzz),
     'field': Suite(_field),
     'calibration': Suite(_calibration),
+    'speed': Suite(_speed),
 }
 
 

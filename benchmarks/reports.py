@@ -29,7 +29,7 @@ from pathlib import Path
 import subprocess
 
 from benchmarks import (calibration_bench, driver_bench, field_bench, fuzz_bench, integrity_bench,
-                        soak_bench)
+                        soak_bench, speed_bench)
 from benchmarks.experiments import (BagsReport, LatencyReport, OTHER_POSTURE, PAPER_TABLE1,
                                     PAPER_TABLE3, PaperReport, PUBLISHED_NAMES, TABLE1_ETA,
                                     TrackingReport, Xie3dimReport)
@@ -612,6 +612,52 @@ def driver_markdown(report):
 
 
 #: The formatter of each report type.
+def _speed_method_table(report):
+    chain = report.rows.get('chain', {}).get('median')
+    lines = ['| method | median [ms] | p90 | p99 | max | p99 / median | / chain | published | '
+             'refused (lowest_joint 10 m) / good | garbage / good | target median, p99 |',
+             '|---|---|---|---|---|---|---|---|---|---|---|']
+    for method, row in report.rows.items():
+        target = speed_bench.TARGETS.get(method)
+        lines.append(
+            f'| {method} | {row["median"]:.2f} | {row["p90"]:.2f} | {row["p99"]:.2f} | '
+            f'{row["max"]:.2f} | {_ratio(row["p99"], row["median"])} | '
+            f'{_ratio(row["median"], chain)} | {row["published"]}/{report.frames} | '
+            f'{_ratio(row["refused_median"], row["median"])} | '
+            f'{_ratio(row["garbage_median"], row["median"])} | '
+            + (f'{target[0]:g}, {target[1]:g} |' if target else '- |'))
+    return lines
+
+
+def _speed_growth_table(report):
+    if not report.growth:
+        return []
+    methods = [key for key in report.growth[0] if key not in ('sections', 'anchors')]
+    lines = ['', 'Median ms per frame as the pump grows (40 m boom):', '',
+             '| sections | anchors | ' + ' | '.join(methods) + ' |',
+             '|---|---|' + '---|' * len(methods)]
+    lines += [f'| {row["sections"]} | {row["anchors"]} | '
+              + ' | '.join(f'{row[m]:.1f}' for m in methods) + ' |' for row in report.growth]
+    lines.append('')
+    for axis, fitted in report.exponents.items():
+        lines.append(f'- exponent in {axis}: '
+                     + ', '.join(f'{m} {value:.2f}' for m, value in fitted.items()))
+    return lines
+
+
+def speed_markdown(report):
+    """Return the speed suite's tables: CPU ms per frame, ratios, refused frames, growth."""
+    chain = report.rows.get('chain', {}).get('median')
+    lines = [f'### Speed: CPU time per update, working cycle at sigma {speed_bench.SIGMA:g} m, '
+             f'{report.frames} frames after {speed_bench.WARM_UP}, one BLAS thread', '',
+             *_speed_method_table(report), '',
+             f'scipy least_squares (LM), bare fit of the chain from a warm start: '
+             f'{report.scipy_fit_ms:.2f} ms; chain update / scipy fit: '
+             f'{_ratio(chain, report.scipy_fit_ms)} (target <= 0.5)',
+             *_speed_growth_table(report)]
+    return '\n'.join(lines)
+
+
 MARKDOWN = {
     Xie3dimReport: xie3dim_markdown,
     TrackingReport: tracking_markdown,
@@ -624,6 +670,7 @@ MARKDOWN = {
     fuzz_bench.FuzzReport: fuzz_markdown,
     driver_bench.DriverReport: driver_markdown,
     CalibrationReport: lambda report: calibration_bench.markdown(report.fields),
+    speed_bench.SpeedReport: speed_markdown,
 }
 
 

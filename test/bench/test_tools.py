@@ -299,3 +299,19 @@ def test_bench_field_prints_every_case_against_the_bounds(capsys):
         assert all(np.isfinite(row[method]['ratio']) for method in field_bench.METHODS)
     assert 0.0 < report['posterior']['posterior_ratio'] < 10.0
     assert '| all |' in out and 'posterior CRLB' in out and 'scipy least_squares' in out
+
+
+def test_bench_speed_prints_times_ratios_and_growth(capsys):
+    """A short run: every method's percentiles in order, finite ratios, both exponents."""
+    assert bench.main(['speed', '--methods', 'chain', 'cepp', '--seconds', '1', '--json']) == 0
+    out = capsys.readouterr().out
+    assert '### Speed' in out and 'exponent in anchors' in out
+    report = json.loads(out.strip().splitlines()[-1])['reports'][0]
+    assert report['suite'] == 'speed' and list(report['rows']) == ['chain', 'cepp']
+    for row in report['rows'].values():
+        assert 0.0 < row['median'] <= row['p90'] <= row['p99'] <= row['max']
+        assert 0 <= row['published'] <= report['frames'] == 10
+        assert np.isfinite([row['refused_median'], row['garbage_median']]).all()
+    assert set(report['exponents']) == {'sections', 'anchors'}
+    assert all(np.isfinite(list(fitted.values())).all()
+               for fitted in report['exponents'].values())

@@ -199,6 +199,7 @@ class PostureEstimator:
         self._limits = plausible_limits(model)
         self._previous = None           # (joints, stamp, joint_std) last accepted
         self._warm = None               # the last estimate that fitted its frame
+        self._provisional = False       # _warm is a refused frame's fit (after a drop)
         self._stamp = None
 
     def reconfigure(self, *, integrity=None, thresholds=None, reset_after_failures=None,
@@ -295,7 +296,7 @@ class PostureEstimator:
         """
         if self._learned is None or not self._learned.biased:
             return measurements             # nothing learned yet: no directions to compute
-        warm = self._warm
+        warm = None if self._provisional else self._warm
         return self._learned.unbiased(
             measurements, None if warm is None else self.integrity.anchor_directions(warm))
 
@@ -343,7 +344,7 @@ class PostureEstimator:
             if seed.shape != (self.model.n_sections, 3) or not np.all(np.isfinite(seed)):
                 raise ValueError(f'joints: must be finite, of shape '
                                  f'({self.model.n_sections}, 3), got {np.shape(joints)}')
-        self._previous, self._warm = None, seed
+        self._previous, self._warm, self._provisional = None, seed, False
         self._reacquisition.succeeded()
         self._solver.reset(seed)
 
@@ -402,7 +403,8 @@ class PostureEstimator:
                        'range_bias': self.range_bias,
                        'anchor_shifts': dict(zip(self.moving_anchors, self.anchor_shifts)),
                        'missing_links': int(p * m - valid.sum()),
-                       'implausible_links': implausible, 'cold_start': self._warm is None,
+                       'implausible_links': implausible,
+                       'cold_start': self._warm is None or self._provisional,
                        'reacquired': False, 'iterations': 0,
                        'ignored_inputs': [name for name in measurements.present()
                                           if name not in self._solver.inputs]}
@@ -415,7 +417,14 @@ class PostureEstimator:
             diagnostics['error'] = solved
             return self._reject('solver_failed', diagnostics, measurements, start)
         verdict = self._judge(solved, measurements, stamp)
-        if self._warm is not None and not solved[1].get('searched'):
+        if self._provisional and not verdict.lost and not solved[1].get('searched'):
+            # From a refused frame's fit: what it leads to stands only if a search finds it.
+            solved = self._solve(measurements, warm=False)
+            if isinstance(solved, str):
+                diagnostics['error'] = solved
+                return self._reject('solver_failed', diagnostics, measurements, start)
+            verdict = self._judge(solved, measurements, stamp)
+        elif self._warm is not None and not solved[1].get('searched'):
             solved, verdict = self._reconsider(solved, verdict, measurements, stamp,
                                                diagnostics)
         if self._learned is not None and not self._learned.settled:
@@ -429,7 +438,7 @@ class PostureEstimator:
         diagnostics.update(verdict.values, estimate=joints)
         diagnostics.update(level=verdict.level, message=verdict.message)
         if not verdict.lost:            # it fits the frame: the next frame's start
-            self._warm = joints.copy()
+            self._warm, self._provisional = joints.copy(), False
         if not verdict.valid:
             return self._reject(verdict.status, diagnostics, measurements, start, joints)
         # A fold about as likely widens what later frames allow (Integrity.fold_spread).
@@ -543,12 +552,13 @@ class PostureEstimator:
 
     def _second_opinion(self, solved, measurements, stamp, verdict):
         """
-        Solve the frame from scratch too; keep the fit the frame likes better.
+        Solve the frame from scratch too, or from the rival in doubt; keep the fit it likes better.
 
         The other stays as an alternative: when it is about as likely and elsewhere, the
-        frame is ambiguous. Returns (joints, info), verdict, and whether the fresh fit won.
+        frame is ambiguous. Returns (joints, info), verdict, and whether the other fit won.
         """
-        fresh = self._solve(measurements, warm=False)
+        rival = self._reacquisition.rival_start(stamp)
+        fresh = self._solve(measurements, warm=rival is not None, prior=rival)
         if isinstance(fresh, str):
             self._reacquisition.searched(stamp)
             return solved, verdict, False
@@ -560,12 +570,21 @@ class PostureEstimator:
         best[1]['alternatives'] = (list(best[1].get('alternatives', [])) + [other[0]]
                                    + list(other[1].get('alternatives', [])))
         verdict = self._judge(best, measurements, stamp)
-        self._reacquisition.searched(stamp, verdict.status == 'ambiguous')
+        ambiguous = verdict.status == 'ambiguous'
+        if rival is None:
+            self._reacquisition.searched(stamp, ambiguous, other[0])
+        else:
+            self._reacquisition.followed(ambiguous, other[0])
         return best, verdict, moved
 
-    def _solve(self, measurements, warm):
-        """Return the method's (joints, info) from the warm start or a cold one; why not if not."""
-        prior = self._warm if warm else None
+    def _solve(self, measurements, warm, prior=None):
+        """
+        Return the method's (joints, info) from ``prior``, the warm start or a cold one.
+
+        A string says why not.
+        """
+        if prior is None:
+            prior = self._warm if warm else None
         if prior is None and self._solver.prior != 'unused':
             prior = cold_start_guess(self.model, measurements.ranges)
         if prior is None and self._solver.prior == 'required':
@@ -579,12 +598,19 @@ class PostureEstimator:
         return joints, info
 
     def _reject(self, status, diagnostics, measurements, start, joints=None):
-        """Report an invalid frame; the warm start is dropped after too many in a row."""
+        """
+        Report an invalid frame; the warm start is dropped after too many in a row.
+
+        Its place is taken by the refused fits, as provisional starts: a search per frame
+        would make refused frames cost ten good ones (``Reacquisition`` spaces them).
+        """
         diagnostics.setdefault('level', ERROR)
         diagnostics.setdefault('message', f'no estimate: {status}')
         if self._reacquisition.failed(status):
-            self._previous = self._warm = None
+            self._previous, self._warm, self._provisional = None, None, True
             diagnostics['cold_restart'] = True
+        if self._provisional and joints is not None:
+            self._warm = joints.copy()
         estimate = self._fallback() if joints is None else joints
         self._finish(estimate, status, diagnostics, measurements, start)
         return self._fallback()

@@ -20,7 +20,8 @@ The policy says when a frame is also solved from scratch (a rejected frame, the 
 in a run and then every tenth, so that garbage does not cost a search per frame; a fit
 that calls half a tag's links blocked, at most once a period, and every frame while the
 last search left the frame ambiguous) and when the warm start is dropped (after
-``reset_after_failures`` failures in a row). ``PostureEstimator`` does the solving.
+``reset_after_failures`` failures in a row; then the last fit is only a provisional start,
+and what it leads to stands only if a search finds it too). ``PostureEstimator`` does the solving.
 """
 import numpy as np
 
@@ -45,7 +46,8 @@ class Reacquisition:
         self.reset_after_failures = reset_after_failures
         self.failures = 0
         self.in_doubt = False           # the last search found another fit about as likely
-        self._searched = -np.inf        # when the last second opinion was taken
+        self.rival = None               # that fit, (p, 3), followed from frame to frame
+        self._searched = -np.inf        # when the last search was made
 
     def due_for_search(self):
         """
@@ -74,24 +76,44 @@ class Reacquisition:
         measured = np.sum(np.isfinite(ranges), axis=1)
         return bool(np.any((flagged >= 2) & (2 * flagged >= measured)))
 
-    def searched(self, stamp, ambiguous=None):
-        """Note a second opinion taken at ``stamp``, and whether it left the frame ambiguous."""
+    def searched(self, stamp, ambiguous=None, rival=None):
+        """
+        Note a search made at ``stamp``.
+
+        ``ambiguous``: whether it left the frame ambiguous; ``rival`` (p, 3): the other fit.
+        """
         self._searched = stamp
+        self.followed(ambiguous, rival)
+
+    def followed(self, ambiguous=None, rival=None):
+        """Note a frame solved from the rival: whether still ambiguous, and the rival now."""
         if ambiguous is not None:           # None: the search failed, the doubt stands
             self.in_doubt = bool(ambiguous)
+        self.rival = rival if self.in_doubt else None
+
+    def rival_start(self, stamp):
+        """
+        Return the rival to solve this doubted frame from, or None when a search is due.
+
+        While in doubt the rival the last search found is followed, warm, from frame to frame
+        (what the last frame knew): a search per frame made an ambiguous stream cost 25 good
+        frames. A search is made once a ``SECOND_OPINION_PERIOD``, for a rival elsewhere.
+        """
+        if self.rival is None or stamp - self._searched >= self.SECOND_OPINION_PERIOD:
+            return None
+        return self.rival
 
     def failed(self, status):
         """
         Count a rejected frame; True when the warm start must now be dropped.
 
         A frame that fitted but did not determine the posture (ambiguous, unobservable)
-        does not count: its fit is a good start for the next frame.
+        does not count: its fit is a good start for the next frame. The count goes on past
+        the drop, so that searches stay one in ten frames however long the failures last.
         """
         if status not in ('ambiguous', 'unobservable'):
             self.failures += 1
-        if self.failures >= self.reset_after_failures:
-            self.failures = 0
-            return True
+            return self.failures == self.reset_after_failures
         return False
 
     def succeeded(self):

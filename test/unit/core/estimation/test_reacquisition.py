@@ -18,19 +18,22 @@ import numpy as np
 
 
 def test_rejected_frames_are_searched_first_often_then_every_tenth():
-    policy = Reacquisition(reset_after_failures=1000)
-    searched = []
+    """Across the drop of the warm start too: garbage costs a search per ten frames."""
+    policy = Reacquisition(reset_after_failures=10)
+    searched, dropped = [], []
     for failure in range(1, 41):
         if policy.due_for_search():
             searched.append(failure)
-        policy.failed('inconsistent')
+        if policy.failed('inconsistent'):
+            dropped.append(failure)
     assert searched == [1, 2, 4, 8, 10, 16, 20, 30, 32, 40]
+    assert dropped == [10]
 
 
 def test_the_warm_start_goes_after_so_many_failures_and_not_for_an_undetermined_fit():
     policy = Reacquisition(reset_after_failures=3)
-    assert [policy.failed('inconsistent') for _ in range(3)] == [False, False, True]
-    assert policy.failures == 0                     # counted afresh after the drop
+    assert [policy.failed('inconsistent') for _ in range(5)] == [False, False, True,
+                                                                 False, False]
     assert not any(policy.failed(status) for status in ['ambiguous', 'unobservable'] * 5)
     policy.failed('implausible')
     policy.succeeded()

@@ -1,0 +1,158 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+``python3 dev.py bench speed``: CPU time per frame of the estimators, as issue #30 states it.
+
+CPU time (``time.process_time``) around ``PostureEstimator.update``, one BLAS thread as the
+nodes run, on the simulated truck pump's working cycle at sigma 0.1 m after 30 warm-up
+frames. Rows: each method's median, p90, p99 and max per frame; frames published; the
+chain's update against scipy's bare ``least_squares`` fit of the same frames; refused frames
+(``lowest_joint`` 10 m: every frame refused; uniform garbage 0-80 m) against good ones; and
+the growth with anchors and sections, with the exponent of a log-log fit.
+"""
+from dataclasses import dataclass, field
+import time
+
+from epp_ros.core import PostureEstimator
+from epp_ros.core.model.boom import BoomModel
+from epp_ros.core.model.measurements import Measurements, Residuals, SensorNoise
+from epp_ros.core.simulation import observe, RangeNoise, truck_pump, working_cycle
+import numpy as np
+from scipy.optimize import least_squares
+
+WARM_UP = 30
+RATE = 10.0
+SIGMA = 0.1
+#: The issue's targets, milliseconds of CPU per frame: (median, p99).
+TARGETS = {'chain': (1.0, 3.0), 'cepp': (2.0, 5.0), 'track': (1.5, 4.0)}
+#: The pumps of the growth rows: (sections, anchors).
+SECTIONS = (3, 5, 8, 12)
+ANCHORS = (4, 6, 9, 12, 16)
+
+
+def frames_of(model, count, seed):
+    """Return ``count`` frames of the working cycle (``update``'s keywords) and the angles."""
+    motion = working_cycle(model, duration=count / RATE, rate=RATE,
+                           rng=np.random.default_rng(seed))
+    rng = np.random.default_rng(seed + 1)
+    noise = RangeNoise(sigma=SIGMA)
+    frames = []
+    for k in range(count):
+        frame, _ = observe(model, motion.slew[k], motion.pitches[k], rng, noise)
+        frame['stamp'] = k / RATE
+        frames.append(frame)
+    return frames, np.c_[motion.slew[:count], motion.pitches[:count]]
+
+
+def frame_times(model, method, frames, **options):
+    """Return CPU milliseconds per frame after the warm-up, and how many were published."""
+    estimator = PostureEstimator(model, method, **options)
+    times, published = [], 0
+    for k, frame in enumerate(frames):
+        began = time.process_time()
+        estimator.update(**frame)
+        spent = time.process_time() - began
+        if k >= WARM_UP:
+            times.append(1e3 * spent)
+            published += bool(estimator.last_diagnostics.valid)
+    return np.array(times), published
+
+
+def percentiles(times):
+    """Median, p90, p99 and max of ``times``."""
+    return {'median': float(np.median(times)), 'p90': float(np.percentile(times, 90)),
+            'p99': float(np.percentile(times, 99)), 'max': float(np.max(times))}
+
+
+def scipy_fit_ms(model, frames, angles):
+    """Median CPU milliseconds of scipy's LM fit of the chain from a warm start, per frame."""
+    times = []
+    rng = np.random.default_rng(0)
+    for frame, truth in zip(frames[WARM_UP:], angles[WARM_UP:]):
+        residuals = Residuals(model, Measurements.ranges_only(frame['ranges']),
+                              SensorNoise(SIGMA))
+        start = truth + rng.normal(0.0, 0.02, truth.size)     # a frame away
+        began = time.process_time()
+        least_squares(lambda x: residuals.residuals(x)[0], start,
+                      jac=lambda x: residuals.jacobian(x), method='lm', xtol=1e-10)
+        times.append(1e3 * (time.process_time() - began))
+    return float(np.median(times))
+
+
+def growth_pump(sections, anchors, seed=0):
+    """Return a 40 m boom of ``sections`` equal sections: the truck's anchors, then others."""
+    truck = truck_pump()
+    rng = np.random.default_rng(seed)
+    extra = [rng.uniform([-7.0, -4.0, 0.2], [7.0, 4.0, 3.5]) for _ in range(anchors)]
+    return BoomModel(np.full(sections, 40.0 / sections), truck.base,
+                     np.vstack([truck.anchors] + extra)[:anchors])
+
+
+def growth_rows(methods, frames_per_pump, seed):
+    """Median ms per frame on pumps of more sections and anchors; the log-log exponents."""
+    rows = []
+    for sections, anchors in [(s, 6) for s in SECTIONS] + [(5, a) for a in ANCHORS]:
+        model = growth_pump(sections, anchors, seed)
+        frames, _ = frames_of(model, WARM_UP + frames_per_pump, seed)
+        row = {'sections': sections, 'anchors': anchors}
+        for method in methods:
+            row[method] = float(np.median(frame_times(model, method, frames)[0]))
+        rows.append(row)
+    exponents = {}
+    for axis, values in (('sections', SECTIONS), ('anchors', ANCHORS)):
+        picked = [row for row in rows if row[axis] in values
+                  and row['anchors' if axis == 'sections' else 'sections']
+                  == (6 if axis == 'sections' else 5)]
+        exponents[axis] = {method: float(np.polyfit(np.log([r[axis] for r in picked]),
+                                                    np.log([r[method] for r in picked]), 1)[0])
+                           for method in methods}
+    return rows, exponents
+
+
+@dataclass
+class SpeedReport:
+    """The report of ``python3 dev.py bench speed`` (see :func:`run`)."""
+
+    frames: int
+    rows: dict                  #: method -> percentiles, published, refused ratios
+    scipy_fit_ms: float
+    growth: list = field(default_factory=list)
+    exponents: dict = field(default_factory=dict)
+    suite: str = 'speed'
+
+
+def run(methods, frames, seed, growth_frames=20):
+    """Run the speed suite: ``frames`` measured frames per method and case."""
+    model = truck_pump()
+    good, angles = frames_of(model, WARM_UP + frames, seed)
+    rng = np.random.default_rng(seed + 2)
+    garbage = [{'ranges': rng.uniform(0.0, 80.0, frame['ranges'].shape),
+                'stamp': frame['stamp']} for frame in good]
+    rows = {}
+    for method in methods:
+        times, published = frame_times(model, method, good)
+        low, _ = frame_times(model, method, good, lowest_joint=10.0)
+        junk, _ = frame_times(model, method, garbage)
+        rows[method] = {**percentiles(times), 'published': published,
+                        'refused_median': float(np.median(low)),
+                        'garbage_median': float(np.median(junk)),
+                        'garbage_p99': float(np.percentile(junk, 99))}
+    growth, exponents = growth_rows([m for m in ('chain', 'cepp') if m in methods],
+                                    growth_frames, seed) if growth_frames else ([], {})
+    return SpeedReport(frames, rows, scipy_fit_ms(model, good, angles), growth, exponents)
+
+
+__all__ = ['SpeedReport', 'run', 'TARGETS']
