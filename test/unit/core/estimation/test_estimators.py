@@ -295,3 +295,59 @@ def test_impossibly_long_ranges_are_dropped_and_counted():
     np.testing.assert_allclose(estimator.update(ranges), joints, atol=1e-6)
     assert estimator.last_diagnostics['implausible_links'] == 2
     assert estimator.last_diagnostics['missing_links'] == 2
+
+
+def _solve_log(estimator):
+    """Wrap the estimator's method: ``log`` gets (frame, warm) of every solve."""
+    log, solve, frame = [], estimator._solver.solve, [0]
+
+    def logged(measurements, prior, warm=False):
+        log.append((frame[0], warm))
+        return solve(measurements, prior, warm=warm)
+    estimator._solver.solve = logged
+    return log, frame
+
+
+def _cycle_frames(model, count, seed):
+    motion = working_cycle(model, duration=count / 10, rate=10, rng=np.random.default_rng(seed))
+    noise, rng = RangeNoise(sigma=0.1), np.random.default_rng(seed + 1)
+    return [noise.apply(model.ranges(joints), rng)[0] for joints in motion.joints[:count]]
+
+
+@pytest.mark.parametrize('method', ['chain', 'cepp'])
+def test_refused_frames_search_one_in_ten_past_the_drop_of_the_warm_start(method):
+    """A boom below lowest_joint for 60 frames: every frame refused, few solved from scratch."""
+    model = truck_pump()
+    estimator = PostureEstimator(model, method, lowest_joint=10.0)
+    log, frame = _solve_log(estimator)
+    for frame[0], ranges in enumerate(_cycle_frames(model, 60, 3)):
+        estimator.update(ranges)
+        assert not estimator.last_diagnostics.valid
+    cold = {k for k, warm in log if not warm}
+    # The first frame, a search per second opinion at most once a second, and the
+    # schedule 1, 2, 4, 8, 10, 16, 20, ... of rejected frames: well under one in three.
+    assert len(cold) <= 20, sorted(cold)
+
+
+@pytest.mark.parametrize('method', ['chain', 'cepp'])
+def test_after_garbage_a_fit_stands_only_when_a_search_finds_it(method):
+    """Garbage past the drop of the warm start, then the boom: its first valid frame searched."""
+    model = truck_pump()
+    frames = _cycle_frames(model, 80, 4)
+    rng = np.random.default_rng(5)
+    estimator = PostureEstimator(model, method)
+    log, frame = _solve_log(estimator)
+    restarts, first_valid = 0, None
+    for frame[0], ranges in enumerate(frames):
+        garbage = 10 <= frame[0] < 40
+        estimator.update(rng.uniform(0.0, 80.0, ranges.shape) if garbage else ranges)
+        restarts += bool(estimator.last_diagnostics.cold_restart)
+        if garbage:
+            assert not estimator.last_diagnostics.valid
+        elif frame[0] >= 40 and estimator.last_diagnostics.valid and first_valid is None:
+            first_valid = frame[0]
+    assert restarts == 1                    # the warm start was dropped once, mid-garbage
+    assert first_valid is not None and first_valid < 50
+    assert (first_valid, False) in log      # solved from scratch in the frame published
+    garbage_cold = {k for k, warm in log if not warm and 20 <= k < 40}
+    assert len(garbage_cold) <= 4, sorted(garbage_cold)     # 20 refused frames past the drop
