@@ -153,6 +153,10 @@ class LatencyRow:
     p99_ms_100hz: float
     lost_100hz: int
     sustained_hz: float
+    parameter_p99_ms: float = float('nan')     #: set_parameters response while frames flow
+    parameter_max_ms: float = float('nan')
+    parameter_frames_p99_ms: float = float('nan')   #: the frames' latency meanwhile
+    parameter_lost: int = 0                     #: frames and calls unanswered meanwhile
 
 
 @dataclass
@@ -592,13 +596,19 @@ def tracking_suite(methods, seconds, seed, options):
 # -- the node and bags ----------------------------------------------------------------------
 def _latency_row(method, frames, seconds):
     """Measure one method's latency at 10 and 100 Hz and its sustained rate."""
-    from benchmarks.node_bench import measure_latency, sustained_rate
+    from benchmarks.node_bench import measure_latency, parameter_response, sustained_rate
     values = {}
     for rate in (10.0, 100.0):
         latencies, lost = measure_latency(method, frames, rate, seconds)
         values[f'p50_ms_{rate:g}hz'] = 1e3 * float(np.median(latencies))
         values[f'p99_ms_{rate:g}hz'] = 1e3 * float(np.percentile(latencies, 99))
         values[f'lost_{rate:g}hz'] = lost
+    responses, latencies, lost, unanswered = parameter_response(method, frames,
+                                                                max(seconds, 2.0))
+    values.update(parameter_p99_ms=1e3 * float(np.percentile(responses, 99)),
+                  parameter_max_ms=1e3 * float(np.max(responses)),
+                  parameter_frames_p99_ms=1e3 * float(np.percentile(latencies, 99)),
+                  parameter_lost=lost + unanswered)
     return LatencyRow(method, **values, sustained_hz=sustained_rate(method, frames))
 
 

@@ -24,11 +24,13 @@ from epp_ros.app.config import default_config_path, load_pump_config
 from epp_ros.nodes.messages import POSTURE_QOS, RANGES_INPUT_QOS, RANGES_QOS, to_time
 from geometry_msgs.msg import PoseArray
 import numpy as np
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
 import rclpy
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-__all__ = ['measure_latency', 'sustained_rate', 'replay_rate']
+__all__ = ['measure_latency', 'parameter_response', 'sustained_rate', 'replay_rate']
 
 
 class _Feeder(Node):
@@ -59,14 +61,15 @@ def _with_estimator(method, work):
     """
     Run ``work(feeder)`` against a fresh posture_estimator process.
 
-    The process runs on a domain of its own (set in this process's environment, which the
-    estimator inherits).
+    The process runs on a domain of its own, set in this process's environment while
+    ``work`` runs (the estimator and any player ``work`` starts inherit it).
     """
     config = default_config_path()
     names = load_pump_config(config).link_names
     args = [sys.executable, '-m', 'epp_ros.nodes.estimator', '--ros-args', '--params-file',
             str(config), '-p', f'method:={method}', '-p', 'publish_markers:=false',
             '--log-level', 'warn']
+    saved = os.environ.get('ROS_DOMAIN_ID')
     os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 100)
     estimator = subprocess.Popen(args)
     rclpy.init()
@@ -83,6 +86,10 @@ def _with_estimator(method, work):
         rclpy.shutdown()
         estimator.send_signal(signal.SIGINT)
         estimator.wait(10)
+        if saved is None:
+            os.environ.pop('ROS_DOMAIN_ID')
+        else:
+            os.environ['ROS_DOMAIN_ID'] = saved
 
 
 #: Frames are 10 Hz samples of a motion; a frame stamped t shows the boom at t (held
@@ -92,8 +99,12 @@ FRAME_RATE = 10.0
 _EPOCH = time.time()
 
 
-def _feed(feeder, frames, rate, count):
-    """Publish ``count`` frames at ``rate``, then wait for the answers; return lost count."""
+def _feed(feeder, frames, rate, count, each_frame=None):
+    """
+    Publish ``count`` frames at ``rate``, then wait for the answers; return lost count.
+
+    ``each_frame(i)``, if given, is called after frame ``i`` is published.
+    """
     start = time.perf_counter()
     base = time.time()
     for i in range(count):
@@ -103,6 +114,8 @@ def _feed(feeder, frames, rate, count):
                                                              time.perf_counter())))
         stamp = base + i / rate
         feeder.publish(frames[int((stamp - _EPOCH) * FRAME_RATE) % len(frames)], stamp)
+        if each_frame is not None:
+            each_frame(i)
     deadline = time.perf_counter() + 3.0
     while len(feeder.answered) < len(feeder.sent) and time.perf_counter() < deadline:
         rclpy.spin_once(feeder, timeout_sec=0.01)
@@ -117,6 +130,53 @@ def measure_latency(method, frames, rate, seconds):
         feeder.answered.clear()
         lost = _feed(feeder, frames, rate, int(rate * seconds))
         return np.array(list(feeder.answered.values())), lost
+    return _with_estimator(method, work)
+
+
+#: Valid live changes sent by :func:`parameter_response`: (name, values it cycles through).
+LIVE_CHANGES = (('range_sigma', (0.05, 0.2, 0.1)), ('lowest_joint', (-1.0, -0.5)),
+                ('nlos_fraction', (0.2, 0.1)), ('max_angular_rate', (0.2, 0.35)))
+
+
+def _double(name, value):
+    return Parameter(name=name, value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE,
+                                                     double_value=float(value)))
+
+
+def parameter_response(method, frames, seconds, every=5):
+    """
+    Response times (s) of ``set_parameters`` calls made while frames flow at 10 Hz.
+
+    One call every ``every`` frames, cycling through :data:`LIVE_CHANGES` (valid values
+    that leave the frames valid, so that every frame is answered; ``bench speed`` has the
+    cost of refused ones). Returns the response times, the frames' latencies, frames lost
+    and calls unanswered or refused.
+    """
+    def work(feeder):
+        client = feeder.create_client(SetParameters, '/posture_estimator/set_parameters')
+        if not client.wait_for_service(timeout_sec=20.0):
+            raise RuntimeError('posture_estimator/set_parameters did not come up')
+        _feed(feeder, frames, 10.0, 10)
+        feeder.sent.clear()
+        feeder.answered.clear()
+        responses, pending = [], []
+
+        def change(i):
+            if i % every:
+                return
+            name, values = LIVE_CHANGES[(i // every) % len(LIVE_CHANGES)]
+            value = values[(i // every // len(LIVE_CHANGES)) % len(values)]
+            sent = time.perf_counter()
+            future = client.call_async(SetParameters.Request(parameters=[_double(name, value)]))
+            future.add_done_callback(lambda _: responses.append(time.perf_counter() - sent))
+            pending.append(future)
+        lost = _feed(feeder, frames, 10.0, int(10.0 * seconds), change)
+        deadline = time.perf_counter() + 30.0
+        while not all(f.done() for f in pending) and time.perf_counter() < deadline:
+            rclpy.spin_once(feeder, timeout_sec=0.01)
+        refused = sum(not f.result().results[0].successful for f in pending if f.done())
+        return (np.array(responses), np.array(list(feeder.answered.values())), lost,
+                sum(not f.done() for f in pending) + refused)
     return _with_estimator(method, work)
 
 

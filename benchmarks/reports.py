@@ -154,6 +154,13 @@ def latency_markdown(report):
     lines += [f'| {row.method} | {row.p50_ms_10hz:.1f} | {row.p99_ms_10hz:.1f} | '
               f'{row.lost_10hz} | {row.p50_ms_100hz:.1f} | {row.p99_ms_100hz:.1f} | '
               f'{row.lost_100hz} | {row.sustained_hz:g} |' for row in report.rows]
+    lines += ['', 'set_parameters twice a second (valid values, node_bench.LIVE_CHANGES) '
+              'while frames flow at 10 Hz:', '',
+              '| method | response p99 [ms] | max | frames p99 [ms] | frames and calls lost |',
+              '|---|---|---|---|---|']
+    lines += [f'| {row.method} | {row.parameter_p99_ms:.1f} | {row.parameter_max_ms:.1f} | '
+              f'{row.parameter_frames_p99_ms:.1f} | {row.parameter_lost} |'
+              for row in report.rows]
     return '\n'.join(lines)
 
 

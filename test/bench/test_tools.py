@@ -21,6 +21,7 @@ import sys
 
 from benchmarks import bench, experiments, field_bench, reports
 from epp_ros.cli import demo
+from epp_ros.core.simulation import RangeNoise, truck_pump, working_cycle
 import numpy as np
 import pytest
 
@@ -315,3 +316,16 @@ def test_bench_speed_prints_times_ratios_and_growth(capsys):
     assert set(report['exponents']) == {'sections', 'anchors'}
     assert all(np.isfinite(list(fitted.values())).all()
                for fitted in report['exponents'].values())
+
+
+def test_live_parameter_changes_are_answered_while_frames_flow():
+    """set_parameters twice a second over DDS to a running estimator: every call accepted."""
+    from benchmarks.node_bench import parameter_response
+    model = truck_pump()
+    rng = np.random.default_rng(0)
+    motion = working_cycle(model, 10.0, 10.0, rng=np.random.default_rng(1))
+    frames = [RangeNoise(sigma=0.1).apply(model.ranges(joints), rng)[0]
+              for joints in motion.joints]
+    responses, latencies, _, unanswered = parameter_response('chain', frames, 3.0)
+    assert unanswered == 0 and len(responses) == 6      # frames 0, 5, ..., 25 of 30
+    assert len(latencies) > 0                           # and postures came back meanwhile

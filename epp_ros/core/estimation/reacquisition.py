@@ -18,8 +18,8 @@ When the estimator doubts its warm start: the re-acquisition policy, apart from 
 A warm start follows the boom from frame to frame, and can follow it into the wrong basin.
 The policy says when a frame is also solved from scratch (a rejected frame, the first few
 in a run and then every tenth, so that garbage does not cost a search per frame; a fit
-that calls half a tag's links blocked, at most once a period, and every frame while the
-last search left the frame ambiguous) and when the warm start is dropped (after
+that calls half a tag's links blocked, at most once a period; while the last search left
+the frame ambiguous, every frame from the rival it found) and when the warm start is dropped (after
 ``reset_after_failures`` failures in a row; then the last fit is only a provisional start,
 and what it leads to stands only if a search finds it too). ``PostureEstimator`` does the solving.
 """
@@ -45,6 +45,7 @@ class Reacquisition:
     def __init__(self, reset_after_failures=10):
         self.reset_after_failures = reset_after_failures
         self.failures = 0
+        self._dropped = False           # the warm start was dropped in this run of failures
         self.in_doubt = False           # the last search found another fit about as likely
         self.rival = None               # that fit, (p, 3), followed from frame to frame
         self._searched = -np.inf        # when the last search was made
@@ -111,11 +112,13 @@ class Reacquisition:
         does not count: its fit is a good start for the next frame. The count goes on past
         the drop, so that searches stay one in ten frames however long the failures last.
         """
-        if status not in ('ambiguous', 'unobservable'):
-            self.failures += 1
-            return self.failures == self.reset_after_failures
-        return False
+        if status in ('ambiguous', 'unobservable'):
+            return False
+        self.failures += 1
+        drop = self.failures >= self.reset_after_failures and not self._dropped
+        self._dropped |= drop
+        return drop
 
     def succeeded(self):
         """Start the count of failures in a row over (a frame accepted, or a new seed)."""
-        self.failures = 0
+        self.failures, self._dropped = 0, False

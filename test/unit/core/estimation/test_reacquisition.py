@@ -38,6 +38,9 @@ def test_the_warm_start_goes_after_so_many_failures_and_not_for_an_undetermined_
     policy.failed('implausible')
     policy.succeeded()
     assert policy.failures == 0 and not policy.failed('implausible')
+    policy.failed('inconsistent')
+    policy.reset_after_failures = 1                 # lowered past the count: dropped once
+    assert [policy.failed('inconsistent') for _ in range(3)] == [True, False, False]
 
 
 def test_a_fit_calling_half_a_tags_links_blocked_is_doubted_once_a_period():
