@@ -103,22 +103,22 @@ def growth_pump(sections, anchors, seed=0):
 
 def growth_rows(methods, frames_per_pump, seed):
     """Median ms per frame on pumps of more sections and anchors; the log-log exponents."""
-    rows = []
-    for sections, anchors in [(s, 6) for s in SECTIONS] + [(5, a) for a in ANCHORS]:
-        model = growth_pump(sections, anchors, seed)
-        frames, _ = frames_of(model, WARM_UP + frames_per_pump, seed)
-        row = {'sections': sections, 'anchors': anchors}
+    axes = (('sections', SECTIONS, 'anchors', 6), ('anchors', ANCHORS, 'sections', 5))
+    rows, exponents = [], {}
+    for axis, values, other, held in axes:
+        picked = []
+        for value in values:
+            shape = {axis: value, other: held}
+            model = growth_pump(shape['sections'], shape['anchors'], seed)
+            frames, _ = frames_of(model, WARM_UP + frames_per_pump, seed)
+            medians = {method: float(np.median(frame_times(model, method, frames)[0]))
+                       for method in methods}
+            picked.append({**shape, **medians})
+        exponents[axis] = {}
         for method in methods:
-            row[method] = float(np.median(frame_times(model, method, frames)[0]))
-        rows.append(row)
-    exponents = {}
-    for axis, values in (('sections', SECTIONS), ('anchors', ANCHORS)):
-        picked = [row for row in rows if row[axis] in values
-                  and row['anchors' if axis == 'sections' else 'sections']
-                  == (6 if axis == 'sections' else 5)]
-        exponents[axis] = {method: float(np.polyfit(np.log([r[axis] for r in picked]),
-                                                    np.log([r[method] for r in picked]), 1)[0])
-                           for method in methods}
+            times = [row[method] for row in picked]
+            exponents[axis][method] = float(np.polyfit(np.log(values), np.log(times), 1)[0])
+        rows += picked
     return rows, exponents
 
 
