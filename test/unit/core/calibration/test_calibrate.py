@@ -192,8 +192,10 @@ def test_links_own_offsets_are_fitted_not_pushed_into_the_anchors():
     """
     Per-link biases the devices' offsets cannot explain: fitted under a learned prior.
 
-    The devices' model alone (``link_std=0``) moves the anchors by decimetres and says
-    they are known to millimetres. With the links' own offsets a result is never
+    The devices' model alone (``link_std=0``) moves the anchors by decimetres, and must
+    refuse its result (``misfit``, as on both seeds) or be seen to be confidently wrong:
+    its errors are 3-11 of its standard deviations, by how this ill-posed fit rounds (seed
+    2: 3.3 on one BLAS thread, 11 on two). With the links' own offsets a result is never
     confidently wrong: it is refused (``misfit``, ``not_converged``: the start took a wrong
     basin) or every anchor and link offset lies within its standard deviation.
     """
@@ -205,7 +207,9 @@ def test_links_own_offsets_are_fitted_not_pushed_into_the_anchors():
         devices = calibrate(model, ranges, fixed_anchors=FIXED, sigma=0.02, link_std=0.0)
         assert not devices.pair_offsets.any()
         device_errors = np.abs(devices.anchors - simulator.true_anchors)[moved]
-        assert (device_errors / devices.anchor_std[moved]).max() > 4.0  # confidently wrong
+        assert device_errors.max() > 0.1
+        assert devices.status == 'misfit' or \
+            (device_errors / devices.anchor_std[moved]).max() > 4.0     # confidently wrong
         result = calibrate(model, ranges, fixed_anchors=FIXED, sigma=0.02)
         if result.status in ('misfit', 'not_converged'):
             continue
