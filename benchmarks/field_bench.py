@@ -259,6 +259,12 @@ def authors_rows(trials, seed):
     return rows
 
 
+def scipy_chain_fit(residuals, start):
+    """Return scipy's LM fit of the chain's angles to ``residuals`` from ``start``, (p+1,)."""
+    return least_squares(lambda x: residuals.residuals(x)[0], start,
+                         jac=lambda x: residuals.jacobian(x), method='lm', xtol=1e-10).x
+
+
 def cost_row(seconds, seed):
     """Time per frame of chain and track on the clean case; chain's fit against scipy's."""
     results, _, frames, model = run_case('clean', seconds, seed)
@@ -275,10 +281,9 @@ def cost_row(seconds, seed):
         psi = chain.fit(start, residuals).psi
         ours.append(time.perf_counter() - began)
         began = time.perf_counter()
-        fitted = least_squares(lambda x: residuals.residuals(x)[0], start,
-                               jac=lambda x: residuals.jacobian(x), method='lm', xtol=1e-10)
+        fitted = scipy_chain_fit(residuals, start)
         scipys.append(time.perf_counter() - began)
-        agree.append(np.max(np.abs(fitted.x - psi)))
+        agree.append(np.max(np.abs(fitted - psi)))
     return {'chain_ms': results['chain']['ms'], 'track_ms': results['track']['ms'],
             'cepp_ms': results['cepp']['ms'],
             'fit_ms': 1e3 * float(np.median(ours)), 'scipy_ms': 1e3 * float(np.median(scipys)),
