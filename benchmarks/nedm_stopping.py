@@ -14,7 +14,7 @@
 # limitations under the License.
 
 """
-What ``nearest_edm``'s stopping rule costs the EDM estimators, side by side in one run.
+This checkout's ``nearest_edm`` against another revision's, in the EDM estimators, side by side.
 
     python3 benchmarks/nedm_stopping.py [--reference REV] [--seconds S] [--cases a,b]
 
@@ -22,8 +22,11 @@ Runs epp1, epp2 and cepp on frames of ``python3 dev.py bench field`` cases twice
 turn: with this checkout's ``nearest_edm`` and with the one at git revision ``REV``
 (default cb73d97, the last with the old rule: relative change of sqrt(f + c p) <= tol).
 Prints per method and case the median and p99 CPU time per frame, the ratio of the two,
-the joint RMSE of the frames published as valid, the frames published, and how many of
-the solver's calls ended converged.
+the joint RMSE of the frames published as valid, the frames published, those published
+while more than 1 m off (and of them, those whose predicted RMSE said too little), how many of
+the solver's calls ended converged, and against this checkout's run the frames whose
+validity differs and the largest joint difference (m) where both are valid; all after the
+field suite's warm-up.
 """
 import argparse
 from pathlib import Path
@@ -37,6 +40,7 @@ sys.path.insert(0, str(ROOT))
 
 from benchmarks import field_bench  # noqa: E402
 from epp_ros.core import PostureEstimator  # noqa: E402,I100
+from epp_ros.core.estimation import wrong_frames  # noqa: E402
 from epp_ros.core.estimation.methods import epp  # noqa: E402
 from epp_ros.core.simulation import field_effects, simulate_field, truck_pump  # noqa: E402
 from epp_ros.core.solvers import nedm  # noqa: E402
@@ -44,11 +48,18 @@ import numpy as np  # noqa: E402
 
 
 def _reference_solver(revision):
-    """Return ``nearest_edm`` of ``epp_ros/core/nedm.py`` at ``revision``."""
-    source = subprocess.run(['git', 'show', f'{revision}:epp_ros/core/nedm.py'], cwd=ROOT,
-                            check=True, capture_output=True, text=True).stdout
-    module = types.ModuleType('epp_ros.core.nedm_reference')
-    module.__package__ = 'epp_ros.core'
+    """Return ``nearest_edm`` of the solver module at ``revision`` (either layout)."""
+    for path, package in (('epp_ros/core/solvers/nedm.py', 'epp_ros.core.solvers'),
+                          ('epp_ros/core/nedm.py', 'epp_ros.core')):
+        shown = subprocess.run(['git', 'show', f'{revision}:{path}'], cwd=ROOT,
+                               capture_output=True, text=True)
+        if shown.returncode == 0:
+            break
+    else:
+        raise SystemExit(f'nedm_stopping: no nedm.py at {revision}')
+    source = shown.stdout
+    module = types.ModuleType(f'{package}.nedm_reference')
+    module.__package__ = package
     exec(compile(source, f'nedm.py@{revision}', 'exec'), module.__dict__)
     return module.nearest_edm
 
@@ -72,19 +83,63 @@ def _frames(case, seconds, seed):
     return model, simulate_field(model, motion, seconds, effects, rng, 0.1)
 
 
+def _agreement(first, other):
+    """Frames whose validity differs, and the largest joint difference where both are valid."""
+    differ, largest = 0, 0.0
+    for valid, estimate, other_valid, other_estimate in zip(
+            first['decisions'], first['estimates'], other['decisions'], other['estimates']):
+        differ += valid != other_valid
+        if valid and other_valid:
+            largest = max(largest, float(np.max(np.abs(estimate - other_estimate))))
+    return differ, largest
+
+
+def _entry(model, method):
+    """Return what one solver's run records, empty."""
+    return {'estimator': PostureEstimator(model, method), 'times': [], 'errors': [],
+            'valid': 0, 'decisions': [], 'estimates': [], 'predicted': [],
+            'counts': {'calls': 0, 'converged': 0, 'iterations': 0}}
+
+
+def _record(entry, frame, result):
+    """Add a scored frame's decision, estimate and error to ``entry``."""
+    entry['decisions'].append(bool(result['valid']))
+    entry['estimates'].append(result.get('estimate'))
+    if result['valid']:
+        entry['valid'] += 1
+        estimate = result.get('estimate')
+        entry['errors'].append(np.mean(np.sum((estimate - frame.joints) ** 2, axis=1)))
+        entry['predicted'].append(result.get('predicted_rmse', np.nan))
+
+
+def _row(case, method, name, entry, first, scored):
+    """Return one printed row: ``entry``'s figures, agreement with ``first``'s."""
+    times = 1e3 * np.array(entry['times'])
+    counts = entry['counts']
+    rmse = f'{np.sqrt(np.mean(entry["errors"])):.3f}' if entry['errors'] else '–'
+    differ, largest = _agreement(first, entry)
+    wrong, confident = wrong_frames(entry['errors'], np.ones(len(entry['errors'])),
+                                    entry['predicted'])
+    ratio = np.median(entry['times']) / np.median(first['times'])
+    return (f'| {case} | {method} | {name} | {np.median(times):.2f} | '
+            f'{np.percentile(times, 99):.2f} | {ratio:.2f} | {rmse} | '
+            f'{entry["valid"]}/{scored} | {wrong}, {confident} | '
+            f'{counts["converged"]}/{counts["calls"]} | '
+            f'{counts["iterations"] / max(counts["calls"], 1):.1f} | {differ} | '
+            f'{largest:.2g} |')
+
+
 def run(solvers, methods, cases, seconds, seed):
     """Print one row per (case, method, solver)."""
     print('| case | method | solver | median ms | p99 ms | time ratio | RMSE valid m '
-          '| published | converged calls | iterations/call |')
-    print('|---|---|---|---|---|---|---|---|---|---|')
+          '| published | wrong, confidently | converged calls | iterations/call '
+          '| decisions differ | max difference m |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|')
     for case in cases:
         model, frames = _frames(case, seconds, seed)
+        scored = sum(frame.stamp >= field_bench.WARM_UP_S for frame in frames)
         for method in methods:
-            runs = {}
-            for name in solvers:
-                runs[name] = {'estimator': PostureEstimator(model, method), 'times': [],
-                              'errors': [], 'valid': 0,
-                              'counts': {'calls': 0, 'converged': 0, 'iterations': 0}}
+            runs = {name: _entry(model, method) for name in solvers}
             for frame in frames:
                 for name, solver in solvers.items():
                     entry = runs[name]
@@ -92,23 +147,11 @@ def run(solvers, methods, cases, seconds, seed):
                     began = time.process_time()
                     entry['estimator'].update(**frame.inputs())
                     entry['times'].append(time.process_time() - began)
-                    result = entry['estimator'].last_diagnostics
-                    if frame.stamp >= field_bench.WARM_UP_S and result['valid']:
-                        entry['valid'] += 1
-                        estimate = result.get('estimate')
-                        entry['errors'].append(np.mean(np.sum(
-                            (estimate - frame.joints) ** 2, axis=1)))
-            scored = sum(frame.stamp >= field_bench.WARM_UP_S for frame in frames)
-            base = np.median(runs[next(iter(solvers))]['times'])
+                    if frame.stamp >= field_bench.WARM_UP_S:
+                        _record(entry, frame, entry['estimator'].last_diagnostics)
+            first = runs[next(iter(solvers))]
             for name, entry in runs.items():
-                times = 1e3 * np.array(entry['times'])
-                counts = entry['counts']
-                rmse = f'{np.sqrt(np.mean(entry["errors"])):.3f}' if entry['errors'] else '–'
-                print(f'| {case} | {method} | {name} | {np.median(times):.2f} | '
-                      f'{np.percentile(times, 99):.2f} | {np.median(times) / 1e3 / base:.2f} | '
-                      f'{rmse} | {entry["valid"]}/{scored} | '
-                      f'{counts["converged"]}/{counts["calls"]} | '
-                      f'{counts["iterations"] / max(counts["calls"], 1):.1f} |', flush=True)
+                print(_row(case, method, name, entry, first, scored), flush=True)
     epp.nearest_edm = nedm.nearest_edm
 
 

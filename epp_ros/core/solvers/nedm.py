@@ -31,6 +31,11 @@ negative semidefinite on ``sqrt(w)``-perp, which is solved through its dual by a
 Newton method (H.-D. Qi, SIAM J. Matrix Anal. Appl. 34:67-93, 2013) with a dense generalized
 Jacobian; our problems have n <= ~20 points.
 
+Once an iterate is of rank r (a warm start from a posture already is), Newton's method in
+the points finishes (:mod:`~epp_ros.core.solvers.point_newton`): the MM map converges
+linearly there, one projection per step, Newton's in a few steps. The stopping rule is the
+same; when Newton's method does not meet it the penalty iterations go on.
+
 :func:`nearest_edm` checks its input and drives the penalty iterations; ``_PenaltySolver``
 holds one problem's fixed data and takes its MM steps and SQUAREM cycles; the iterates are
 ``_Iterate`` values, and the multipliers carried between subproblems a ``_DualState``.
@@ -40,6 +45,7 @@ from typing import NamedTuple, Optional
 
 from epp_ros.core.solvers.edm import (centering_matrix, classical_mds, rank_penalty,
                                       squared_distances, symmetric_eigh)
+from epp_ros.core.solvers.point_newton import PointProblem
 import numpy as np
 from scipy.linalg import lapack
 
@@ -66,6 +72,7 @@ class NearestEDMResult:
     objective: float            #: 1/2 ||H o (D - G)||^2
     rank_error: float           #: p(D) / trace(-JDJ): 0 when D embeds in `rank` dimensions
     iterations: int             #: outer (penalty/majorization) iterations
+    newton_steps: int           #: Newton steps in the points that finished them
     inner_iterations: int       #: Newton iterations summed over all subproblems
     kkt_residual: float         #: of the last subproblem, in the units of G
     penalty_parameter: float    #: c at the end, in the units of G
@@ -242,6 +249,9 @@ _MAX_PENALTY = 1e12                 # scaled units; beyond it c J(I-U)J swamps f
 _LARGE_RANK_ERROR_PER_DIMENSION = 0.1
 # Below this ||second - 2 first + start|| the MM map has stopped moving: no extrapolation.
 _FLAT_CURVATURE = 1e-15
+# Attempts at finishing by Newton's method per call: one usually converges; a second is
+# given after more cycles when the first started outside the Newton model's reach.
+_NEWTON_ATTEMPTS = 2
 
 
 class _Iterate(NamedTuple):
@@ -278,6 +288,7 @@ class _Outcome(NamedTuple):
     duals: _DualState
     penalty_parameter: float            #: c
     iterations: int                     #: MM steps of the penalty iterations
+    newton_steps: int                   #: Newton steps in the points
     stationarity: float                 #: of ``iterate``'s points (inf when not of rank r)
     status: int                         #: one of _MESSAGES
 
@@ -299,6 +310,10 @@ class _PenaltySolver:
 
     """
 
+    #: Newton steps per attempt at finishing in the points; a step converges the
+    #: stationarity by one to several decades.
+    NEWTON_STEPS = 8
+
     def __init__(self, goal, weights, fixed, rank, tau, inner_tol):
         n = goal.shape[0]
         self.goal, self.rank, self.inner_tol = goal, rank, inner_tol
@@ -313,6 +328,7 @@ class _PenaltySolver:
         self.constraint_values = goal[rows, cols] * self.q_outer[rows, cols]
         self.projector = _Projector(q, rows, cols)
         self.centering = centering_matrix(np.ones(n))
+        self.points = PointProblem(goal, self.sq_weights, self.fixed_pairs)
 
     def iterate(self, edm):
         """Return ``edm`` (n, n) as an :class:`_Iterate` of this problem's rank."""
@@ -326,41 +342,22 @@ class _PenaltySolver:
         """
         Return the relative KKT residual of the rank-r problem at ``classical_mds(edm)``.
 
-        With ``D = D(X)`` for points ``X`` (n, r), the problem is ``min f(D(X))`` subject to
-        the fixed distances: its first-order condition is ``grad f(X) + sum_k mu_k
-        grad c_k(X) = 0``, where ``grad f(X) = 4 L(H o H o (D - G)) X`` (``L(S) = diag(S 1)
-        - S``) and ``c_k(X) = |x_a - x_b|^2 - G_ab`` for each fixed pair. The multipliers
-        ``mu`` are the least-squares ones; the residual is divided by
-        ``4 max(H o H) |X|_F``, so it is free of the units of G and of the weights' scale.
-        Primal feasibility counts too: the largest violation of a fixed distance (a
-        fraction of the largest G) is returned when it is larger (a warm start that is
-        not feasible is not a stationary point).
-        It measures the problem itself, not the penalty iterations (whose map crawls once
-        c is large and reports no motion far from a minimum).
+        See :meth:`PointProblem.stationarity`. It measures the problem itself, not the
+        penalty iterations (whose map crawls once c is large and reports no motion far
+        from a minimum).
         """
-        points = classical_mds(edm, self.rank)
-        distances = squared_distances(points)
-        stress = self.sq_weights * (distances - self.goal)
-        laplacian = np.diag(stress.sum(axis=1)) - stress
-        gradient = (4.0 * laplacian @ points).ravel()
-        infeasible = 0.0
-        if self.fixed_pairs.size:
-            first, second = self.fixed_pairs.T
-            infeasible = float(np.max(np.abs(distances[first, second]
-                                             - self.goal[first, second])))
-            jacobian = self._constraint_jacobian(points)
-            gradient = gradient - jacobian @ np.linalg.lstsq(jacobian, gradient, rcond=None)[0]
-        size = 4.0 * max(float(self.sq_weights.max()), 1e-300) * np.linalg.norm(points)
-        return max(float(np.linalg.norm(gradient) / size) if size > 0 else 0.0, infeasible)
+        return self.points.stationarity(classical_mds(edm, self.rank))
 
-    def _constraint_jacobian(self, points):
-        """Gradients of ``|x_a - x_b|^2`` for the fixed pairs, as columns, (n r, k)."""
-        first, second = self.fixed_pairs[:, 0], self.fixed_pairs[:, 1]
-        difference = 2.0 * (points[first] - points[second])
-        jacobian = np.zeros((first.size,) + points.shape)
-        jacobian[np.arange(first.size), first] = difference
-        jacobian[np.arange(first.size), second] = -difference
-        return jacobian.reshape(first.size, -1).T
+    def newton(self, iterate, tol, stationarity):
+        """
+        Newton's method in the points from ``iterate`` (of rank r), until stationary to ``tol``.
+
+        ``stationarity`` is the iterate's. Returns the iterate reached (never of larger
+        ``f``: only descent steps are kept), its stationarity and the Newton steps taken.
+        """
+        points, stationarity, steps = self.points.refine(
+            classical_mds(iterate.edm, self.rank), tol, self.NEWTON_STEPS, stationarity)
+        return self.iterate(squared_distances(points)), stationarity, steps
 
     def merit(self, iterate, c):
         """Return ``f + c p`` at ``iterate``: what the MM steps decrease."""
@@ -499,15 +496,23 @@ def _penalty_iterations(solver, iterate, duals, c, tol, rank_tol, max_iter):
     The rule: of rank r (rank error <= ``rank_tol``) and stationary (KKT residual <= ``tol``,
     see :meth:`_PenaltySolver.stationarity`). Slow progress is not convergence: once c is
     large the MM map crawls along the rank-r set, changing ``f + c p`` by little per cycle
-    far from a minimum. Returns an :class:`_Outcome`.
+    far from a minimum. After a cycle that ends of rank r, Newton's method in the points
+    tries to finish (at most ``_NEWTON_ATTEMPTS`` times): the cycles choose the basin, the
+    Newton steps converge in it. Returns an :class:`_Outcome`.
     """
-    iterations = 0
+    iterations = newton_steps = attempts = 0
     while True:
         stationarity = _stationarity(solver, iterate, rank_tol)
+        if tol < stationarity < np.inf and attempts < _NEWTON_ATTEMPTS:
+            attempts += 1
+            iterate, stationarity, steps = solver.newton(iterate, tol, stationarity)
+            newton_steps += steps
         if stationarity <= tol:
-            return _Outcome(iterate, duals, c, iterations, stationarity, _CONVERGED)
+            return _Outcome(iterate, duals, c, iterations, newton_steps, stationarity,
+                            _CONVERGED)
         if iterations >= max_iter:
-            return _Outcome(iterate, duals, c, iterations, stationarity, _MAX_ITER_REACHED)
+            return _Outcome(iterate, duals, c, iterations, newton_steps, stationarity,
+                            _MAX_ITER_REACHED)
         iterate, duals, steps = solver.squarem_cycle(iterate, c, duals)
         iterations += steps
         c = _next_penalty(c, iterate.rank_error, solver.rank, rank_tol)
@@ -522,6 +527,7 @@ def _result(solver, outcome, scale, tolerances):
         edm=edm, points=classical_mds(edm, solver.rank),
         objective=solver.objective(edm / scale) * scale ** 2,
         rank_error=float(outcome.iterate.rank_error), iterations=outcome.iterations,
+        newton_steps=outcome.newton_steps,
         inner_iterations=outcome.duals.inner_iterations,
         kkt_residual=outcome.duals.kkt_residual * scale,
         penalty_parameter=outcome.penalty_parameter * scale,
