@@ -249,6 +249,15 @@ class FieldCEPP(CEPP):
                                   axis=-1)
         return np.sum(self.nlos.loss((ranges[k, valid] - distance) / sigma, sigma)[0], axis=-1)
 
+    def _tag_losses(self, points, ranges):
+        """Return :meth:`_tag_loss` of tags 0 .. q-1, each at its row of points (q, 3), (q,)."""
+        ranges = ranges[:len(points)]
+        valid = np.isfinite(ranges)
+        sigma = np.hypot(self.sigma, self.eta * np.where(valid, ranges, 0.0))
+        distance = np.linalg.norm(points[:, None, :] - self.model.anchors, axis=-1)
+        excess = np.where(valid, ranges - distance, 0.0) / sigma
+        return np.sum(self.nlos.loss(excess, sigma)[0], axis=1)     # 0 at 0: the unheard
+
     def _fold_starts(self, joints, ranges):
         """
         Return the fit with one heard joint folded or the tip turned, where it fits better.
@@ -258,8 +267,8 @@ class FieldCEPP(CEPP):
         p = self.model.n_sections
         heard = np.isfinite(ranges).any(axis=1)
         folded = fold_alternatives(self.model, joints)
-        gains = [(self._tag_loss(k, joints[k], ranges) - self._tag_loss(k, folded[k], ranges),
-                  k, folded[k]) for k in np.flatnonzero(heard[:-1])]
+        fold_gains = self._tag_losses(joints[:-1], ranges) - self._tag_losses(folded, ranges)
+        gains = [(fold_gains[k], k, folded[k]) for k in np.flatnonzero(heard[:-1])]
         if heard[-1]:
             hinge = joints[-2] if p > 1 else self.model.pivot_of(joints)
             _, ends = tip_circle(self.model, hinge, fit_slew(joints, self.model.base))
