@@ -159,7 +159,8 @@ class BiasLearner:
 
     def covariance(self):
         """Return what is not known of the bias (q, q): the estimate's and the links' share."""
-        return self._statistical() + self.floor()
+        statistical = self._statistical()
+        return statistical + self._floor(statistical)
 
     def _statistical(self):
         """Return ``(Lambda_0 + Lambda)^-1`` on the free parameters, zero elsewhere (q, q)."""
@@ -171,7 +172,11 @@ class BiasLearner:
 
     def floor(self):
         """Return the covariance (q, q) the links' own biases leave in what is learned."""
-        carried = self._statistical() @ self.through
+        return self._floor(self._statistical())
+
+    def _floor(self, statistical):
+        """Return :meth:`floor` from :meth:`_statistical`'s covariance (q, q)."""
+        carried = statistical @ self.through
         return self.link_std ** 2 * carried @ carried.T
 
     def observe(self, jacobian, sigma, residuals, distances, links, directions=None):

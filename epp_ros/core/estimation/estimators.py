@@ -306,7 +306,8 @@ class PostureEstimator:
 
         From frames published, and from those refused only as too uncertain: the prior on
         the bias alone can make the first frames so, and only frames can shrink it. Each
-        tag is where it was when it ranged (``timed_joints``), for a method that knows.
+        tag is where it was when it ranged (``timed_joints``), for a method that knows. The
+        fit's Jacobian over those links is the one ``verdict`` judged it with, when it has one.
         """
         if self._learned is None or verdict.status not in ('ok', 'unobservable'):
             return
@@ -315,14 +316,18 @@ class PostureEstimator:
         if blocked is not None:
             kept &= ~np.asarray(blocked, dtype=bool)
         sigma = self.integrity.link_sigma(measurements)
-        residuals = Residuals(self.model, Measurements.ranges_only(
-            np.where(kept, measurements.ranges, np.nan)), SensorNoise(sigma))
-        slew, pitches = angles_from_joints(self.model, joints)
+        rows = verdict.los_rows
+        if rows is None:        # a method not held to the chain: not in its judgement
+            residuals = Residuals(self.model, Measurements.ranges_only(
+                np.where(kept, measurements.ranges, np.nan)), SensorNoise(sigma))
+            slew, pitches = verdict.angles or angles_from_joints(self.model, joints)
+            rows = residuals.rows(np.r_[slew, pitches])
         timed = info.get('timed_joints', joints)
         fitted = self.model.ranges(timed)[kept]
         scaled = (fitted - measurements.ranges[kept]) / sigma[kept]
-        if self._learned.observe_bias(residuals.jacobian(np.r_[slew, pitches]), sigma[kept],
-                                      scaled, fitted, np.flatnonzero(kept),
+        # Scaled by the noise now in use, which learning may have changed since the judgement.
+        if self._learned.observe_bias(rows / sigma[kept][:, None], sigma[kept], scaled,
+                                      fitted, np.flatnonzero(kept),
                                       self.integrity.anchor_directions(timed)[kept]):
             self._share_bias()
 

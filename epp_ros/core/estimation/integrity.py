@@ -171,6 +171,12 @@ class Verdict:
         One line for a person.
     values : dict
         The statistics behind it (for diagnostics).
+    angles : tuple (float, ndarray (p,)), optional
+        The estimate's slew and pitches, radians, as judged.
+    los_rows : ndarray, shape (n, p + 1), optional
+        The Jacobian in psi of the estimate's line-of-sight tag-anchor ranges (row-major
+        over the links kept), unscaled, for the bias learner; None when not computed (a
+        method not held to the chain).
 
     """
 
@@ -178,6 +184,8 @@ class Verdict:
     status: str
     message: str
     values: dict = field(default_factory=dict)
+    angles: tuple = field(default=None, repr=False, compare=False)
+    los_rows: np.ndarray = field(default=None, repr=False, compare=False)
 
     @property
     def valid(self):
@@ -236,6 +244,7 @@ class Integrity:
         self._link_loss = nlos.bind(np.hypot(float(noise.range_sigma), bias.link_std)) \
             if fixed else None
         self._tag_loss = nlos.bind(np.asarray(noise.tag_sigma, float))
+        self._planes = _mirror_planes(model)
 
     # -- the pieces -----------------------------------------------------------------------
     def link_sigma(self, measurements):
@@ -269,18 +278,32 @@ class Integrity:
         Its tag's ranges (NLOS mixture), its tag-tag ranges, and the inclinometers of the
         two sections it ends and starts, the other joints staying where they are. Shape (n,).
         """
-        p = self.model.n_sections
         ranges = measurements.ranges[which]
         valid = np.isfinite(ranges)
         sigma = self.link_sigma(measurements)[which]
         distance = _norm(positions[:, None, :] - self.model.anchors)
         excess = np.where(valid, (ranges - distance) / sigma, 0.0)
         total = np.sum(np.where(valid, self._mixture(excess, sigma)[0], 0.0), axis=1)
+        # Sensors the frame lacks would add zeros: skipped (most frames are ranges only).
+        if np.isfinite(measurements.tag_ranges).any():
+            total = self._add_tag_cost(total, which, positions, measurements, joints)
+        if np.isfinite(measurements.pitches).any():
+            total = self._add_pitch_cost(total, which, positions, measurements, joints, slew)
+        return total
+
+    def _add_tag_cost(self, total, which, positions, measurements, joints):
+        """Return ``total`` (n,) plus the tag-tag ranges' share of :meth:`_joint_cost`."""
+        p = self.model.n_sections
         gaps = _norm(positions[:, None, :] - joints[None, :, :])   # (n, p)
         for measured in (measurements.tag_ranges[which], measurements.tag_ranges[:, which].T):
             seen = np.isfinite(measured) & (np.arange(p) != which[:, None])
             error = np.where(seen, (measured - gaps) / self.noise.tag_sigma, 0.0)
             total = total + 0.5 * np.sum(error ** 2, axis=1)
+        return total
+
+    def _add_pitch_cost(self, total, which, positions, measurements, joints, slew):
+        """Return ``total`` (n,) plus the inclinometers' share of :meth:`_joint_cost`."""
+        p = self.model.n_sections
         along = np.array([np.cos(slew), np.sin(slew), 0.0])
         chain = np.vstack([self.model.pivot(slew), joints, joints[-1:]])
         for section, steps in ((which, positions - chain[which]),
@@ -365,6 +388,10 @@ class Integrity:
         Both count each link's own bias in its sigma; the second is the first when no
         common bias is unknown or the first is infinite.
         """
+        return self._bounds(joints, measurements, kept, angles)[:2]
+
+    def _bounds(self, joints, measurements, kept, angles):
+        """Return :meth:`bounds`' two and the unscaled Jacobian rows (n, p + 1) of the links."""
         slew, pitches = angles
         ranges, tag_ranges = kept
         used = Measurements(np.where(ranges, measurements.ranges, np.nan),
@@ -375,11 +402,16 @@ class Integrity:
             noise = type(noise)(self.link_sigma(measurements), noise.tag_sigma,
                                 noise.pitch_sigma, noise.slew_sigma)
         residuals = Residuals(self.model, used, noise)
-        jacobian = residuals.jacobian(np.r_[slew, pitches])
-        random = bound_from_information(self.model, slew, pitches, jacobian.T @ jacobian)
+        # One joint Jacobian serves the rows and both bounds.
+        joint_jacobian = self.model.joint_jacobian(slew, pitches)
+        rows = residuals.rows(np.r_[slew, pitches], joint_jacobian=joint_jacobian)
+        jacobian = rows / residuals.sigma[:, None]
+        random = bound_from_information(self.model, slew, pitches, jacobian.T @ jacobian,
+                                        joint_jacobian)
+        n_links = np.count_nonzero(residuals.link_mask)
         if not self.common_covariance.any() or not math.isfinite(random.rmse):
-            return random, random
-        links = np.arange(residuals.size) < np.count_nonzero(residuals.link_mask)
+            return random, random, rows[:n_links]
+        links = np.arange(residuals.size) < n_links
         tags, anchors = np.nonzero(residuals.link_mask)
         directions = self.anchor_directions(joints)[tags, anchors]
         common = (bias_design(residuals.measured[links], directions, anchors, self.bias.moving),
@@ -387,7 +419,8 @@ class Integrity:
         added = bias_covariance(jacobian, residuals.sigma, links, random.parameter_covariance,
                                 common=common)
         return random, bound_from_covariance(self.model, slew, pitches,
-                                             random.parameter_covariance + added)
+                                             random.parameter_covariance + added,
+                                             joint_jacobian), rows[:n_links]
 
     def reach(self, reference, elapsed, reference_std):
         """
@@ -449,15 +482,10 @@ class Integrity:
         two folds apart within any one frame's reach: the reference posture must allow the
         joint at either (:meth:`reach`), or time would rule out the right one.
         """
-        p = self.model.n_sections
         positions = fold_alternatives(self.model, joints)                   # (p - 1, 3)
-        which = np.arange(p - 1)
-        costs = self._joint_cost(np.r_[np.arange(p), which], np.vstack([joints, positions]),
-                                 measurements, joints, slew)
-        close = costs[p:] - costs[which] < math.log(self.limits.ambiguity_odds)
-        spread = np.zeros(p)
-        spread[which[close]] = _norm(positions[close] - joints[which[close]])
-        return spread
+        which = np.arange(self.model.n_sections - 1)
+        return self._spread(joints, positions, self._margins(joints, measurements, slew,
+                                                             positions, which))
 
     def ambiguous_joints(self, joints, measurements, joint_std, slew, reach=None):
         """
@@ -470,6 +498,36 @@ class Integrity:
         last accepted posture (``reach``: that posture and the distances, see
         :meth:`reach`), when it could have got there.
         """
+        positions, which, keep = self._candidates(joints, joint_std, slew, reach)
+        if not keep.any():
+            return {}
+        positions, which = positions[keep], which[keep]
+        return self._found(positions, which,
+                           self._margins(joints, measurements, slew, positions, which))
+
+    def _joint_rivals(self, joints, measurements, joint_std, slew, reach):
+        """
+        Return :meth:`fold_spread` and :meth:`ambiguous_joints` from one cost evaluation.
+
+        The folds :meth:`fold_spread` weighs are the first of :meth:`ambiguous_joints`'
+        candidates; each joint's cost is then computed once, not twice.
+        """
+        p = self.model.n_sections
+        positions, which, keep = self._candidates(joints, joint_std, slew, reach)
+        scored = keep | (np.arange(len(which)) < p - 1)           # every fold, and the kept
+        margin = self._margins(joints, measurements, slew, positions[scored], which[scored])
+        spread = self._spread(joints, positions[:p - 1], margin[:p - 1])
+        counted = keep[scored]
+        return spread, self._found(positions[scored][counted], which[scored][counted],
+                                   margin[counted])
+
+    def _candidates(self, joints, joint_std, slew, reach):
+        """
+        Return the other positions :meth:`ambiguous_joints` weighs, and which count.
+
+        Each inner joint folded, then the tip's circle: positions (n, 3), metres, their
+        joints (n,) and whether each is far enough and within ``reach`` (n,).
+        """
         near = self._near(joint_std)
         p = self.model.n_sections
         tip = self._tip_circle(joints, slew)
@@ -478,13 +536,25 @@ class Integrity:
         keep = _norm(positions - joints[which]) > near[which]
         if reach is not None:
             keep &= _norm(positions - reach[0][which]) <= reach[1][which]
-        if not keep.any():
-            return {}
-        positions, which = positions[keep], which[keep]
-        joint_index = np.arange(p)
-        costs = self._joint_cost(np.r_[joint_index, which], np.vstack([joints, positions]),
+        return positions, which, keep
+
+    def _margins(self, joints, measurements, slew, positions, which):
+        """Return how much costlier joint ``which[i]`` is at ``positions[i]``, shape (n,)."""
+        p = self.model.n_sections
+        costs = self._joint_cost(np.r_[np.arange(p), which], np.vstack([joints, positions]),
                                  measurements, joints, slew)
-        margin = costs[p:] - costs[which]
+        return costs[p:] - costs[which]
+
+    def _spread(self, joints, folds, margin):
+        """Return :meth:`fold_spread` from the folds (p - 1, 3) and their margins (p - 1,)."""
+        which = np.arange(len(folds))
+        close = margin < math.log(self.limits.ambiguity_odds)
+        spread = np.zeros(self.model.n_sections)
+        spread[which[close]] = _norm(folds[close] - joints[which[close]])
+        return spread
+
+    def _found(self, positions, which, margin):
+        """Return :meth:`ambiguous_joints`' joints and their likeliest other positions."""
         found = {}
         for k in np.unique(which[margin < math.log(self.limits.ambiguity_odds)]):
             rivals = np.flatnonzero(which == k)
@@ -500,15 +570,9 @@ class Integrity:
         space (kept when it stays above ``lowest_joint``). Anchors spread in every
         direction tell both apart; anchors near one line or plane do not. Shape (k, p, 3).
         """
-        anchors = self.model.anchors
-        horizontal = anchors[:, :2] - self.model.base[:2]
-        direction = np.linalg.svd(horizontal, full_matrices=False)[2][0]
-        across = np.r_[-direction[1], direction[0], 0.0]
-        centre = np.r_[self.model.base[:2], 0.0]
+        centre, across, mean, normal = self._planes
         mirrored = [joints - 2.0 * ((joints - centre) @ across)[:, None] * across]
-        centred = anchors - anchors.mean(axis=0)
-        normal = np.linalg.svd(centred, full_matrices=False)[2][-1]
-        image = joints - 2.0 * ((joints - anchors.mean(axis=0)) @ normal)[:, None] * normal
+        image = joints - 2.0 * ((joints - mean) @ normal)[:, None] * normal
         if image[:, 2].min() >= self.lowest_joint:
             mirrored.append(image)
         return np.array(mirrored)
@@ -613,9 +677,10 @@ class Integrity:
         self._plausibility(joints, angles[0], reach, elapsed, checks, values)
         kept = self._consistency(joints if timed_joints is None else timed_joints,
                                  measurements, checks, values)
+        los_rows = None
         if chain:
-            joint_std, total_std = (bound.joint_std for bound in self.bounds(
-                joints, measurements, kept, angles))
+            random, total, los_rows = self._bounds(joints, measurements, kept, angles)
+            joint_std, total_std = random.joint_std, total.joint_std
         else:
             joint_std = self.point_bound(joints, measurements, kept)
             total_std = self.point_bound(joints, measurements, kept, biased=True)
@@ -624,9 +689,9 @@ class Integrity:
         seen = joints + shift
         values['noise_rmse'] = float(np.sqrt(np.mean(joint_std ** 2)))
         self._observability(total_std, checks, values)
-        values['reach_std'] = np.maximum(joint_std,
-                                         self.fold_spread(seen, measurements, angles[0]))
-        ambiguous = set(self.ambiguous_joints(seen, measurements, joint_std, angles[0], reach))
+        spread, found = self._joint_rivals(seen, measurements, joint_std, angles[0], reach)
+        values['reach_std'] = np.maximum(joint_std, spread)
+        ambiguous = set(found)
         ambiguous |= self.ambiguous_postures(seen, measurements, joint_std, angles[0], reach,
                                              [np.asarray(a) + shift for a in alternatives])
         for rival in rivals:
@@ -637,7 +702,9 @@ class Integrity:
             checks.append((ERROR, 'ambiguous', 'joint(s) ' + ', '.join(
                 str(k + 1) for k in sorted(ambiguous)) + ' could be elsewhere: another '
                 'posture fits about as well'))
-        return _verdict(checks, values)
+        verdict = _verdict(checks, values)
+        verdict.angles, verdict.los_rows = angles, los_rows
+        return verdict
 
     def _consistency(self, joints, measurements, checks, values):
         """Append the residual checks to ``checks``; return the links judged clear."""
@@ -696,6 +763,24 @@ class Integrity:
             if jumped.size:
                 checks.append((ERROR, 'implausible', f'joint {jumped[0] + 1} moved '
                                f'{moved[jumped[0]]:.1f} m in {elapsed:.2f} s'))
+
+
+def _mirror_planes(model):
+    """
+    Return the planes :meth:`Integrity.mirrors` reflects across: a point and a normal each.
+
+    The vertical plane through the slew axis that best fits the anchors, and the plane
+    that best fits them in space: ``(centre, across, mean, normal)``, (3,) each, metres and
+    unit vectors. They depend on the anchors alone: computed with the checks, not per frame.
+    """
+    anchors = model.anchors
+    horizontal = anchors[:, :2] - model.base[:2]
+    direction = np.linalg.svd(horizontal, full_matrices=False)[2][0]
+    across = np.r_[-direction[1], direction[0], 0.0]
+    centre = np.r_[model.base[:2], 0.0]
+    centred = anchors - anchors.mean(axis=0)
+    normal = np.linalg.svd(centred, full_matrices=False)[2][-1]
+    return centre, across, anchors.mean(axis=0), normal
 
 
 def _verdict(checks, values):

@@ -200,8 +200,13 @@ def crlb(model, slew, pitches, sigma, measured=None):
                                   fisher_information(model, slew, pitches, sigma, measured))
 
 
-def bound_from_information(model, slew, pitches, information):
-    """Return the :class:`Bound` at a posture from the Fisher information (p + 1, p + 1) of psi."""
+def bound_from_information(model, slew, pitches, information, joint_jacobian=None):
+    """
+    Return the :class:`Bound` at a posture from the Fisher information (p + 1, p + 1) of psi.
+
+    ``joint_jacobian`` (p, 3, p + 1): ``model.joint_jacobian(slew, pitches)``, when the
+    caller has it already.
+    """
     p = model.n_sections
     try:
         # One symmetric eigendecomposition gives both the conditioning and the inverse.
@@ -211,12 +216,18 @@ def bound_from_information(model, slew, pitches, information):
     if not np.all(np.isfinite(eigenvalues)) or eigenvalues[0] <= 1e-14 * eigenvalues[-1]:
         infinite = np.full((p + 1, p + 1), np.inf)
         return Bound(infinite, np.full((p, 3, 3), np.inf), float('inf'))
-    return bound_from_covariance(model, slew, pitches, (vectors / eigenvalues) @ vectors.T)
+    return bound_from_covariance(model, slew, pitches, (vectors / eigenvalues) @ vectors.T,
+                                 joint_jacobian)
 
 
-def bound_from_covariance(model, slew, pitches, covariance):
-    """Return the :class:`Bound` at a posture of psi's covariance (p + 1, p + 1), rad^2."""
-    jacobian = model.joint_jacobian(slew, pitches)
+def bound_from_covariance(model, slew, pitches, covariance, joint_jacobian=None):
+    """
+    Return the :class:`Bound` at a posture of psi's covariance (p + 1, p + 1), rad^2.
+
+    ``joint_jacobian`` as in :func:`bound_from_information`.
+    """
+    jacobian = model.joint_jacobian(slew, pitches) if joint_jacobian is None \
+        else joint_jacobian
     joint_covariance = np.einsum('kcq,qr,kdr->kcd', jacobian, covariance, jacobian)
     rmse = float(np.sqrt(np.trace(joint_covariance, axis1=-2, axis2=-1).sum()
                          / model.n_sections))

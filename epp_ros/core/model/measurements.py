@@ -384,12 +384,21 @@ class Residuals:
 
     def jacobian(self, psi, geometry=None):
         """Jacobian of the scaled residuals, shape (size, p + 1)."""
+        return self.rows(psi, geometry) / self.sigma[:, None]
+
+    def rows(self, psi, geometry=None, joint_jacobian=None):
+        """
+        Jacobian of the residuals before scaling by sigma, shape (size, p + 1).
+
+        ``joint_jacobian`` (p, 3, p + 1): the model's at ``psi``, when the caller has it.
+        Unscaled, the rows stay valid when only the noise changes.
+        """
         if geometry is None:
             geometry = self.predict(psi)[1]
         offsets, distances, _ = geometry
         units = offsets / np.maximum(distances, 1e-12)[:, None]
-        joint_jacobian = self.model.joint_jacobian(psi[0], psi[1:])
+        if joint_jacobian is None:
+            joint_jacobian = self.model.joint_jacobian(psi[0], psi[1:])
         moved = np.concatenate([joint_jacobian[self._tag],
                                 joint_jacobian[self._near] - joint_jacobian[self._far]])
-        rows = np.concatenate([np.einsum('nc,ncq->nq', units, moved), self._angle_rows])
-        return rows / self.sigma[:, None]
+        return np.concatenate([np.einsum('nc,ncq->nq', units, moved), self._angle_rows])
