@@ -82,7 +82,7 @@ def marquardt_step(ridge=1e-9):
 
 
 def levenberg_marquardt(x, evaluate, normal_equations, *, max_iter, tol, step=None, stall=1e-6,
-                        damping_floor=1e-9, refine=None):
+                        damping_floor=1e-9, refine=None, done=None):
     """
     Minimise a cost by Levenberg–Marquardt from ``x``.
 
@@ -108,6 +108,9 @@ def levenberg_marquardt(x, evaluate, normal_equations, *, max_iter, tol, step=No
     refine : callable, optional
         ``refine(x, cost, state) -> (x, cost, state)`` after each accepted step: a move
         the caller knows to be good (it must not raise the cost).
+    done : callable, optional
+        ``done(x, cost, state) -> bool`` after each accepted step: converged by the
+        caller's own test (a KKT residual, say), checked before ``stall`` and ``tol``.
 
     Returns
     -------
@@ -133,6 +136,8 @@ def levenberg_marquardt(x, evaluate, normal_equations, *, max_iter, tol, step=No
         if refine is not None:
             x, cost, state = refine(x, cost, state)
         damping = max(damping / FALL, damping_floor)
+        if done is not None and done(x, cost, state):
+            return LevenbergMarquardtResult(x, cost, state, iteration, True)
         if stalled or np.max(np.abs(dx), initial=0.0) <= tol:
             return LevenbergMarquardtResult(x, cost, state, iteration, True)
     return LevenbergMarquardtResult(x, cost, state, max_iter, False)

@@ -27,6 +27,8 @@ restoration onto the constraints, converge at a rate set by the residuals, in a 
 of a few small dense solves each. ``nearest_edm`` takes them once its iterates are of rank
 r: the penalty method chooses the basin, Newton's method finishes in it.
 """
+from epp_ros.core.solvers.edm import symmetric_eigh
+from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt
 import numpy as np
 from scipy.linalg import lapack
 
@@ -75,12 +77,9 @@ class PointProblem:
     ROUND_OFF = 1e-14
     #: Violation a kept step may leave: far below any tolerance of ``nearest_edm``.
     FEASIBLE = 1e-12
-    #: Levenberg-Marquardt damping, relative to the largest diagonal of J^T J: the rigid
-    #: motions leave f unchanged, and the damping takes them out of each step.
-    INITIAL_DAMPING = 1e-9
-    #: Damping beyond which a step is not tried: f does not decrease along any direction the
-    #: model sees (at a minimum to round-off, or far outside the model's reach).
-    MAX_DAMPING = 1e3
+    #: Added to the Hessian's diagonal besides the damping, relative to its largest entry:
+    #: the rigid motions leave f and the constraints unchanged.
+    RIDGE = 1e-9
 
     def __init__(self, goal, sq_weights, fixed_pairs):
         self.goal, self.sq_weights = goal, sq_weights
@@ -164,34 +163,67 @@ class PointProblem:
             points = points + step.reshape(points.shape)
         return points, violation
 
+    def _laplacian(self, pair_weights, first, second, n):
+        """Return ``L(W) = diag(W 1) - W`` (n, n) of weights on the pairs (first, second)."""
+        weights = np.zeros((n, n))
+        weights[first, second] = pair_weights
+        weights += weights.T
+        return np.diag(weights.sum(axis=1)) - weights
+
+    def _newton_matrix(self, points, jacobian, residuals, gradient, constraints):
+        """
+        Return the Hessian of the Lagrangian ``f + mu^T c`` with its curvature made PSD.
+
+        The residuals and the constraints are quadratic in the points, so their second
+        derivatives are the Laplacians of the pairs: the Hessian is ``J^T J + C kron I_r``
+        with ``C = 4 L(S) + 2 L(mu)``, the stresses ``S = H o H o (D - G)`` and the
+        least-squares multipliers ``mu``. Gauss-Newton's ``J^T J`` alone over-steps where
+        the residuals are large (ranges that fit no posture); far from a minimum C may have
+        negative eigenvalues, which are dropped (a modified Newton method): near a minimum
+        the step is Newton's, and it is always a descent direction for the damping to tune.
+        """
+        n, r = points.shape
+        multipliers = -_least_squares(constraints.T, gradient)
+        stress = residuals * self.root_weights / 2.0            # H^2 (d - G) on each pair
+        curvature = (4.0 * self._laplacian(stress, self.first, self.second, n)
+                     + 2.0 * self._laplacian(multipliers, self.fixed_first, self.fixed_second, n))
+        eigenvalues, eigenvectors = symmetric_eigh(curvature)
+        positive = (eigenvectors * np.maximum(eigenvalues, 0.0)) @ eigenvectors.T
+        return jacobian.T @ jacobian + np.kron(positive, np.eye(r))
+
     def _step(self, points, damping):
-        """Return the damped Gauss-Newton step with the constraints linearised, (n, r)."""
+        """
+        Return Marquardt's damped Newton step, the constraints linearised, then restored.
+
+        Returns the step (n r,) from ``points`` (n, r) to the restored point.
+        """
         jacobian = (self._pair_jacobian(points, self.first, self.second)
                     * self.root_weights[:, None])
-        normal = jacobian.T @ jacobian
-        size = normal.shape[0]
-        scale = max(float(normal.diagonal().max(initial=0.0)), 1e-300)
-        normal.flat[::size + 1] += damping * scale
-        gradient = jacobian.T @ self.residuals(points)
+        residuals = self.residuals(points)
+        gradient = jacobian.T @ residuals
         constraints = self.constraint_jacobian(points)
-        k = constraints.shape[0]
+        hessian = self._newton_matrix(points, jacobian, residuals, gradient, constraints)
+        size, k = hessian.shape[0], constraints.shape[0]
+        scale = max(float(hessian.diagonal().max(initial=0.0)), 1e-300)
+        # The rigid motions change nothing: the ridge holds them still.
+        hessian.flat[::size + 1] += damping * hessian.diagonal() + self.RIDGE * scale
         # Redundant fixed pairs (more known points than a rigid body has freedoms) make the
         # KKT matrix singular: a small negative block keeps it quasi-definite.
-        kkt = np.block([[normal, constraints.T],
+        kkt = np.block([[hessian, constraints.T],
                         [constraints, -1e-12 * scale * np.eye(k)]])
         solution = np.linalg.solve(kkt, -np.concatenate([gradient, self.violations(points)]))
-        return solution[:size].reshape(points.shape)
+        restored, _ = self._restored(points + solution[:size].reshape(points.shape))
+        return (restored - points).ravel()
 
     def refine(self, points, tol, max_steps, stationarity=None):
         """
         Newton steps from ``points`` (n, r) until stationary to ``tol``.
 
-        ``stationarity``: that of ``points``, when known.
-
-        A step is kept when, restored onto the fixed distances, it decreases ``f``; else
-        the damping grows tenfold and the step is tried again. A step the restoration
-        cannot bring back within ``FEASIBLE`` (or the start's violation) is not kept: f can
-        fall by leaving the constraints.
+        ``stationarity``: that of ``points``, when known. The steps are damped by the
+        package's Levenberg-Marquardt loop (:mod:`~epp_ros.core.solvers.levenberg_marquardt`):
+        one is kept when, restored onto the fixed distances, it does not raise ``f``. A
+        step the restoration cannot bring back within ``FEASIBLE`` (or the start's
+        violation) is not kept: f can fall by leaving the constraints.
 
         Returns
         -------
@@ -200,27 +232,30 @@ class PointProblem:
         stationarity : float
             Its :meth:`stationarity`.
         steps : int
-            Newton steps tried.
+            Newton steps (normal equations built and solved).
 
         """
-        value = self.objective(points)
-        if stationarity is None:
-            stationarity = self.stationarity(points)
+        shape = points.shape
+        stationarity = self.stationarity(points) if stationarity is None else stationarity
+        if stationarity <= tol:
+            return points, stationarity, 0
         feasible = max(self.FEASIBLE, float(np.max(np.abs(self.violations(points)),
                                                    initial=0.0)))
-        damping, steps = self.INITIAL_DAMPING, 0
-        while stationarity > tol and steps < max_steps and damping <= self.MAX_DAMPING:
-            steps += 1
-            try:
-                trial, violation = self._restored(points + self._step(points, damping))
-            except np.linalg.LinAlgError:
-                damping *= 10.0
-                continue
-            trial_value = self.objective(trial)
-            if trial_value <= value * (1 + 1e-14) and violation <= feasible:
-                points, value = trial, trial_value
-                stationarity = self.stationarity(points)
-                damping = max(damping / 10.0, self.INITIAL_DAMPING)
-            else:
-                damping *= 10.0
-        return points, stationarity, steps
+        reached = {'stationarity': stationarity}
+
+        def evaluate(flat):
+            trial = flat.reshape(shape)
+            violation = float(np.max(np.abs(self.violations(trial)), initial=0.0))
+            value = self.objective(trial) if violation <= feasible else np.inf
+            return (value if np.isfinite(value) else np.inf), None
+
+        def done(flat, value, state):
+            reached['stationarity'] = self.stationarity(flat.reshape(shape))
+            return reached['stationarity'] <= tol
+
+        fit = levenberg_marquardt(points.ravel(), evaluate, lambda flat, state: flat,
+                                  max_iter=max_steps, tol=0.0, stall=0.0,
+                                  step=lambda flat, damping: self._step(flat.reshape(shape),
+                                                                        damping),
+                                  done=done)
+        return fit.x.reshape(shape), reached['stationarity'], fit.iterations

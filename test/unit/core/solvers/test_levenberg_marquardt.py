@@ -92,6 +92,19 @@ def test_refine_is_applied_after_each_accepted_step():
     np.testing.assert_array_equal(calls[-1], fit.x)
 
 
+def test_the_callers_own_test_stops_the_fit_at_the_first_step_it_passes():
+    costs = []
+
+    def done(x, cost, state):
+        costs.append(cost)
+        return cost < 1.0                      # far above the minimum (0): stalls do not stop
+
+    fit = levenberg_marquardt(np.array([-1.2, 1.0]), evaluate, normal_equations, max_iter=200,
+                              tol=0.0, stall=0.0, done=done)
+    assert fit.converged and fit.cost == costs[-1] < 1.0 <= min(costs[:-1], default=1.0)
+    assert fit.iterations >= len(costs)
+
+
 def test_the_ridge_holds_still_a_parameter_no_residual_sees():
     def unseen(x):
         r = np.array([x[0] - 2.0])
