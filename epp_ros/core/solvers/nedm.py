@@ -496,9 +496,10 @@ def _penalty_iterations(solver, iterate, duals, c, tol, rank_tol, max_iter):
     The rule: of rank r (rank error <= ``rank_tol``) and stationary (KKT residual <= ``tol``,
     see :meth:`_PenaltySolver.stationarity`). Slow progress is not convergence: once c is
     large the MM map crawls along the rank-r set, changing ``f + c p`` by little per cycle
-    far from a minimum. After a cycle that ends of rank r, Newton's method in the points
-    tries to finish (at most ``_NEWTON_ATTEMPTS`` times): the cycles choose the basin, the
-    Newton steps converge in it. Returns an :class:`_Outcome`.
+    far from a minimum. Whenever an iterate is of rank r (a warm start, or after a cycle),
+    Newton's method in the points tries to finish (at most ``_NEWTON_ATTEMPTS`` times): the
+    start or the cycles choose the basin, the Newton steps converge in it. Returns an
+    :class:`_Outcome`.
     """
     iterations = newton_steps = attempts = 0
     while True:
