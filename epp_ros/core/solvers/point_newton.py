@@ -21,11 +21,12 @@ Once an EDM of rank r is reached, ``D = D(X)`` for points ``X`` (n, r) and the p
 
 a small smooth least-squares problem with quadratic equality constraints. Its first-order
 (KKT) residual is the stopping rule of :func:`~epp_ros.core.solvers.nedm.nearest_edm`. The
-penalty method's MM map converges on it linearly, one weighted projection per step;
-Gauss-Newton steps with the constraints linearised (SQP), each followed by a minimum-norm
-restoration onto the constraints, converge at a rate set by the residuals, in a few steps
-of a few small dense solves each. ``nearest_edm`` takes them once its iterates are of rank
-r: the penalty method chooses the basin, Newton's method finishes in it.
+penalty method's MM map converges on it linearly, one weighted projection per step. Newton
+steps with the constraints linearised (SQP; the Hessian of the Lagrangian is exact, as
+everything is quadratic in the points), each followed by a minimum-norm restoration onto
+the constraints and damped by the package's Levenberg-Marquardt loop, converge in a few
+steps of a few small dense solves each. ``nearest_edm`` takes them once its iterates are
+of rank r: the start or the penalty method chooses the basin, Newton's method finishes in it.
 """
 from epp_ros.core.solvers.edm import symmetric_eigh
 from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt
@@ -163,7 +164,8 @@ class PointProblem:
             points = points + step.reshape(points.shape)
         return points, violation
 
-    def _laplacian(self, pair_weights, first, second, n):
+    @staticmethod
+    def _laplacian(pair_weights, first, second, n):
         """Return ``L(W) = diag(W 1) - W`` (n, n) of weights on the pairs (first, second)."""
         weights = np.zeros((n, n))
         weights[first, second] = pair_weights
@@ -195,8 +197,16 @@ class PointProblem:
         """
         Return Marquardt's damped Newton step, the constraints linearised, then restored.
 
-        Returns the step (n r,) from ``points`` (n, r) to the restored point.
+        Returns the step (n r,) from ``points`` (n, r) to the restored point; zero when
+        LAPACK fails (non-finite points), which ends the steps.
         """
+        try:
+            return self._restored_step(points, damping)
+        except np.linalg.LinAlgError:
+            return np.zeros(points.size)
+
+    def _restored_step(self, points, damping):
+        """Return :meth:`_step`, raising LinAlgError when a factorisation fails."""
         jacobian = (self._pair_jacobian(points, self.first, self.second)
                     * self.root_weights[:, None])
         residuals = self.residuals(points)

@@ -158,3 +158,12 @@ def test_a_warm_start_of_the_right_rank_is_finished_without_penalty_steps():
     assert warm.stationarity <= 1e-7 and warm.rank_error <= 1e-8
     held = warm.edm[fixed]
     np.testing.assert_allclose(held, noisy[fixed], atol=1e-9 * noisy.max())
+
+
+def test_points_that_are_not_finite_end_the_steps_without_an_exception():
+    goal, sq_weights, fixed, truth = chain_problem(4)
+    problem = PointProblem(goal, sq_weights, fixed)
+    broken = truth.copy()
+    broken[-1] = np.nan
+    points, stationarity, steps = problem.refine(broken, 1e-9, 5)
+    assert not stationarity <= 1e-9 and steps <= 5 and points.shape == truth.shape
