@@ -133,8 +133,11 @@ class PointProblem:
         ``|grad f(X) + J_c(X)^T mu| / (4 max(H o H) |X - mean X|_F)`` with the least-squares
         multipliers ``mu`` (``grad f(X) = 4 L(H o H o (D - G)) X``, ``L(S) = diag(S 1) - S``),
         or the largest violation of a fixed distance when that is larger: a point that is
-        not feasible is not stationary. Free of the units of G and the weights' scale.
+        not feasible is not stationary. Free of the units of G and the weights' scale; inf
+        at points that are not finite.
         """
+        if not np.all(np.isfinite(points)):
+            return np.inf
         centred = points - points.mean(axis=0)
         distances = np.sum((centred[:, None, :] - centred[None, :, :]) ** 2, axis=2)
         stress = self.sq_weights * (distances - self.goal)
