@@ -28,7 +28,7 @@ the constraints and damped by the package's Levenberg-Marquardt loop, converge i
 steps of a few small dense solves each. ``nearest_edm`` takes them once its iterates are
 of rank r: the start or the penalty method chooses the basin, Newton's method finishes in it.
 """
-from epp_ros.core.solvers.edm import symmetric_eigh
+from epp_ros.core.solvers.edm import squared_distances, symmetric_eigh
 from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt
 import numpy as np
 from scipy.linalg import lapack
@@ -139,7 +139,7 @@ class PointProblem:
         if not np.all(np.isfinite(points)):
             return np.inf
         centred = points - points.mean(axis=0)
-        distances = np.sum((centred[:, None, :] - centred[None, :, :]) ** 2, axis=2)
+        distances = squared_distances(centred)
         stress = self.sq_weights * (distances - self.goal)
         laplacian = np.diag(stress.sum(axis=1)) - stress
         gradient = (4.0 * laplacian @ centred).ravel()
