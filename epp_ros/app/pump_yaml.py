@@ -41,8 +41,9 @@ def _yaml_list(values, column, per_line):
 
 
 #: The estimator's settings a calibration determines (metres, standard deviations): what it
-#: leaves unknown of each link's own bias and of the bias common to all.
-CALIBRATED_SETTINGS = ('link_bias_std', 'common_bias_std')
+#: leaves unknown of each link's own bias, of the bias common to all and of where the
+#: anchors it located stand.
+CALIBRATED_SETTINGS = ('link_bias_std', 'common_bias_std', 'anchor_std')
 
 
 def update_pump_yaml(text, values):

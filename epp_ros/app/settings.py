@@ -94,7 +94,7 @@ SETTINGS = {
     'residual_warn': _metres('residual_warn', 'Range residual RMS for WARN, m.'),
     'residual_error': _metres('residual_error', 'Range residual RMS for ERROR, m.'),
     'predicted_rmse_warn': _metres('predicted_rmse_warn',
-                                   'Predicted RMSE (Cramer-Rao bound) for WARN, m.'),
+                                   'Predicted RMSE (biases included) for WARN, m.'),
     'predicted_rmse_error': _metres('predicted_rmse_error', 'Predicted RMSE for ERROR, m.'),
     'range_sigma': _told('sigma', 'UWB range standard deviation, m.', 1e-6, 100.0),
     'nlos_fraction': _told('nlos_fraction', 'Prior probability that a range is NLOS.', 0.0,
@@ -112,8 +112,12 @@ SETTINGS = {
     'bias_slope_std': _told('bias_slope_std', 'Std of the growth of that common bias with '
                             'range, m per m.', 0.0, 1.0),
     'anchor_std': _told('anchor_std', 'Std per axis of how far each anchor off the truck body '
-                        '(not in body_anchors) may stand from where configured, m; > 0: its '
-                        'shift is learned while running (learn_noise).', 0.0, 10.0),
+                        '(not in body_anchors) may stand from where configured, m: adds to '
+                        'the predicted RMSE; calibration writes what it leaves unknown.',
+                        0.0, 10.0),
+    'learn_anchors': Setting(False, 'Also learn how far each anchor off the truck body stands '
+                                    'from where configured (with learn_noise): for calibrated '
+                                    'links and outriggers not surveyed.'),
     'max_angular_rate': Setting(IntegrityLimits.max_angular_rate, 'Fastest slew or pitch '
                                 'rate of the boom, rad/s: rules out jumps and folds.', True,
                                 1e-4, 100.0),
@@ -159,7 +163,7 @@ def estimator_settings(values):
     integrity = IntegrityLimits(max_angular_rate=values['max_angular_rate'])
     return dict(method=method, integrity=integrity, thresholds=thresholds,
                 reset_after_failures=values['reset_after_failures'],
-                learn_noise=values['learn_noise'],
+                learn_noise=values['learn_noise'], learn_anchors=values['learn_anchors'],
                 **{OPTION_OF[name]: values[name] for name in OPTION_OF})
 
 

@@ -24,9 +24,9 @@ and luffs, fits the free anchors' positions, every tag's and anchor's range offs
 each link's own offset under a prior whose size it learns (epp_ros.core.calibration.fit), prints
 what changed with its standard deviation, and writes --out: the --config file with
 anchor_positions, anchor_offsets, tag_offsets and pair_offsets replaced, and with
-link_bias_std and common_bias_std set to what the calibration leaves unknown (the
-estimator weighs the ranges by them), everything else kept, for the nodes to start from
-(--params-file). The fixed anchors
+link_bias_std, common_bias_std and anchor_std set to what the calibration leaves unknown
+(the estimator counts them in its predicted stds), everything else kept, for the nodes to
+start from (--params-file). The fixed anchors
 (--fixed-anchors, names or device ids, comma-separated) are those on the truck body
 (turret, cab): their configured positions define the truck frame; default: the first
 anchor. The range noise model is the config's range_sigma, nlos_fraction and nlos_gamma.
@@ -507,9 +507,8 @@ def report_lines(config, before, result, fixed, survey=None):
     lines.append(f'Range residual RMS: {result.rms_before:.3f} m -> {result.rms_after:.3f} m '
                  f'({used} frames, {result.iterations} iterations, condition '
                  f'{result.condition:.3g}, {result.seconds:.1f} s)')
-    link_bias, common_bias = result.bias_std
-    lines.append(f'Left unknown (written for the estimator): link_bias_std {link_bias:.3f} m, '
-                 f'common_bias_std {common_bias:.3f} m')
+    lines.append('Left unknown (written for the estimator): ' + ', '.join(
+        f'{name} {value:.3f} m' for name, value in result.left_unknown.items()))
     lines.append(f'Verdict: {result.status}: {result.message}')
     return lines
 
@@ -536,7 +535,7 @@ def result_json(config, before, result, fixed, written, survey_rounds=0):
         'link_offset_std': result.link_offset_std.tolist(),
         'pair_offsets': result.pair_offsets.tolist(), 'link_std': result.link_std,
         'correlation_frames': result.correlation,
-        'link_bias_std': result.bias_std[0], 'common_bias_std': result.bias_std[1],
+        **result.left_unknown,
         'arm_lengths': {'before': before.arm_lengths.tolist(),
                         'after': result.arm_lengths.tolist(),
                         'std': result.arm_length_std.tolist()},
@@ -564,7 +563,7 @@ def write_config(path, source_text, result):
               'anchor_offsets': result.anchor_offsets.tolist(),
               'tag_offsets': result.tag_offsets.tolist(),
               'pair_offsets': result.pair_offsets.ravel().tolist(),
-              'link_bias_std': result.bias_std[0], 'common_bias_std': result.bias_std[1]}
+              **result.left_unknown}
     if result.arm_length_std.any():         # fitted (--fit-arm-lengths)
         values['arm_lengths'] = result.arm_lengths.tolist()
     text = update_pump_yaml(source_text, values)

@@ -201,6 +201,21 @@ class CalibrationResult:
                 min(self.common_offset_std, UNKNOWN_OFFSET))
 
     @property
+    def left_unknown(self):
+        """
+        Return the estimator's settings for the calibrated model: what it leaves unknown, m.
+
+        ``link_bias_std`` and ``common_bias_std`` (:attr:`bias_std`), and ``anchor_std``:
+        the largest standard deviation per axis of an anchor it located (0 when every
+        anchor was held; one it does not determine counts as :data:`UNKNOWN_OFFSET`).
+        ``epp_calibrate`` writes them to the pump.yaml (``CALIBRATED_SETTINGS``).
+        """
+        link_bias, common_bias = self.bias_std
+        std = np.where(np.isfinite(self.anchor_std), self.anchor_std, UNKNOWN_OFFSET)
+        return {'link_bias_std': link_bias, 'common_bias_std': common_bias,
+                'anchor_std': float(min(np.max(std, initial=0.0), UNKNOWN_OFFSET))}
+
+    @property
     def success(self):
         """Return whether the calibration converged and is well determined."""
         return self.status == 'ok'

@@ -38,9 +38,13 @@ again, it is rarely where it was measured. Standing at ``a + delta`` it makes ea
 ranges ``-u . delta`` longer to first order, ``u`` the unit vector from the configured
 anchor to the tag: a bias whose direction turns as the boom moves. Each such anchor adds
 three columns ``-u`` (on its own links' rows, zero elsewhere) to ``D`` under a prior of
-``anchor_std``, and is learned with the common bias, from the same frames. Each link's own
-bias moves the learned shift too (the floor above), and on real links so do biases that
-turn with the boom, which the shifts then take for theirs: the prior is zero unless told.
+``anchor_std``. Learned (``learn_anchors``), the shifts come from the same frames as the
+common bias. Each link's own bias moves the learned shift too (the floor above), and on
+real links so do biases that turn with the boom, which the shifts then take for theirs.
+Not learned (the default), a shift is only considered: its prior stays in
+:meth:`BiasLearner.covariance`, so the predicted joint stds count what a set-up may have
+moved, however consistent the fit looks (a shifted outrigger moves the boom's fit, not its
+residuals).
 """
 import numpy as np
 
@@ -111,6 +115,9 @@ class BiasLearner:
         The anchors that may stand elsewhere than configured (indices).
     n_anchors : int
         How many anchors there are (m): a link's flat index ``k m + j`` names anchor j.
+    learn_anchors : bool
+        Learn the moving anchors' shifts; False: they stay at zero and their prior is
+        counted in :meth:`covariance` (considered, not estimated).
 
     Attributes
     ----------
@@ -121,14 +128,19 @@ class BiasLearner:
     """
 
     def __init__(self, common_std, slope_std, link_std, links, memory=MEMORY_FRAMES,
-                 anchor_std=0.0, moving=(), n_anchors=1):
+                 anchor_std=0.0, moving=(), n_anchors=1, learn_anchors=False):
         self.moving = tuple(int(j) for j in moving)
         self.n_anchors = int(n_anchors)
         prior = np.array([common_std, slope_std, *[anchor_std] * (3 * len(self.moving))],
                          dtype=float)
         size = prior.size
         self.limits = np.r_[LIMITS, np.full(3 * len(self.moving), ANCHOR_LIMIT)]
-        self.fixed = ~(prior > 0)                  # a zero std: not learned, stays at 0
+        # Not learned, a shift's prior is what stays unknown of it.
+        self.considered = np.zeros(size, dtype=bool)
+        self.considered[2:] = not learn_anchors
+        self.considered &= prior > 0
+        self.fixed = ~(prior > 0) | self.considered    # stays at 0
+        self.considered_covariance = np.diag(np.where(self.considered, prior, 0.0) ** 2)
         self.prior_information = np.diag(np.where(self.fixed, 0.0, 1.0 / np.where(
             prior > 0, prior, 1.0) ** 2))
         self.link_std = float(link_std)
@@ -160,7 +172,7 @@ class BiasLearner:
     def covariance(self):
         """Return what is not known of the bias (q, q): the estimate's and the links' share."""
         statistical = self._statistical()
-        return statistical + self._floor(statistical)
+        return statistical + self._floor(statistical) + self.considered_covariance
 
     def _statistical(self):
         """Return ``(Lambda_0 + Lambda)^-1`` on the free parameters, zero elsewhere (q, q)."""

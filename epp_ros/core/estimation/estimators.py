@@ -126,12 +126,17 @@ class PostureEstimator:
         values, and the range bias common to all links (``core.bias_learning``), starting
         from none; the solver and the integrity checks then use what was learned. False:
         the told values stay (benchmarks that tell the truth).
+    learn_anchors : bool
+        Also learn how far each of ``moving_anchors`` stands from where configured, with
+        the common bias (``learn_noise``). False (the default): their ``anchor_std`` only
+        adds to the predicted joint standard deviations. Learning them helps where the
+        links are unbiased (calibrated) and the outriggers were not surveyed; on
+        uncalibrated real links the shifts take the links' own biases for theirs.
     moving_anchors : sequence of int
         The anchors off the truck body (outriggers') that may stand elsewhere than
-        configured, by ``anchor_std`` per axis: with ``anchor_std`` > 0 their shifts are
-        learned with the common bias (``learn_noise``) and, until learned, add to the
-        predicted joint standard deviations. Empty (the default): every anchor is where
-        configured.
+        configured, by ``anchor_std`` per axis: what a set-up may have moved adds to the
+        predicted joint standard deviations (a shifted anchor moves the fit without showing
+        in its residuals). Empty (the default): every anchor is where configured.
     **options
         What the estimator is told, for every method (``ESTIMATOR_OPTIONS``): ``sigma``
         (tag-anchor range standard deviation, 0.1 m), ``eta`` (multiplicative range
@@ -141,10 +146,11 @@ class PostureEstimator:
         (0.25 m) and ``bias_slope_std`` (0.01 m/m): what is not known of the ranges' biases
         once the model's offsets are taken off, each link's own and the part common to
         all, an offset and a growth with range (uncalibrated DW1000-class links: see
-        ``core.bounds.RangeBiasPrior``), and ``anchor_std`` (0 m per axis, for the
-        ``moving_anchors``); they add to the predicted joint standard
-        deviations the thresholds judge, and with ``learn_noise`` the common part is
-        learned and taken off the ranges (``core.bias_learning``). And the method's own:
+        ``core.bounds.RangeBiasPrior``), and ``anchor_std`` (0.1 m per axis, for the
+        ``moving_anchors``; calibration writes what it leaves unknown); they add to the
+        predicted joint standard deviations the thresholds judge, and with ``learn_noise``
+        the common part is learned and taken off the ranges (``core.bias_learning``). And
+        the method's own:
         ``prior_weight`` (weight of tag-tag distances from the previous pose, default 0;
         the paper uses 1),
         ``anchor_weight`` (inf: anchor-anchor distances fixed, the default; a number:
@@ -183,7 +189,7 @@ class PostureEstimator:
 
     def __init__(self, model, method='cepp', *, integrity=IntegrityLimits(),
                  thresholds=Thresholds(), reset_after_failures=10, learn_noise=True,
-                 moving_anchors=(), **options):
+                 learn_anchors=False, moving_anchors=(), **options):
         if method not in METHODS:
             raise ValueError(f'method must be one of {sorted(METHODS)}, got {method!r}')
         self.model = model
@@ -195,7 +201,7 @@ class PostureEstimator:
         self.last_diagnostics = None
         self._configure(integrity=integrity, thresholds=thresholds,
                         reset_after_failures=reset_after_failures, learn_noise=learn_noise,
-                        options=options)
+                        learn_anchors=learn_anchors, options=options)
         self._limits = plausible_limits(model)
         self._previous = None           # (joints, stamp, joint_std) last accepted
         self._warm = None               # the last estimate that fitted its frame
@@ -203,7 +209,7 @@ class PostureEstimator:
         self._stamp = None
 
     def reconfigure(self, *, integrity=None, thresholds=None, reset_after_failures=None,
-                    learn_noise=None, **options):
+                    learn_noise=None, learn_anchors=None, **options):
         """
         Change settings from the next frame on, keeping the warm start.
 
@@ -211,12 +217,14 @@ class PostureEstimator:
         ValueError, leaving the estimator as it was, when the new settings are invalid.
         """
         changes = {'integrity': integrity, 'thresholds': thresholds,
-                   'reset_after_failures': reset_after_failures, 'learn_noise': learn_noise}
+                   'reset_after_failures': reset_after_failures, 'learn_noise': learn_noise,
+                   'learn_anchors': learn_anchors}
         settings = {**self._settings, **{k: v for k, v in changes.items() if v is not None}}
         settings['options'] = {**self._settings['options'], **options}
         self._configure(**settings)
 
-    def _configure(self, integrity, thresholds, reset_after_failures, learn_noise, options):
+    def _configure(self, integrity, thresholds, reset_after_failures, learn_noise,
+                   learn_anchors, options):
         """Validate the settings and build the method and the integrity checks from them."""
         method = self.method
         unknown = set(options) - accepted_options(method)
@@ -227,8 +235,9 @@ class PostureEstimator:
                 reset_after_failures, (int, np.integer)) or reset_after_failures < 1:
             raise ValueError(f'reset_after_failures: must be an integer >= 1, got '
                              f'{reset_after_failures!r}')
-        if not isinstance(learn_noise, (bool, np.bool_)):
-            raise ValueError(f'learn_noise: must be true or false, got {learn_noise!r}')
+        for name, value in (('learn_noise', learn_noise), ('learn_anchors', learn_anchors)):
+            if not isinstance(value, (bool, np.bool_)):
+                raise ValueError(f'{name}: must be true or false, got {value!r}')
         told = _told(options)
         checks = _integrity(self.model, told, integrity, thresholds, self.moving_anchors)
         solver = make_method(self.model, method, {**options, **told})
@@ -237,14 +246,15 @@ class PostureEstimator:
             self._reacquisition = Reacquisition()
         self._reacquisition.reset_after_failures = int(reset_after_failures)
         keep = (learn_noise and self._learned is not None
-                and self._learned.learned_from(told))
+                and self._learned.learned_from(told, learn_anchors))
         if not keep:            # what was learned from other told values starts over
-            self._learned = LearnedErrors(self.model, told, self.moving_anchors) \
-                if learn_noise else None
+            self._learned = LearnedErrors(self.model, told, self.moving_anchors,
+                                          learn_anchors) if learn_noise else None
         self._told = told
         self._settings = {'integrity': integrity, 'thresholds': thresholds,
                           'reset_after_failures': reset_after_failures,
-                          'learn_noise': bool(learn_noise), 'options': dict(options)}
+                          'learn_noise': bool(learn_noise),
+                          'learn_anchors': bool(learn_anchors), 'options': dict(options)}
         if keep:
             self._use_noise(self._learned.noise)
         self._share_bias()

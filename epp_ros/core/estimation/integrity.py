@@ -108,7 +108,7 @@ class Thresholds:
     arm_length_error: float = 0.5
     residual_warn: float = 0.5          #: range residual RMS
     residual_error: float = 2.0
-    predicted_rmse_warn: float = 0.5    #: Cramér–Rao bound of the joints' RMSE
+    predicted_rmse_warn: float = 1.0    #: predicted RMSE of the joints, biases included
     predicted_rmse_error: float = 2.0
 
     def __post_init__(self):

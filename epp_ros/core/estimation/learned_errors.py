@@ -50,21 +50,25 @@ class LearnedErrors:
         The estimator's told options (its noise model's and the bias priors).
     moving : tuple of int
         The anchors that may stand elsewhere than configured.
+    learn_anchors : bool
+        Learn their shifts too; False: only count what ``anchor_std`` leaves unknown.
 
     """
 
-    def __init__(self, model, told, moving):
+    def __init__(self, model, told, moving, learn_anchors=False):
         self.told = dict(told)
+        self.learn_anchors = bool(learn_anchors)
         self.noise_learner = NoiseLearner(told_noise(told))
         self.bias_learner = BiasLearner(
             told['common_bias_std'], told['bias_slope_std'], told['link_bias_std'],
             model.n_sections * model.n_anchors, anchor_std=told['anchor_std'], moving=moving,
-            n_anchors=model.n_anchors)
+            n_anchors=model.n_anchors, learn_anchors=learn_anchors)
 
-    def learned_from(self, told):
-        """Whether what was learned started from these told values (else it starts over)."""
+    def learned_from(self, told, learn_anchors=False):
+        """Whether what was learned started from these settings (else it starts over)."""
         return (self.noise_learner.configured == told_noise(told)
-                and all(told[name] == self.told[name] for name in BIAS_SETTINGS))
+                and all(told[name] == self.told[name] for name in BIAS_SETTINGS)
+                and bool(learn_anchors) == self.learn_anchors)
 
     @property
     def noise(self):

@@ -18,8 +18,9 @@ What the estimator is told of its measurements' errors: one home, checked once.
 
 The defaults are DW1000-class UWB links and MEMS angle sensors: a range standard deviation
 of 0.1 m (plus ``eta`` per metre), a tenth of the ranges NLOS with a mean excess of 1 m,
-and the biases left once the configured offsets are taken off (each link's own, the part
-common to all and its growth with range; ``core.model.bounds.RangeBiasPrior``). Every
+the biases left once the configured offsets are taken off (each link's own, the part
+common to all and its growth with range; ``core.model.bounds.RangeBiasPrior``), and an
+outrigger set up again 0.1 m per axis from where it was surveyed (until calibrated). Every
 estimator option, node parameter and method default of these names reads them here.
 """
 from dataclasses import asdict, dataclass, fields
@@ -48,7 +49,7 @@ class NoiseModel:
     link_bias_std: float = 0.1              #: m, each link's own bias
     common_bias_std: float = 0.25           #: m, the bias common to every link
     bias_slope_std: float = 0.01            #: m per m, its growth with range
-    anchor_std: float = 0.0                 #: m per axis, where a moving anchor may stand
+    anchor_std: float = 0.1                 #: m per axis, where a moving anchor may stand
 
     def __post_init__(self):
         for field in fields(self):

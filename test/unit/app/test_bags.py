@@ -162,7 +162,7 @@ ALTERED = {'method': 'chain', 'reset_after_failures': 7, 'publish_markers': Fals
            'nlos_gamma': 1.2, 'tag_sigma': 0.11, 'pitch_sigma': 0.01, 'slew_sigma': 0.011,
            'lowest_joint': -0.8, 'link_bias_std': 0.05, 'common_bias_std': 0.2,
            'bias_slope_std': 0.008, 'anchor_std': 0.05, 'max_angular_rate': 0.5,
-           'angle_max_age': 0.3,
+           'learn_anchors': True, 'angle_max_age': 0.3,
            'slew_name': 'slew_encoder'}
 
 

@@ -108,11 +108,14 @@ def test_calibrates_a_synthesized_bag_and_writes_a_config_the_nodes_load(calibra
     parameters = written['/**']['ros__parameters']
     np.testing.assert_allclose(np.reshape(parameters['pair_offsets'], (5, 6)),
                                printed['pair_offsets'], atol=1e-6)
-    for name in ('link_bias_std', 'common_bias_std'):
+    for name in ('link_bias_std', 'common_bias_std', 'anchor_std'):
         assert abs(parameters[name] - printed[name]) <= 1e-6
         assert 0.0 < parameters[name] < 0.05
+    # anchor_std: the largest std of a located anchor, as printed.
+    located = np.array([anchor['std'] for anchor in printed['anchors'].values()])
+    assert abs(parameters['anchor_std'] - located.max()) <= 1e-6
     for name in ('anchor_positions', 'anchor_offsets', 'tag_offsets', 'pair_offsets',
-                 'link_bias_std', 'common_bias_std'):
+                 'link_bias_std', 'common_bias_std', 'anchor_std'):
         source['/**']['ros__parameters'].pop(name, None)
         written['/**']['ros__parameters'].pop(name)
     assert written == source
@@ -466,7 +469,8 @@ def configured_result():
     model = CONFIG.model()
     return SimpleNamespace(anchors=model.anchors, anchor_offsets=model.anchor_offsets,
                            tag_offsets=model.tag_offsets, pair_offsets=model.pair_offsets,
-                           bias_std=(0.01, 0.02), arm_length_std=np.zeros(5),
+                           left_unknown={'link_bias_std': 0.01, 'common_bias_std': 0.02,
+                                         'anchor_std': 0.03}, arm_length_std=np.zeros(5),
                            arm_lengths=model.arm_lengths)
 
 

@@ -115,7 +115,7 @@ def test_outriggers_that_stand_elsewhere_are_learned_to_their_stated_uncertainty
     true_anchors, frames = moved_outriggers()
     moving = truck_outriggers(MODEL)
     estimator = PostureEstimator(MODEL, 'chain', sigma=0.05, link_bias_std=0.0,
-                                 anchor_std=0.1, moving_anchors=moving)
+                                 anchor_std=0.1, learn_anchors=True, moving_anchors=moving)
     squared, diagnostics = run(estimator, frames)
     shift = (true_anchors - MODEL.anchors)[list(moving)]
     assert np.min(np.linalg.norm(shift, axis=1)) > 0.1      # the case moves every one
@@ -131,43 +131,88 @@ def test_outriggers_that_stand_elsewhere_are_learned_to_their_stated_uncertainty
     assert np.sqrt(np.mean(late)) < 0.15
 
 
-def test_unlearned_outriggers_publish_nothing_far_off_and_say_how_unsure_they_are():
-    _, frames = moved_outriggers(seconds=30.0)
-    told = PostureEstimator(MODEL, 'chain', sigma=0.05, learn_noise=False, anchor_std=0.1,
-                            moving_anchors=truck_outriggers(MODEL))
-    ignorant = PostureEstimator(MODEL, 'chain', sigma=0.05, learn_noise=False,
+def test_outriggers_not_learned_publish_nothing_far_off_and_say_how_unsure_they_are():
+    # The defaults: the outriggers may stand 0.1 m per axis off, considered, not learned;
+    # and they do.
+    _, frames = moved_outriggers(seconds=30.0, shift=0.1)
+    told = PostureEstimator(MODEL, 'chain', sigma=0.05, moving_anchors=truck_outriggers(MODEL))
+    ignorant = PostureEstimator(MODEL, 'chain', sigma=0.05, anchor_std=0.0,
                                 moving_anchors=truck_outriggers(MODEL))
+    confident = 0               # frames the ignorant one publishes > 1 m off, saying < 1/3
     for frame in frames:
         told.update(**frame.inputs())
         ignorant.update(**frame.inputs())
-        for estimator in (told, ignorant):
-            assert not np.any(np.isnan(estimator.last_diagnostics['joint_std']))
-        # Told that the outriggers may be 0.1 m off, the predicted joint spread is wider.
-        assert told.last_diagnostics['predicted_rmse'] > ignorant.last_diagnostics[
-            'predicted_rmse']
-        if told.last_diagnostics['valid']:
-            error = np.sqrt(np.mean(np.sum((told.last_diagnostics['estimate']
-                                            - frame.joints) ** 2, axis=1)))
-            assert error < 1.0 or told.last_diagnostics['predicted_rmse'] > error / 3
+        said, unsaid = told.last_diagnostics, ignorant.last_diagnostics
+        # The same fits: considering the shifts changes only the stds.
+        assert np.array_equal(said['estimate'], unsaid['estimate'])
+        assert said['valid'] == unsaid['valid']
+        assert not np.any(np.isnan(said['joint_std']))
+        assert said['predicted_rmse'] > unsaid['predicted_rmse']
+        error = np.sqrt(np.mean(np.sum((said['estimate'] - frame.joints) ** 2, axis=1)))
+        if said['valid']:
+            assert error < 1.0 or said['predicted_rmse'] > error / 3
+            confident += error >= 1.0 and unsaid['predicted_rmse'] <= error / 3
+    assert not told.anchor_shifts.any()
+    # The case is one where the stds without the shifts say too little.
+    assert confident > 0
 
 
-def test_no_moving_anchor_or_no_anchor_std_keeps_the_common_bias_alone():
+def test_no_moving_anchor_keeps_the_common_bias_alone_and_no_anchor_std_adds_nothing():
     estimator = PostureEstimator(MODEL, 'chain', sigma=0.05)
     assert estimator.anchor_shifts.shape == (0, 3)
     assert estimator.integrity.common_covariance.shape == (2, 2)
-    # Moving anchors with no anchor_std (the default): the same postures, nothing learned.
+    # Moving anchors neither learned nor considered: the same postures and stds.
     _, frames = moved_outriggers(seconds=10.0)
-    fixed = PostureEstimator(MODEL, 'chain', sigma=0.05, moving_anchors=truck_outriggers(MODEL))
+    fixed = PostureEstimator(MODEL, 'chain', sigma=0.05, anchor_std=0.0, learn_anchors=True,
+                             moving_anchors=truck_outriggers(MODEL))
     for frame in frames:
         fixed.update(**frame.inputs())
         estimator.update(**frame.inputs())
         assert np.array_equal(fixed.last_diagnostics['estimate'],
                               estimator.last_diagnostics['estimate'])
+        assert fixed.last_diagnostics['predicted_rmse'] == pytest.approx(
+            estimator.last_diagnostics['predicted_rmse'], rel=1e-9)
     assert not fixed.anchor_shifts.any() and fixed.anchor_shifts.shape == (4, 3)
     with pytest.raises(ValueError, match='moving_anchors'):
         PostureEstimator(MODEL, 'chain', moving_anchors=[MODEL.n_anchors])
     with pytest.raises(ValueError, match='anchor_std'):
         PostureEstimator(MODEL, 'chain', anchor_std=-0.1)
+    with pytest.raises(ValueError, match='learn_anchors: must be true or false'):
+        PostureEstimator(MODEL, 'chain', learn_anchors='yes')
+
+
+def one_frame(learner, shift, seed=0):
+    """Show ``learner`` one frame of ranges long by an anchor 1's ``shift``; its (p, m) links."""
+    rng = np.random.default_rng(seed)
+    tags = rng.uniform(-10.0, 10.0, (4, 3)) + [0.0, 0.0, 15.0]
+    anchors = rng.uniform(-5.0, 5.0, (3, 3))
+    units = tags[:, None] - anchors
+    distances = np.linalg.norm(units, axis=-1)
+    units /= distances[..., None]
+    bias = np.zeros((4, 3))
+    bias[:, 1] = -units[:, 1] @ shift
+    left = bias - learner.correction(distances, units)     # once what it learned is off
+    sigma = np.full(12, 0.05)
+    # A fit that moves nothing: its Jacobian spans none of the bias's directions.
+    jacobian = np.zeros((12, 1))
+    assert learner.observe(jacobian, sigma, -left.ravel() / sigma, distances.ravel(),
+                           np.arange(12), units.reshape(-1, 3))
+
+
+def test_a_considered_shift_stays_zero_and_counts_its_prior():
+    considered = BiasLearner(0.25, 0.01, 0.0, 12, anchor_std=0.1, moving=(1,), n_anchors=3)
+    learned = BiasLearner(0.25, 0.01, 0.0, 12, anchor_std=0.1, moving=(1,), n_anchors=3,
+                          learn_anchors=True)
+    for learner in (considered, learned):
+        np.testing.assert_allclose(np.diag(learner.covariance())[2:], 0.01)
+    shift = np.array([0.3, -0.2, 0.1])
+    for seed in range(20):
+        one_frame(considered, shift, seed)
+        one_frame(learned, shift, seed)
+    assert not considered.anchor_shifts.any()
+    np.testing.assert_allclose(np.diag(considered.covariance())[2:], 0.01)
+    np.testing.assert_allclose(learned.anchor_shifts[0], shift, atol=0.01)
+    assert np.all(np.diag(learned.covariance())[2:] < 0.01)
 
 
 def test_a_frames_reported_bias_stays_what_it_was_at_that_frame():
