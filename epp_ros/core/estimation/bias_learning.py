@@ -41,10 +41,14 @@ three columns ``-u`` (on its own links' rows, zero elsewhere) to ``D`` under a p
 ``anchor_std``. Learned (``learn_anchors``), the shifts come from the same frames as the
 common bias. Each link's own bias moves the learned shift too (the floor above), and on
 real links so do biases that turn with the boom, which the shifts then take for theirs.
-Not learned (the default), a shift is only considered: its prior stays in
-:meth:`BiasLearner.covariance`, so the predicted joint stds count what a set-up may have
-moved, however consistent the fit looks (a shifted outrigger moves the boom's fit, not its
-residuals).
+Not learned (the default), a shift is only considered: never taken off the ranges, but
+counted in :meth:`BiasLearner.covariance`, so the predicted joint stds count what a set-up
+may have moved, however consistent the fit looks (a shifted outrigger moves the boom's fit,
+not its residuals). What is counted is the shift's second moment given the frames, ``E[delta
+delta^T] = delta_hat delta_hat^T + P``, from a learner beside it that does learn the shifts
+(and whose estimate is used for nothing else): the prior's ``anchor_std^2`` at first, then
+more where the frames show a shift, less where they show none. On real links that learner
+takes some of the links' own biases for shifts too, and then only widens the stds.
 """
 import numpy as np
 
@@ -140,7 +144,10 @@ class BiasLearner:
         self.considered[2:] = not learn_anchors
         self.considered &= prior > 0
         self.fixed = ~(prior > 0) | self.considered    # stays at 0
-        self.considered_covariance = np.diag(np.where(self.considered, prior, 0.0) ** 2)
+        # Beside, the same with the shifts learned: what frames say of them.
+        self.shadow = BiasLearner(common_std, slope_std, link_std, links, memory, anchor_std,
+                                  moving, n_anchors, learn_anchors=True) \
+            if self.considered.any() else None
         self.prior_information = np.diag(np.where(self.fixed, 0.0, 1.0 / np.where(
             prior > 0, prior, 1.0) ** 2))
         self.link_std = float(link_std)
@@ -170,9 +177,24 @@ class BiasLearner:
         return self.estimate[2:].reshape(-1, 3)
 
     def covariance(self):
-        """Return what is not known of the bias (q, q): the estimate's and the links' share."""
+        """
+        Return what is not known of the bias (q, q).
+
+        The estimate's share and the links' (the floor), and of the shifts counted but not
+        learned their second moment.
+        """
         statistical = self._statistical()
-        return statistical + self._floor(statistical) + self.considered_covariance
+        return statistical + self._floor(statistical) + self._considered()
+
+    def _considered(self):
+        """Return the second moment (q, q) of the shifts counted but not learned."""
+        size = self.estimate.size
+        second = np.zeros((size, size))
+        if self.shadow is not None:
+            block = np.ix_(self.considered, self.considered)
+            shift = self.shadow.estimate[self.considered]
+            second[block] = self.shadow.covariance()[block] + np.outer(shift, shift)
+        return second
 
     def _statistical(self):
         """Return ``(Lambda_0 + Lambda)^-1`` on the free parameters, zero elsewhere (q, q)."""
@@ -212,13 +234,21 @@ class BiasLearner:
             anchors' shifts learn nothing from this frame.
 
         """
+        anchors = np.asarray(links) % self.n_anchors
+        if self.shadow is not None and directions is not None:
+            # Its residuals: of the ranges had its own estimate been taken off. (Its own
+            # projection: the fit's bias stays bit for bit that of one not counting.)
+            taken = self.shadow.estimate - self.estimate
+            offset = bias_design(distances, directions, anchors, self.moving) @ taken
+            self.shadow.observe(jacobian, sigma, residuals + offset / sigma, distances, links,
+                                directions)
         free = ~self.fixed
         if directions is None:
             free[2:] = False
         if not free.any() or residuals.size <= jacobian.shape[1] + free.sum():
             return False
-        design = bias_design(distances, directions, np.asarray(links) % self.n_anchors,
-                             self.moving)[:, free] / sigma[:, None]
+        design = bias_design(distances, directions, anchors, self.moving)[:, free] \
+            / sigma[:, None]
         projected = design - jacobian @ np.linalg.lstsq(jacobian, design, rcond=None)[0]
         information = projected.T @ projected
         # The common bias alone: a frame that cannot tell it is skipped. An anchor's shift
