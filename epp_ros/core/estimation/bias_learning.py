@@ -120,8 +120,8 @@ class BiasLearner:
     n_anchors : int
         How many anchors there are (m): a link's flat index ``k m + j`` names anchor j.
     learn_anchors : bool
-        Learn the moving anchors' shifts; False: they stay at zero and their prior is
-        counted in :meth:`covariance` (considered, not estimated).
+        Learn the moving anchors' shifts; False: they stay at zero and are only counted
+        in :meth:`covariance` (the prior, then what the frames show of them).
 
     Attributes
     ----------
@@ -139,7 +139,7 @@ class BiasLearner:
                          dtype=float)
         size = prior.size
         self.limits = np.r_[LIMITS, np.full(3 * len(self.moving), ANCHOR_LIMIT)]
-        # Not learned, a shift's prior is what stays unknown of it.
+        # Not learned, a shift is counted: all of it stays unknown to the estimate.
         self.considered = np.zeros(size, dtype=bool)
         self.considered[2:] = not learn_anchors
         self.considered &= prior > 0

@@ -128,8 +128,9 @@ class PostureEstimator:
         the told values stay (benchmarks that tell the truth).
     learn_anchors : bool
         Also learn how far each of ``moving_anchors`` stands from where configured, with
-        the common bias (``learn_noise``). False (the default): their ``anchor_std`` only
-        adds to the predicted joint standard deviations. Learning them helps where the
+        the common bias (``learn_noise``). False (the default): the shifts are only counted
+        in the predicted joint standard deviations (``anchor_std``, then what the frames
+        show of them; ``core.estimation.bias_learning``). Learning them helps where the
         links are unbiased (calibrated) and the outriggers were not surveyed; on
         uncalibrated real links the shifts take the links' own biases for theirs.
     moving_anchors : sequence of int

@@ -51,7 +51,8 @@ class LearnedErrors:
     moving : tuple of int
         The anchors that may stand elsewhere than configured.
     learn_anchors : bool
-        Learn their shifts too; False: only count what ``anchor_std`` leaves unknown.
+        Learn their shifts too; False: only count them (``anchor_std``, then what the
+        frames show) in what is unknown of the bias.
 
     """
 
