@@ -172,7 +172,7 @@ def report(diagnostics, lengths):
     if 'hypotheses' in diagnostics.details:
         values['hypotheses'] = str(diagnostics.details['hypotheses'])
     values.update(_noise_values(diagnostics))
-    for anchor, shift in (diagnostics.anchor_shifts or {}).items():   # learned, x y z
+    for anchor, shift in (diagnostics.anchor_shifts or {}).items():   # seen, x y z
         values[f'anchor {anchor} shift [m]'] = '{:.3f} {:.3f} {:.3f}'.format(*shift)
     if diagnostics.noise_rmse is not None:            # the predicted RMSE without the common bias
         values['noise RMSE [m]'] = f'{diagnostics.noise_rmse:.4f}'

@@ -176,6 +176,15 @@ class BiasLearner:
         """Return each moving anchor's learned shift (len(moving), 3), metres."""
         return self.estimate[2:].reshape(-1, 3)
 
+    @property
+    def seen_shifts(self):
+        """
+        Return each moving anchor's shift as the frames show it (len(moving), 3), m.
+
+        The learned one, or, counted but not learned, that of the learner beside.
+        """
+        return (self if self.shadow is None else self.shadow).anchor_shifts
+
     def covariance(self):
         """
         Return what is not known of the bias (q, q).

@@ -298,6 +298,18 @@ class PostureEstimator:
             return np.zeros((len(self.moving_anchors), 3))
         return self._learned.anchor_shifts
 
+    @property
+    def seen_anchor_shifts(self):
+        """
+        Return how far the frames show each of ``moving_anchors`` to stand (n, 3), m.
+
+        :attr:`anchor_shifts` when learned (``learn_anchors``); otherwise what the frames
+        show while the shifts are only counted: taken off nothing, a cue to calibrate.
+        """
+        if self._learned is None:
+            return np.zeros((len(self.moving_anchors), 3))
+        return self._learned.seen_shifts
+
     def _unbiased(self, measurements):
         """
         Return ``measurements`` with the learned bias taken off the ranges.
@@ -417,7 +429,8 @@ class PostureEstimator:
         valid = np.isfinite(measurements.ranges)
         diagnostics = {'method': self.method, 'noise': self.noise,
                        'range_bias': self.range_bias,
-                       'anchor_shifts': dict(zip(self.moving_anchors, self.anchor_shifts)),
+                       'anchor_shifts': dict(zip(self.moving_anchors,
+                                                 self.seen_anchor_shifts)),
                        'missing_links': int(p * m - valid.sum()),
                        'implausible_links': implausible,
                        'cold_start': self._warm is None or self._provisional,

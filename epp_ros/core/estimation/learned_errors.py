@@ -99,6 +99,11 @@ class LearnedErrors:
         """Return how far each moving anchor stands from where configured (n, 3), m."""
         return self.bias_learner.anchor_shifts.copy()
 
+    @property
+    def seen_shifts(self):
+        """Return how far the frames show each moving anchor to stand (n, 3), m, a copy."""
+        return self.bias_learner.seen_shifts.copy()
+
     def bias_covariance(self):
         """Return what is still unknown of the common bias (its covariance)."""
         return self.bias_learner.covariance()

@@ -99,7 +99,7 @@ class FrameResult(Mapping):
     implausible_links: Optional[int] = None   #: ranges set aside as impossible
     ignored_inputs: Optional[list] = None   #: inputs the method does not use, by name
     range_bias: Optional[np.ndarray] = None   #: (2,) the common bias taken off: m, m/m
-    anchor_shifts: Optional[dict] = None    #: {anchor: (3,) m}, each moving anchor's shift
+    anchor_shifts: Optional[dict] = None    #: {anchor: (3,) m}, each moving anchor's, seen
     # How well the answer fits, and how well it is known (the integrity checks').
     range_residual_rms: Optional[float] = None   #: m, fitted minus measured ranges
     section_lengths: Optional[np.ndarray] = None   #: (p,) m, of the answer

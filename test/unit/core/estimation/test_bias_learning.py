@@ -134,7 +134,7 @@ def test_outriggers_that_stand_elsewhere_are_learned_to_their_stated_uncertainty
 def test_outriggers_not_learned_publish_nothing_far_off_and_say_how_unsure_they_are():
     # The defaults: the outriggers may stand 0.1 m per axis off, counted, not learned. They
     # stand twice that off: what the frames show of the shifts widens what is counted.
-    _, frames = moved_outriggers(seconds=30.0, shift=0.2)
+    true_anchors, frames = moved_outriggers(seconds=30.0, shift=0.2)
     told = PostureEstimator(MODEL, 'chain', sigma=0.05, moving_anchors=truck_outriggers(MODEL))
     ignorant = PostureEstimator(MODEL, 'chain', sigma=0.05, anchor_std=0.0,
                                 moving_anchors=truck_outriggers(MODEL))
@@ -152,7 +152,13 @@ def test_outriggers_not_learned_publish_nothing_far_off_and_say_how_unsure_they_
         if said['valid']:
             assert error < 1.0 or said['predicted_rmse'] > error / 3
             confident += error >= 1.0 and unsaid['predicted_rmse'] <= error / 3
+    # Nothing taken off the ranges; what the frames show of the shifts is reported.
     assert not told.anchor_shifts.any()
+    moving = list(truck_outriggers(MODEL))
+    shift = (true_anchors - MODEL.anchors)[moving]
+    seen = np.array([said['anchor_shifts'][j] for j in moving])      # at the last frame
+    for shifts in (seen, told.seen_anchor_shifts):
+        assert np.sqrt(np.mean((shifts - shift) ** 2)) < 0.05 < np.sqrt(np.mean(shift ** 2))
     # The case is one where the stds without the shifts say too little.
     assert confident > 0
 
