@@ -32,10 +32,11 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 PUMP_YAML = ROOT / 'config' / 'pump.yaml'
-#: Node arguments telling the estimator that the emulated pump's ranges are unbiased
-#: (pump.yaml allows for the biases of real links, which widen its predicted RMSE).
+#: Node arguments telling the estimator that the emulated pump's ranges are unbiased and its
+#: outriggers where configured (pump.yaml allows for the biases of real links and for
+#: outriggers set up again, which widen its predicted RMSE).
 UNBIASED_ARGS = ('-p', 'link_bias_std:=0.0', '-p', 'common_bias_std:=0.0', '-p',
-                 'bias_slope_std:=0.0')
+                 'bias_slope_std:=0.0', '-p', 'anchor_std:=0.0')
 BIN = Path(sys.executable).parent
 
 
