@@ -188,7 +188,7 @@ def test_no_moving_anchor_keeps_the_common_bias_alone_and_no_anchor_std_adds_not
 
 
 def one_frame(learner, shift, seed=0):
-    """Show ``learner`` one frame of ranges long by an anchor 1's ``shift``; its (p, m) links."""
+    """Show ``learner`` one frame (4 tags, 3 anchors) whose anchor 1 stands ``shift`` off."""
     rng = np.random.default_rng(seed)
     tags = rng.uniform(-10.0, 10.0, (4, 3)) + [0.0, 0.0, 15.0]
     anchors = rng.uniform(-5.0, 5.0, (3, 3))
