@@ -161,8 +161,9 @@ class PostureEstimator:
         the slew, default 0), ``slew_tol``, ``clip_weight``; the field ``cepp`` has
         ``predict_slew`` and ``irls_iterations`` (2) on, and ``noise_weights`` (links
         weighted by the noise model), ``silent_weight`` (a silent tag keeps the previous
-        bends), ``cold_search`` and ``fold_search`` (searches beyond the warm start), each
-        on by default and each off on its own; chain:
+        bends), ``cold_search`` and ``fold_search`` (searches beyond the warm start),
+        ``polish`` (the answer finished at the likelihood's peak near it), each on by
+        default and each off on its own; chain:
         ``tol``, ``max_iter``, ``slew_starts``, ``screen_iterations``; track: the chain's,
         ``process_noise`` (starting acceleration spectral density, rad^2/s^3),
         ``adapt_process_noise``, ``max_rate``, ``max_hypotheses``; sdp: ``solver``.

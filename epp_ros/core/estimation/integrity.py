@@ -26,8 +26,9 @@ judged here on what its frame can show, so that the node and ``epp_bag eval`` ag
   binomial test, and how long they are a gamma test;
 - observability: the Cramér–Rao bound at the estimate, from the links kept, must be finite
   and small, and no joint may have another position that fits about as well (a fold, the
-  tip at another pitch, the whole boom mirrored, another fit the method's search found),
-  unless the boom could not have got there since the last accepted posture;
+  tip at another pitch, the whole boom mirrored, another fit the method's search found,
+  the frame fitted without one tag's ranges), unless the boom could not have got there
+  since the last accepted posture;
 - plausibility: no joint below ``lowest_joint``, section lengths and the boom's vertical
   plane as configured, no jump faster than the boom moves.
 
@@ -37,7 +38,7 @@ from dataclasses import dataclass, field, fields
 import math
 
 from epp_ros.core.estimation.bias_learning import bias_design
-from epp_ros.core.estimation.methods.chain import angles_from_joints
+from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMethod
 from epp_ros.core.model.bounds import (bias_covariance, bound_from_covariance,
                                        bound_from_information, RangeBiasPrior)
 from epp_ros.core.model.folds import fold_alternatives, tip_circle
@@ -226,6 +227,9 @@ class Integrity:
 
     """
 
+    #: Levenberg–Marquardt iterations of each separation fit (:meth:`separated`).
+    SEPARATION_ITERATIONS = 5
+
     def __init__(self, model, noise, nlos, eta=0.0, lowest_joint=-0.5,
                  limits=IntegrityLimits(), thresholds=Thresholds(), bias=RangeBiasPrior()):
         self.model = model
@@ -245,6 +249,10 @@ class Integrity:
             if fixed else None
         self._tag_loss = nlos.bind(np.asarray(noise.tag_sigma, float))
         self._planes = _mirror_planes(model)
+        # The likelihood's peaks for the separation fits: the chain's loss, this mixture.
+        self._peaks = ChainMethod(model, nlos_fraction=nlos.fraction, nlos_gamma=nlos.gamma,
+                                  lowest_joint=lowest_joint,
+                                  max_iter=self.SEPARATION_ITERATIONS)
 
     # -- the pieces -----------------------------------------------------------------------
     def link_sigma(self, measurements):
@@ -468,6 +476,36 @@ class Integrity:
                 std[k] = math.sqrt(np.trace(covariance))
         return std
 
+    def separated(self, joints, measurements, kept):
+        """
+        Fit the frame again without each tag's ranges in turn, when links were set aside.
+
+        Under blocked links the likelihood can peak where other links are the blocked
+        ones: a fit that took a tag's NLOS excess for line of sight is metres off with
+        residuals that look clear. Solution separation, as receiver autonomous integrity
+        monitoring does it, leaves each tag's ranges out in turn and lets the rest say
+        where the boom is, from ``joints`` (p, 3); :meth:`judge` weighs these fits with
+        all the ranges, as rivals. Only when the consistency checks set a tag-anchor link
+        aside (``kept`` as :meth:`consistency` returns it): with every link clear the
+        likelihood peaks once near the estimate, up to the folds and mirrors weighed anyway.
+        Returns a list of postures (p, 3), metres.
+        """
+        ranges = measurements.ranges
+        measured = np.isfinite(ranges)
+        if not (measured & ~kept[0]).any():
+            return []
+        noise = type(self.noise)(self.link_sigma(measurements), self.noise.tag_sigma,
+                                 self.noise.pitch_sigma, self.noise.slew_sigma)
+        fits = []
+        for k in np.flatnonzero(measured.any(axis=1)):
+            without = ranges.copy()
+            without[k] = np.nan
+            residuals = Residuals(self.model, measurements.with_ranges(without), noise)
+            posture = self._peaks.refine(joints, residuals)[0]
+            if np.all(np.isfinite(posture)):
+                fits.append(posture)
+        return fits
+
     def _near(self, joint_std):
         """Per joint, metres: alternatives closer than this do not matter (p,)."""
         return np.maximum(self.limits.ambiguity_distance,
@@ -689,6 +727,8 @@ class Integrity:
         seen = joints + shift
         values['noise_rmse'] = float(np.sqrt(np.mean(joint_std ** 2)))
         self._observability(total_std, checks, values)
+        if chain and all(level < ERROR for level, _, _ in checks):
+            alternatives = list(alternatives) + self.separated(joints, measurements, kept)
         spread, found = self._joint_rivals(seen, measurements, joint_std, angles[0], reach)
         values['reach_std'] = np.maximum(joint_std, spread)
         ambiguous = set(found)

@@ -319,6 +319,27 @@ class ChainMethod:
             max_iter=self.max_iter if max_iter is None else max_iter, tol=self.tol)
         return Fit(result.x, result.cost, result.iterations, result.converged)
 
+    def residuals_of(self, measurements):
+        """Return the frame's :class:`Residuals` under this chain's noise (``eta`` included)."""
+        noise = self.noise
+        if self.eta:
+            distances = np.nan_to_num(measurements.ranges)
+            noise = replace(noise, range_sigma=np.hypot(noise.range_sigma, self.eta * distances))
+        return Residuals(self.model, measurements, noise)
+
+    def refine(self, joints, residuals, max_iter=None):
+        """
+        Return the likeliest posture near ``joints`` (p, 3) and its :class:`Fit`.
+
+        Levenberg–Marquardt from the posture's angles on a :class:`Residuals`: where another
+        method's answer (CEPP's) or a hypothesis (a tag's ranges left out) settles under
+        this chain's loss. The posture (p, 3) is in canonical angles.
+        """
+        slew, pitches = angles_from_joints(self.model, joints)
+        fit = self.fit(np.r_[slew, pitches], residuals, max_iter)
+        psi = canonical_angles(fit.psi, self.model.pivot_offset)
+        return self.model.forward_kinematics(psi[0], psi[1:]), fit
+
     def cost(self, psi, residuals):
         """Return the fitted loss at angles ``psi`` (p + 1,) on a :class:`Residuals`."""
         return self._evaluate(np.asarray(psi, dtype=float), residuals)[0]
@@ -458,11 +479,8 @@ class ChainMethod:
             Whether ``prior`` is a warm start (else a cold one).
 
         """
-        noise = self.noise
-        if self.eta:
-            distances = np.nan_to_num(measurements.ranges)
-            noise = replace(noise, range_sigma=np.hypot(noise.range_sigma, self.eta * distances))
-        residuals = Residuals(self.model, measurements, noise)
+        residuals = self.residuals_of(measurements)
+        noise = residuals.noise
         fit, lost, iterations, others = None, True, 0, []
         if warm and prior is not None:
             slew, pitches = angles_from_joints(self.model, prior)

@@ -31,13 +31,19 @@ of its own, on by default:
 - ``cold_search``: a cold frame is solved from the best chains of a beam search over
   slews and pitches as well as from the prior, the lowest NLOS-mixture loss kept;
 - ``fold_search``: a warm frame is solved again from its joints' other folds and its
-  tip's other pitches where their own ranges prefer them, kept on a clear win.
+  tip's other pitches where their own ranges prefer them, kept on a clear win;
+- ``polish``: the answer is finished where the frame's NLOS-mixture likelihood peaks
+  near it (the chain's Levenberg–Marquardt over the p + 1 angles, on the same ranges).
+  The plane solution weighs squared distances and fixes the slew before the pitches;
+  under blocked links it can stop degrees from the likeliest posture, and the integrity
+  checks, which weigh rivals by that likelihood, must be given its peak. Not with a
+  silent tag: the prior's bends hold what the frame's likelihood leaves free.
 
 Fits the searches found elsewhere are returned as ``alternatives`` for the integrity checks.
 """
 from numbers import Real
 
-from epp_ros.core.estimation.methods.chain import grow_chains
+from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMethod, grow_chains
 from epp_ros.core.estimation.methods.epp import CEPP
 from epp_ros.core.model.folds import fold_alternatives, keep_folds, tip_circle, tip_minima
 from epp_ros.core.model.measurements import Measurements
@@ -75,7 +81,7 @@ class FieldCEPP(CEPP):
         Fit the plane to the frame's ranges (the paper: the prior's plane).
     irls_iterations : int
         Re-solves with the links reweighted under the NLOS mixture (the paper: 0).
-    noise_weights, cold_search, fold_search : bool
+    noise_weights, cold_search, fold_search, polish : bool
         See the module.
     silent_weight : float
         Weight in H of the prior's bends next to a silent tag (0: the frame is refused).
@@ -104,17 +110,31 @@ class FieldCEPP(CEPP):
     FOLD_STARTS = 2
     #: Default weight in H of the prior's bends next to a silent tag.
     SILENT_WEIGHT = 1.0
+    #: Levenberg–Marquardt iterations of the polish at most (from a plane solution it
+    #: converges in a few).
+    POLISH_ITERATIONS = 20
 
     def __init__(self, model, predict_slew=True, irls_iterations=IRLS_ITERATIONS,
                  noise_weights=True, silent_weight=SILENT_WEIGHT, cold_search=True,
-                 fold_search=True, lowest_joint=-0.5, **options):
+                 fold_search=True, polish=True, lowest_joint=-0.5, **options):
         super().__init__(model, predict_slew=predict_slew, irls_iterations=irls_iterations,
                          **options)
         self.noise_weights = _switch('noise_weights', noise_weights)
         self.cold_search = _switch('cold_search', cold_search)
         self.fold_search = _switch('fold_search', fold_search)
+        self.polish = _switch('polish', polish)
         self.silent_weight = _finite('silent_weight', silent_weight, least=0.0)
         self.lowest_joint = _finite('lowest_joint', lowest_joint)
+        self._finish = ChainMethod(model, self.sigma, self.eta,
+                                   nlos_fraction=self.nlos.fraction,
+                                   nlos_gamma=self.nlos.gamma, lowest_joint=self.lowest_joint,
+                                   max_iter=self.POLISH_ITERATIONS)
+
+    def tune(self, **noise):
+        """Change the range noise (see the base's ``tune``); the polish follows it."""
+        super().tune(**noise)
+        self._finish.tune(sigma=self.sigma, eta=self.eta, nlos_fraction=self.nlos.fraction,
+                          nlos_gamma=self.nlos.gamma)
 
     def _kept_folds(self, coords, prior_2d, pivot, ranges):
         """Return ``coords`` (p, 2) with each silent joint at the prior's fold, and how many."""
@@ -181,8 +201,27 @@ class FieldCEPP(CEPP):
         Cold, with ``cold_search``, the frame is also solved from the best chains of a
         beam search over slews and pitches (``chain.grow_chains``), and the fit with the
         lowest NLOS-mixture loss of its ranges kept; the others that land elsewhere are
-        returned as ``alternatives`` for the integrity checks.
+        returned as ``alternatives`` for the integrity checks. Then, with ``polish``,
+        the fit kept is finished at the likelihood's peak near it.
         """
+        joints, info = self._searched(measurements, prior, warm)
+        return self._polished(measurements, joints, info)
+
+    def _polished(self, measurements, joints, info):
+        """Return the fit finished at the likelihood's peak near it (``polish``)."""
+        silent = ~np.isfinite(measurements.ranges).any(axis=1)
+        if not self.polish or silent.any() or not np.all(np.isfinite(joints)):
+            return joints, info
+        ranged = Measurements(measurements.ranges, measurements.tag_ranges,
+                              np.full(self.model.n_sections, np.nan), np.nan)
+        polished, fit = self._finish.refine(joints, self._finish.residuals_of(ranged))
+        if not np.all(np.isfinite(polished)):
+            return joints, info
+        return polished, dict(info, slew=float(angles_from_joints(self.model, polished)[0]),
+                              polish_iterations=fit.iterations)
+
+    def _searched(self, measurements, prior, warm):
+        """Return :meth:`solve`'s fit before the polish."""
         joints, info = self._solve_from(measurements, prior, warm)
         if warm or not self.cold_search:
             return self._refolded(measurements, joints, info) if warm else (joints, info)

@@ -13,6 +13,8 @@
 # limitations under the License.
 
 """Integrity: never a confident wrong posture (core.integrity through PostureEstimator)."""
+from pathlib import Path
+
 from epp_ros.core import PostureEstimator
 from epp_ros.core.estimation.integrity import (_binomial_tail, _chi_square_limit,
                                                fold_alternatives, IntegrityLimits, Thresholds)
@@ -23,8 +25,10 @@ from monte_carlo import UNBIASED
 import numpy as np
 import pytest
 from scipy.stats import binom, chi2
+import yaml
 
 MODEL = truck_pump()
+DATA = Path(__file__).resolve().parents[3] / 'data'
 RATE = 10.0
 #: A joint more than this far off, and more than this many predicted sigmas, is wrong.
 WRONG_M, WRONG_SIGMAS = 1.0, 5.0
@@ -170,6 +174,56 @@ def test_a_joint_with_one_range_is_ambiguous_unless_time_rules_the_fold_out():
     estimate = tracking.update(ranges, stamp=0.05)      # the fold is 2.7 m away: unreachable
     assert tracking.last_diagnostics['valid']
     np.testing.assert_allclose(estimate, joints, atol=1e-6)
+
+
+def test_a_fit_that_took_blocked_links_for_clear_ones_is_refused_as_ambiguous():
+    """
+    Solution separation: the frame fitted without one tag's ranges is a rival.
+
+    The recorded frame passed every residual check at a fit 3.2 m off. Without tag 1's
+    ranges the rest put the boom within a metre of the truth, and that fit is about as
+    likely with all the ranges: the frame is refused. The same checks without the
+    separation fits published it.
+    """
+    data = yaml.safe_load((DATA / 'absorbed_nlos_frame.yaml').read_text())
+    estimate, truth = np.array(data['estimate']), np.array(data['truth'])
+    frame = Measurements.clean(MODEL, np.array(data['ranges']))[0]
+    told = {'sigma': 0.14, 'eta': 0.012, 'nlos_fraction': 0.13, 'nlos_gamma': 1.3}
+    integrity = PostureEstimator(MODEL, 'cepp', **told).integrity
+    kept = integrity.consistency(estimate, frame)[2]
+    assert not kept[0].all()                            # links were set aside
+    fits = integrity.separated(estimate, frame, kept)
+    assert len(fits) == MODEL.n_sections
+    assert np.abs(fits[0] - truth).max() < 1.0 < 3.0 < np.abs(estimate - truth).max()
+    verdict = integrity.judge(estimate, frame)
+    assert verdict.status == 'ambiguous' and 1 in verdict.values['ambiguous_joints']
+    blind = PostureEstimator(MODEL, 'cepp', **told).integrity
+    blind.separated = lambda *args: []
+    assert blind.judge(estimate, frame).valid
+
+
+def test_separation_fits_are_made_only_when_links_were_set_aside():
+    """With every link clear the likelihood peaks once: no fits, and the verdict stands."""
+    joints = MODEL.forward_kinematics(0.4, np.radians([50.0, 25.0, 5.0, -20.0, -45.0]))
+    estimator = PostureEstimator(MODEL, 'chain', sigma=0.1, learn_noise=False)
+    rng = np.random.default_rng(32)
+    ranges = RangeNoise(sigma=0.1).apply(MODEL.ranges(joints), rng)[0]
+    estimate = estimator.update(ranges)
+    integrity, frame = estimator.integrity, Measurements.clean(MODEL, ranges)[0]
+    kept = integrity.consistency(estimate, frame)[2]
+    assert kept[0].all() and integrity.separated(estimate, frame, kept) == []
+    # One blocked link: the fits without each tag stay within the noise of the estimate
+    # (three predicted standard deviations), and the frame is published.
+    ranges[2, 3] += 3.0
+    estimate = estimator.update(ranges)
+    assert estimator.last_diagnostics['valid']
+    frame = Measurements.clean(MODEL, ranges)[0]
+    kept = integrity.consistency(estimate, frame)[2]
+    assert not kept[0][2, 3]
+    fits = integrity.separated(estimate, frame, kept)
+    assert len(fits) == MODEL.n_sections
+    spread = 3.0 * estimator.last_diagnostics['joint_std']
+    assert all(np.all(np.linalg.norm(fit - estimate, axis=1) < spread) for fit in fits)
 
 
 def test_predicted_uncertainty_is_the_bound_at_the_estimate():

@@ -14,6 +14,7 @@
 
 """The paper's NEDM estimators (methods.epp) and our field CEPP (methods.field_cepp)."""
 from epp_ros.core import PostureEstimator
+from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMethod
 from epp_ros.core.estimation.methods.epp import CEPP, EPP1, EPP2
 from epp_ros.core.estimation.methods.field_cepp import FieldCEPP
 from epp_ros.core.model.measurements import Measurements
@@ -68,12 +69,12 @@ def test_cepp_is_the_papers_and_field_cepp_with_its_departures_off_is_too():
     joints, _ = CEPP(MODEL, predict_slew=True).solve(frame(), PRIOR)
     np.testing.assert_allclose(joints, PAPER_CEPP, atol=1e-4)
     off = FieldCEPP(MODEL, irls_iterations=0, noise_weights=False, silent_weight=0.0,
-                    cold_search=False, fold_search=False)
+                    cold_search=False, fold_search=False, polish=False)
     np.testing.assert_array_equal(off.solve(frame(), PRIOR)[0], joints)
     # Plain least squares weights every link 1: without the noise model's weights the
     # reweighting path then is H = 1 too.
-    gaussian, info = FieldCEPP(MODEL, nlos_fraction=0.0, noise_weights=False).solve(
-        frame(), PRIOR)
+    gaussian, info = FieldCEPP(MODEL, nlos_fraction=0.0, noise_weights=False,
+                               polish=False).solve(frame(), PRIOR)
     np.testing.assert_array_equal(gaussian, joints)
     assert np.all(info['link_weights'] == 1.0) and info['irls_iterations'] == 0
 
@@ -108,9 +109,37 @@ def test_exact_ranges_are_not_reweighted():
 def test_line_of_sight_noise_is_weighted_as_the_paper_does():
     """Links a few sigmas long are barely discounted: the answer moves by millimetres."""
     paper, _ = CEPP(MODEL, predict_slew=True).solve(frame(False), PRIOR)
-    joints, info = FieldCEPP(MODEL, noise_weights=False).solve(frame(False), PRIOR)
+    joints, info = FieldCEPP(MODEL, noise_weights=False, polish=False).solve(frame(False),
+                                                                             PRIOR)
     assert np.abs(joints - paper).max() < 0.01
     assert info['link_weights'].min() > 0.8
+
+
+def test_the_polish_finishes_where_the_frames_likelihood_peaks():
+    """Under blocked links the plane solution can stop short of the peak; the polish does not."""
+    chain = ChainMethod(MODEL, sigma=0.1)
+    for seed in range(20):
+        # A quarter of the links blocked, exponential excesses of 1 m.
+        rng = np.random.default_rng(seed)
+        ranges = MODEL.ranges(TRUTH) + rng.normal(0.0, 0.1, (5, 6))
+        blocked = rng.random((5, 6)) < 0.25
+        ranges[blocked] += rng.exponential(1.0, blocked.sum())
+        measurements = Measurements.clean(MODEL, ranges)[0]
+        residuals = chain.residuals_of(measurements)
+        plane, _ = FieldCEPP(MODEL, sigma=0.1, polish=False).solve(measurements, PRIOR)
+        joints, info = FieldCEPP(MODEL, sigma=0.1).solve(measurements, PRIOR)
+        assert info['polish_iterations'] <= FieldCEPP.POLISH_ITERATIONS
+        costs = [chain.cost(np.r_[angles_from_joints(MODEL, posture)], residuals)
+                 for posture in (plane, joints)]
+        assert costs[1] <= costs[0]
+        # A peak: the chain's own fit from it moves it by millimetres (sigma is 0.1 m).
+        np.testing.assert_allclose(chain.refine(joints, residuals)[0], joints, atol=5e-3)
+        np.testing.assert_allclose(MODEL.section_lengths(joints), MODEL.arm_lengths, atol=1e-9)
+        if seed == 17:      # 9 links blocked: the plane solution is 1.3 m off, its peak not
+            assert costs[1] < costs[0] - 5.0 and rmse(joints) < 0.3 < 1.0 < rmse(plane)
+    # On exact ranges the plane solution is the peak already.
+    exact = Measurements.clean(MODEL, MODEL.ranges(TRUTH))[0]
+    np.testing.assert_allclose(FieldCEPP(MODEL).solve(exact, PRIOR)[0], TRUTH, atol=1e-6)
 
 
 def test_epp1_and_epp2_are_the_papers_unless_asked():
@@ -123,7 +152,7 @@ def test_epp1_and_epp2_are_the_papers_unless_asked():
 
 
 def test_tune_changes_the_weighting():
-    method = FieldCEPP(MODEL, noise_weights=False)
+    method = FieldCEPP(MODEL, noise_weights=False, polish=False)
     method.tune(nlos_fraction=0.0)              # Gaussian: every weight 1
     joints, info = method.solve(frame(), PRIOR)
     np.testing.assert_allclose(joints, PAPER_CEPP, atol=1e-4)
@@ -230,7 +259,7 @@ def test_each_departure_from_the_paper_is_an_option_of_its_own():
     assert paper.irls_iterations == 0 and not paper.predict_slew and not paper.noise_weights
     assert not hasattr(paper, 'cold_search') and not hasattr(paper, 'silent_weight')
     method = FieldCEPP(MODEL)
-    assert method.noise_weights and method.cold_search and method.fold_search
+    assert method.noise_weights and method.cold_search and method.fold_search and method.polish
     assert method.predict_slew and method.irls_iterations == FieldCEPP.IRLS_ITERATIONS > 0
     assert method.silent_weight == FieldCEPP.SILENT_WEIGHT > 0
     # Turning one off leaves the others as they were (irls_iterations=0 once turned all off).
@@ -239,6 +268,7 @@ def test_each_departure_from_the_paper_is_an_option_of_its_own():
     assert unweighted.silent_weight == FieldCEPP.SILENT_WEIGHT
     asked = FieldCEPP(MODEL, fold_search=False, silent_weight=0.5)
     assert asked.cold_search and asked.silent_weight == 0.5 and not asked.fold_search
+    assert asked.polish and not FieldCEPP(MODEL, polish=False).polish
 
 
 def test_the_estimator_names_the_papers_cepp_and_ours_apart():
@@ -251,7 +281,8 @@ def test_the_estimator_names_the_papers_cepp_and_ours_apart():
 @pytest.mark.parametrize('name, value', [('silent_weight', -1.0), ('silent_weight', True),
                                          ('silent_weight', float('inf')),
                                          ('noise_weights', 1), ('cold_search', 'yes'),
-                                         ('fold_search', 0), ('lowest_joint', float('nan')),
+                                         ('fold_search', 0), ('polish', 'no'),
+                                         ('lowest_joint', float('nan')),
                                          ('stress_refinement', 1)])
 def test_new_options_are_checked(name, value):
     with pytest.raises(ValueError, match=name):
