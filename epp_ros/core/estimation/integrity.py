@@ -227,8 +227,8 @@ class Integrity:
 
     """
 
-    #: Levenberg–Marquardt iterations of each separation fit (:meth:`separated`).
-    SEPARATION_ITERATIONS = 5
+    #: Levenberg–Marquardt trial steps of each separation fit (:meth:`separated`).
+    SEPARATION_ROUNDS = 8
 
     def __init__(self, model, noise, nlos, eta=0.0, lowest_joint=-0.5,
                  limits=IntegrityLimits(), thresholds=Thresholds(), bias=RangeBiasPrior()):
@@ -251,8 +251,7 @@ class Integrity:
         self._planes = _mirror_planes(model)
         # The likelihood's peaks for the separation fits: the chain's loss, this mixture.
         self._peaks = ChainMethod(model, nlos_fraction=nlos.fraction, nlos_gamma=nlos.gamma,
-                                  lowest_joint=lowest_joint,
-                                  max_iter=self.SEPARATION_ITERATIONS)
+                                  lowest_joint=lowest_joint)
 
     # -- the pieces -----------------------------------------------------------------------
     def link_sigma(self, measurements):
@@ -488,23 +487,20 @@ class Integrity:
         all the ranges, as rivals. Only when the consistency checks set a tag-anchor link
         aside (``kept`` as :meth:`consistency` returns it): with every link clear the
         likelihood peaks once near the estimate, up to the folds and mirrors weighed anyway.
+        The fits use the tag-anchor ranges, all side by side
+        (:meth:`ChainMethod.refine_links`); the rivals are weighed on everything measured.
         Returns a list of postures (p, 3), metres.
         """
         ranges = measurements.ranges
         measured = np.isfinite(ranges)
         if not (measured & ~kept[0]).any():
             return []
-        noise = type(self.noise)(self.link_sigma(measurements), self.noise.tag_sigma,
-                                 self.noise.pitch_sigma, self.noise.slew_sigma)
-        fits = []
-        for k in np.flatnonzero(measured.any(axis=1)):
-            without = ranges.copy()
-            without[k] = np.nan
-            residuals = Residuals(self.model, measurements.with_ranges(without), noise)
-            posture = self._peaks.refine(joints, residuals)[0]
-            if np.all(np.isfinite(posture)):
-                fits.append(posture)
-        return fits
+        heard = np.flatnonzero(measured.any(axis=1))
+        masks = np.ones((heard.size,) + ranges.shape, dtype=bool)
+        masks[np.arange(heard.size), heard] = False
+        postures = self._peaks.refine_links(joints, ranges, self.link_sigma(measurements),
+                                            masks, self.SEPARATION_ROUNDS)
+        return [posture for posture in postures if np.all(np.isfinite(posture))]
 
     def _near(self, joint_std):
         """Per joint, metres: alternatives closer than this do not matter (p,)."""

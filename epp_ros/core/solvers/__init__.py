@@ -16,13 +16,14 @@
 from .block_arrow import damped_step, eliminate, least_squares, normal_equations
 from .edm import (align_to_known, centering_matrix, classical_mds, double_centre, project_edm_cone,
                   rank_penalty, refine_stress, squared_distances, symmetric_eigh)
-from .levenberg_marquardt import (levenberg_marquardt, LevenbergMarquardtResult,
-                                  marquardt_step)
+from .levenberg_marquardt import (levenberg_marquardt, levenberg_marquardt_batch,
+                                  LevenbergMarquardtResult, marquardt_step)
 from .multilateration import cold_start_guess, intersect_spheres, srls
 from .nedm import nearest_edm, NearestEDMResult, project_constrained_edm, ProjectionResult
 from .sdp import SDPLocalizer
 
-__all__ = ['levenberg_marquardt', 'LevenbergMarquardtResult', 'marquardt_step',
+__all__ = ['levenberg_marquardt', 'levenberg_marquardt_batch', 'LevenbergMarquardtResult',
+           'marquardt_step',
            'normal_equations', 'eliminate', 'damped_step', 'least_squares', 'symmetric_eigh',
            'squared_distances', 'centering_matrix', 'double_centre', 'project_edm_cone',
            'rank_penalty', 'classical_mds', 'align_to_known', 'refine_stress', 'srls',

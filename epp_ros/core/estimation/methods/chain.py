@@ -43,7 +43,8 @@ from epp_ros.core.model.measurements import Residuals, SensorNoise, wrap_angle
 from epp_ros.core.model.nlos import NlosMixture
 from epp_ros.core.model.noise import DEFAULT_NOISE
 from epp_ros.core.model.plane import fit_slew, to_plane
-from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt
+from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt, \
+    levenberg_marquardt_batch
 import numpy as np
 
 __all__ = ['ChainMethod', 'Fit', 'SearchExhausted', 'angles_from_joints', 'canonical_angles',
@@ -339,6 +340,69 @@ class ChainMethod:
         fit = self.fit(np.r_[slew, pitches], residuals, max_iter)
         psi = canonical_angles(fit.psi, self.model.pivot_offset)
         return self.model.forward_kinematics(psi[0], psi[1:]), fit
+
+    def refine_links(self, joints, ranges, sigma, masks, rounds):
+        """
+        Fit the frame from ``joints`` on several subsets of its tag-anchor ranges at once.
+
+        The chain's loss on the ranges alone (the NLOS mixture, the ground), each subset
+        its own problem, all side by side (:func:`levenberg_marquardt_batch`): the integrity
+        checks' solution separation, a fit per tag left out.
+
+        Parameters
+        ----------
+        joints : ndarray, shape (p, 3)
+            The start, metres.
+        ranges : ndarray, shape (p, m)
+            Tag-anchor ranges (NaN unmeasured), metres.
+        sigma : ndarray, shape (p, m)
+            Their standard deviations, metres.
+        masks : ndarray of bool, shape (b, p, m)
+            The ranges each fit uses.
+        rounds : int
+            Trial steps per fit.
+
+        Returns
+        -------
+        postures : ndarray, shape (b, p, 3)
+            Where each fit stopped, metres.
+
+        """
+        model = self.model
+        used = np.asarray(masks, dtype=bool) & np.isfinite(ranges)
+        measured = np.where(used, ranges, 0.0)
+        link_loss = self.nlos.bind(sigma)
+
+        def evaluate(psi):
+            joints = model.forward_kinematics(psi[:, 0], psi[:, 1:])               # (b, p, 3)
+            offset = joints[:, :, None, :] - model.anchors                      # (b, p, m, 3)
+            distance = np.linalg.norm(offset, axis=-1)
+            excess = np.where(used, (measured - distance) / sigma, 0.0)
+            cost, slope, _ = link_loss(excess)
+            depth = np.maximum(self.lowest_joint - joints[..., 2], 0.0) / self.GROUND_SIGMA
+            total = np.where(used, cost, 0.0).sum(axis=(1, 2)) + 0.5 * np.sum(depth ** 2, 1)
+            unit = offset / np.maximum(distance, 1e-12)[..., None]
+            return total, (excess, np.where(used, slope, 0.0), unit, depth)
+
+        def normal_equations(psi, state):
+            excess, slope, unit, depth = state
+            jacobian = model.joint_jacobian(psi[:, 0], psi[:, 1:])           # (b, p, 3, p+1)
+            rows = -np.einsum('bkjc,bkcq->bkjq', unit, jacobian) / sigma[..., None]
+            # IRLS curvature slope / excess: 1 for Gaussian rows, small on a blocked link.
+            large = np.abs(excess) > 1.0
+            ratio = np.clip(slope / np.where(large, excess, 1.0), 1e-3, 1.0)
+            weights = np.where(used, np.where(large, ratio, 1.0), 0.0)
+            normal = np.einsum('bkjq,bkj,bkjr->bqr', rows, weights, rows)
+            gradient = np.einsum('bkjq,bkj->bq', rows, slope)
+            sinking = jacobian[:, :, 2, :] * ((depth > 0) / self.GROUND_SIGMA)[..., None]
+            normal += np.einsum('bkq,bkr->bqr', sinking, sinking)
+            gradient -= np.einsum('bkq,bk->bq', sinking, depth)
+            return normal, gradient
+
+        slew, pitches = angles_from_joints(model, joints)
+        start = np.tile(np.r_[slew, pitches], (used.shape[0], 1))
+        psi, _ = levenberg_marquardt_batch(start, evaluate, normal_equations, rounds=rounds)
+        return model.forward_kinematics(psi[:, 0], psi[:, 1:])
 
     def cost(self, psi, residuals):
         """Return the fitted loss at angles ``psi`` (p + 1,) on a :class:`Residuals`."""

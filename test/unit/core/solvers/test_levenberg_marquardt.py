@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """The one Levenberg–Marquardt loop: known minima, its stopping rules, its hooks."""
-from epp_ros.core.solvers import levenberg_marquardt, marquardt_step
+from epp_ros.core.solvers import levenberg_marquardt, levenberg_marquardt_batch, marquardt_step
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -113,3 +113,47 @@ def test_the_ridge_holds_still_a_parameter_no_residual_sees():
     fit = levenberg_marquardt(np.array([0.0, 5.0]), unseen, normal_equations, max_iter=20,
                               tol=1e-12, step=marquardt_step(ridge=1e-9))
     np.testing.assert_allclose(fit.x, [2.0, 5.0], atol=1e-9)
+
+
+def test_the_batch_finds_each_problems_minimum_by_the_same_schedule():
+    """Side by side, each problem reaches its own minimum; a start at one stays there."""
+    rng = np.random.default_rng(5)
+    anchors = rng.uniform(-10.0, 10.0, (6, 3))
+    truths = rng.uniform(-3.0, 3.0, (4, 3))
+    ranges = np.linalg.norm(anchors - truths[:, None], axis=2) + rng.normal(0.0, 0.05, (4, 6))
+
+    def batch_state(x):
+        offset = x[:, None, :] - anchors
+        distance = np.linalg.norm(offset, axis=2)
+        r = distance - ranges
+        return 0.5 * np.sum(r ** 2, axis=1), (r, offset / distance[..., None])
+
+    def batch_normal(x, state):
+        r, jacobian = state
+        return (np.einsum('bji,bjk->bik', jacobian, jacobian),
+                np.einsum('bji,bj->bi', jacobian, r))
+
+    starts = np.zeros((4, 3))
+    x, cost = levenberg_marquardt_batch(starts, batch_state, batch_normal, rounds=30)
+    for b in range(4):
+        one = least_squares(lambda y: np.linalg.norm(anchors - y, axis=1) - ranges[b],
+                            starts[b], method='lm', xtol=1e-15, ftol=1e-15)
+        np.testing.assert_allclose(x[b], one.x, atol=1e-8)
+        assert abs(cost[b] - one.cost) <= 1e-12
+    again, cost_again = levenberg_marquardt_batch(x, batch_state, batch_normal, rounds=5)
+    np.testing.assert_allclose(again, x, atol=1e-12)
+    assert np.all(cost_again <= cost)
+
+
+def test_a_batch_problem_that_cannot_improve_keeps_its_start():
+    """A problem whose every step raises the cost (a NaN cost, too) keeps its start."""
+    def batch_state(x):
+        cost = np.where(np.arange(len(x)) == 0, np.sum((x - 1.0) ** 2, axis=1), np.nan)
+        return cost, (x,)
+
+    def batch_normal(x, state):
+        return np.broadcast_to(2.0 * np.eye(2), (len(x), 2, 2)), 2.0 * (x - 1.0)
+
+    x, cost = levenberg_marquardt_batch(np.zeros((2, 2)), batch_state, batch_normal, rounds=3)
+    np.testing.assert_allclose(x[0], [1.0, 1.0], atol=1e-6)
+    np.testing.assert_array_equal(x[1], [0.0, 0.0])
