@@ -26,6 +26,10 @@ Suites:
             sustained with no frame lost and none answered later than 100 ms.
   bags      A synthesised 60 s bag: `epp_bag eval` frames/s, and `epp_bag play --fast`
             through the live estimator node, frames/s and frames lost.
+  controller  The node pinned to one core that a busy process shares (a controller's
+            budget), the feeder on another, at 10 Hz for --controller-seconds (default
+            600) per method (default cepp): latency p50, p90, p99, max, frames
+            unanswered. Not default.
   paper     The seed paper's experiments side by side with its figures, every method
             including the baselines (SDP needs cvxpy): RMSE (mean and RMS) vs noise with
             the CRLB, Table 1, Table 3 (NLOS), xie3dim with the authors' variants (EMBED's
@@ -112,6 +116,11 @@ def _latency(args):
     return experiments.latency_suite(_methods(args), args.latency_seconds, args.seed)
 
 
+def _controller(args):
+    return experiments.controller_suite(args.methods or ['cepp'], args.controller_seconds,
+                                        args.seed)
+
+
 def _bags(args):
     return experiments.bags_suite(_methods(args), args.seed)
 
@@ -167,6 +176,7 @@ SUITES = {
     'tracking': Suite(_tracking, default=True, angles=True),
     'latency': Suite(_latency, default=True, node=True),
     'bags': Suite(_bags, default=True, node=True),
+    'controller': Suite(_controller, node=True),
     'paper': Suite(_paper, angles=True),
     'integrity': Suite(_integrity),
     'driver': Suite(_driver),
@@ -195,6 +205,8 @@ def parser():
                         help='tracking duration; integrity: seconds per stream')
     result.add_argument('--latency-seconds', type=float, default=5.0,
                         help='latency: seconds per rate')
+    result.add_argument('--controller-seconds', type=float, default=600.0,
+                        help='controller: seconds per method (default 600)')
     result.add_argument('--seed', type=int, default=0)
     result.add_argument('--seeds', type=integer(1, 1000), default=2,
                         help='field: runs per case; calibration: pumps (default 2)')

@@ -169,6 +169,28 @@ class LatencyReport:
 
 
 @dataclass
+class ControllerRow:
+    """One method's node on a shared core: latency percentiles (ms), frames unanswered."""
+
+    method: str
+    frames: int
+    p50_ms: float
+    p90_ms: float
+    p99_ms: float
+    max_ms: float
+    unanswered: int
+
+
+@dataclass
+class ControllerReport:
+    """The node on one shared core at 10 Hz (``python3 dev.py bench controller``)."""
+
+    seconds: float
+    rows: list                  #: :class:`ControllerRow`
+    suite: str = 'controller'
+
+
+@dataclass
 class BagsRow:
     """One method on a bag: offline evaluation and fast replay through the node."""
 
@@ -620,6 +642,25 @@ def latency_suite(methods, seconds, seed):
     frames = [RangeNoise(sigma=0.1).apply(model.ranges(j), rng)[0]
               for j in trajectory.joints[:2000]]
     return LatencyReport(seconds, [_latency_row(method, frames, seconds) for method in methods])
+
+
+def controller_suite(methods, seconds, seed):
+    """Each method's node pinned to a core a busy process shares, fed at 10 Hz for ``seconds``."""
+    from benchmarks.node_bench import pinned_latency
+    model = truck_pump()
+    # Frames are picked by wall time since node_bench's import: longer than every run,
+    # they never wrap round to a jump in the motion.
+    duration = len(methods) * (seconds + 60.0) + 60.0
+    trajectory = working_cycle(model, duration, 10.0, rng=np.random.default_rng(seed))
+    rng = np.random.default_rng(seed + 1)
+    frames = [RangeNoise(sigma=0.1).apply(model.ranges(j), rng)[0] for j in trajectory.joints]
+    rows = []
+    for method in methods:
+        latencies, lost = pinned_latency(method, frames, 10.0, seconds)
+        p50, p90, p99 = (1e3 * float(np.percentile(latencies, q)) for q in (50, 90, 99))
+        rows.append(ControllerRow(method, latencies.size + lost, p50, p90, p99,
+                                  1e3 * float(latencies.max()), lost))
+    return ControllerReport(seconds, rows)
 
 
 def _bags_row(method, bag, config, frames):

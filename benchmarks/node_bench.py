@@ -30,7 +30,8 @@ import rclpy
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-__all__ = ['measure_latency', 'parameter_response', 'sustained_rate', 'replay_rate']
+__all__ = ['measure_latency', 'parameter_response', 'pinned_latency', 'sustained_rate',
+           'replay_rate']
 
 
 class _Feeder(Node):
@@ -57,12 +58,13 @@ class _Feeder(Node):
         self.publisher.publish(message)
 
 
-def _with_estimator(method, work):
+def _with_estimator(method, work, core=None):
     """
     Run ``work(feeder)`` against a fresh posture_estimator process.
 
     The process runs on a domain of its own, set in this process's environment while
-    ``work`` runs (the estimator and any player ``work`` starts inherit it).
+    ``work`` runs (the estimator and any player ``work`` starts inherit it). With a
+    ``core``, the estimator runs on that CPU alone (before its DDS threads start).
     """
     config = default_config_path()
     names = load_pump_config(config).link_names
@@ -72,6 +74,8 @@ def _with_estimator(method, work):
     saved = os.environ.get('ROS_DOMAIN_ID')
     os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 100)
     estimator = subprocess.Popen(args)
+    if core is not None:
+        os.sched_setaffinity(estimator.pid, {core})
     rclpy.init()
     feeder = _Feeder(names)
     try:
@@ -131,6 +135,36 @@ def measure_latency(method, frames, rate, seconds):
         lost = _feed(feeder, frames, rate, int(rate * seconds))
         return np.array(list(feeder.answered.values())), lost
     return _with_estimator(method, work)
+
+
+def pinned_latency(method, frames, rate, seconds, core=0):
+    """
+    :func:`measure_latency` with the estimator on one core that a busy process shares.
+
+    A controller-class budget: the node gets half of one core (the scheduler shares it
+    with a process that never sleeps), the feeder runs on the other cores. Returns the
+    latencies (s) and the frames not answered.
+    """
+    others = os.sched_getaffinity(0) - {core}
+    if not others:
+        raise RuntimeError('pinned_latency needs two cores: one for the node, one to feed it')
+    saved = os.sched_getaffinity(0)
+    load = subprocess.Popen([sys.executable, '-c', 'while True: pass'])
+    try:
+        os.sched_setaffinity(load.pid, {core})
+        os.sched_setaffinity(0, others)
+
+        def work(feeder):
+            _feed(feeder, frames, 10.0, 10)              # warm start and DDS settle
+            feeder.sent.clear()
+            feeder.answered.clear()
+            lost = _feed(feeder, frames, rate, int(rate * seconds))
+            return np.array(list(feeder.answered.values())), lost
+        return _with_estimator(method, work, core)
+    finally:
+        load.kill()
+        load.wait()
+        os.sched_setaffinity(0, saved)
 
 
 #: Valid live changes sent by :func:`parameter_response`: (name, values it cycles through).

@@ -30,9 +30,9 @@ import subprocess
 
 from benchmarks import (calibration_bench, driver_bench, field_bench, fuzz_bench, integrity_bench,
                         soak_bench, speed_bench)
-from benchmarks.experiments import (BagsReport, LatencyReport, OTHER_POSTURE, PAPER_TABLE1,
-                                    PAPER_TABLE3, PaperReport, PUBLISHED_NAMES, TABLE1_ETA,
-                                    TrackingReport, Xie3dimReport)
+from benchmarks.experiments import (BagsReport, ControllerReport, LatencyReport,
+                                    OTHER_POSTURE, PAPER_TABLE1, PAPER_TABLE3, PaperReport,
+                                    PUBLISHED_NAMES, TABLE1_ETA, TrackingReport, Xie3dimReport)
 from epp_ros.core.simulation import XIE3DIM
 import numpy as np
 
@@ -161,6 +161,20 @@ def latency_markdown(report):
     lines += [f'| {row.method} | {row.parameter_p99_ms:.1f} | {row.parameter_max_ms:.1f} | '
               f'{row.parameter_frames_p99_ms:.1f} | {row.parameter_lost} |'
               for row in report.rows]
+    return '\n'.join(lines)
+
+
+def controller_markdown(report):
+    """Format a :class:`~benchmarks.experiments.ControllerReport`."""
+    lines = [f'### posture_estimator on one core shared with a busy process, 10 Hz for '
+             f'{report.seconds:g} s: uwb/ranges publish -> arm_posture receive', '',
+             '| method | frames | p50 [ms] | p90 | p99 | max | unanswered |',
+             '|---|---|---|---|---|---|---|']
+    lines += [f'| {row.method} | {row.frames} | {row.p50_ms:.1f} | {row.p90_ms:.1f} | '
+              f'{row.p99_ms:.1f} | {row.max_ms:.1f} | {row.unanswered} |'
+              for row in report.rows]
+    lines += ['', 'Unanswered: no posture within 3 s of the last frame (refused frames '
+              'publish none, and count here).']
     return '\n'.join(lines)
 
 
@@ -669,6 +683,7 @@ MARKDOWN = {
     Xie3dimReport: xie3dim_markdown,
     TrackingReport: tracking_markdown,
     LatencyReport: latency_markdown,
+    ControllerReport: controller_markdown,
     BagsReport: bags_markdown,
     PaperReport: paper_markdown,
     integrity_bench.IntegrityReport: integrity_markdown,
