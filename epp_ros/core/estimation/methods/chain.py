@@ -345,9 +345,8 @@ class ChainMethod:
         """
         Fit the frame from ``joints`` on several subsets of its tag-anchor ranges at once.
 
-        The chain's loss on the ranges alone (the NLOS mixture, the ground), each subset
-        its own problem, all side by side (:func:`levenberg_marquardt_batch`): the integrity
-        checks' solution separation, a fit per tag left out.
+        The integrity checks' solution separation: a fit per tag left out, all from the
+        estimate (:meth:`fit_links`).
 
         Parameters
         ----------
@@ -366,6 +365,38 @@ class ChainMethod:
         -------
         postures : ndarray, shape (b, p, 3)
             Where each fit stopped, metres.
+
+        """
+        slew, pitches = angles_from_joints(self.model, joints)
+        start = np.tile(np.r_[slew, pitches], (len(masks), 1))
+        return self.fit_links(start, ranges, sigma, masks, rounds)[0]
+
+    def fit_links(self, psi, ranges, sigma, masks, rounds):
+        """
+        Fit the frame's tag-anchor ranges from many starts at once, each on its own links.
+
+        The chain's loss on the ranges alone (the NLOS mixture, the ground), each start
+        its own problem, all side by side (:func:`levenberg_marquardt_batch`).
+
+        Parameters
+        ----------
+        psi : ndarray, shape (b, p + 1)
+            The starts: slew and pitches, radians.
+        ranges : ndarray, shape (p, m)
+            Tag-anchor ranges (NaN unmeasured), metres.
+        sigma : ndarray, shape (p, m)
+            Their standard deviations, metres.
+        masks : ndarray of bool, shape (b, p, m)
+            The ranges each fit uses.
+        rounds : int
+            Trial steps per fit.
+
+        Returns
+        -------
+        postures : ndarray, shape (b, p, 3)
+            Where each fit stopped, metres.
+        cost : ndarray, shape (b,)
+            The loss there.
 
         """
         model = self.model
@@ -399,10 +430,8 @@ class ChainMethod:
             gradient -= np.einsum('bkq,bk->bq', sinking, depth)
             return normal, gradient
 
-        slew, pitches = angles_from_joints(model, joints)
-        start = np.tile(np.r_[slew, pitches], (used.shape[0], 1))
-        psi, _ = levenberg_marquardt_batch(start, evaluate, normal_equations, rounds=rounds)
-        return model.forward_kinematics(psi[:, 0], psi[:, 1:])
+        psi, cost = levenberg_marquardt_batch(psi, evaluate, normal_equations, rounds=rounds)
+        return model.forward_kinematics(psi[:, 0], psi[:, 1:]), cost
 
     def cost(self, psi, residuals):
         """Return the fitted loss at angles ``psi`` (p + 1,) on a :class:`Residuals`."""

@@ -98,6 +98,10 @@ class FieldCEPP(CEPP):
     SEARCH_SLEWS = 24
     SEARCH_PITCHES = 36
     SEARCH_STARTS = 3
+    #: Cold search: trial steps of each slew's chain climbing the likelihood for the
+    #: integrity checks, and the other peaks kept at most (:meth:`_screened_peaks`).
+    SCREEN_ROUNDS = 8
+    SCREEN_PEAKS = 8
     #: A cold search's other fit further than this from the best (metres) is an alternative;
     #: a start of the search nearer than ``SAME_START`` to a fit found is not solved from.
     ALTERNATIVE_DISTANCE = 0.5
@@ -227,7 +231,8 @@ class FieldCEPP(CEPP):
             return self._refolded(measurements, joints, info) if warm else (joints, info)
         fits = [(self._fit_cost(joints, measurements.ranges), joints, info)]
         iterations = dict.fromkeys(('iterations', 'inner_iterations'), 0)
-        for start in [None] + self._cold_starts(measurements.ranges):
+        beam = self._beam(measurements.ranges)
+        for start in [None] + self._cold_starts(measurements.ranges, beam):
             if start is not None and any(np.abs(start - fit[1]).max() < self.SAME_START
                                          for fit in fits):
                 continue                # a start near a fit found ends there too
@@ -240,7 +245,9 @@ class FieldCEPP(CEPP):
                 fits.append((self._fit_cost(found, measurements.ranges), found, found_info))
         _, joints, info = min(fits, key=lambda fit: fit[0])     # the first of equals
         info = dict(info, searched=True, **iterations)
-        info['alternatives'] = [other for _, other, _ in fits if other is not joints]
+        others = [other for _, other, _ in fits if other is not joints]
+        info['alternatives'] = others + self._screened_peaks(
+            measurements.ranges, beam, [joints] + others)
         return joints, info
 
     def _refolded(self, measurements, joints, info):
@@ -334,13 +341,45 @@ class FieldCEPP(CEPP):
         excess = (ranges[measured] - self.model.ranges(joints)[measured]) / sigma
         return float(np.sum(self.nlos.loss(excess, sigma)[0]))
 
-    def _cold_starts(self, ranges):
-        """Return the best postures (k, p, 3) of the chain's beam search (cold-search starts)."""
+    def _beam(self, ranges):
+        """Return each slew of the beam search with its best chain: slews (s,), psi (s, p + 1)."""
         sigma = np.hypot(self.sigma, self.eta * np.nan_to_num(ranges))
         slews = np.linspace(-np.pi, np.pi, self.SEARCH_SLEWS, endpoint=False)
         pitches, costs = grow_chains(self.model, Measurements.ranges_only(ranges), sigma,
                                      self.nlos, slews, self.lowest_joint, width=4,
                                      candidates=self.SEARCH_PITCHES)
         order = np.argsort(costs[:, 0])
-        best = order[np.isfinite(costs[order, 0])][:self.SEARCH_STARTS]
-        return list(self.model.forward_kinematics(slews[best], pitches[best, 0]))
+        best = order[np.isfinite(costs[order, 0])]
+        return np.c_[slews[best], pitches[best, 0]]
+
+    def _cold_starts(self, ranges, beam=None):
+        """Return the best postures (k, p, 3) of the chain's beam search (cold-search starts)."""
+        psi = (self._beam(ranges) if beam is None else beam)[:self.SEARCH_STARTS]
+        return list(self.model.forward_kinematics(psi[:, 0], psi[:, 1:]))
+
+    def _screened_peaks(self, ranges, beam, kept):
+        """
+        Return the likelihood's other peaks that the beam's chains climb to (rivals).
+
+        Every slew's best chain takes ``SCREEN_ROUNDS`` Levenberg–Marquardt steps on the
+        ranges, all side by side (``ChainMethod.fit_links``); the fits further than
+        ``ALTERNATIVE_DISTANCE`` from ``kept`` (postures (k, p, 3)) and from each other,
+        likeliest first, at most ``SCREEN_PEAKS``. CEPP solves from a few starts only:
+        these are for the integrity checks to weigh, as the chain's search gives its own.
+        """
+        if not len(beam):
+            return []
+        sigma = np.hypot(self.sigma, self.eta * np.nan_to_num(ranges))
+        masks = np.ones((len(beam),) + ranges.shape, dtype=bool)
+        postures, costs = self._finish.fit_links(beam, ranges, sigma, masks,
+                                                 self.SCREEN_ROUNDS)
+        found = list(kept)
+        peaks = []
+        for k in np.argsort(costs):
+            if len(peaks) == self.SCREEN_PEAKS or not np.isfinite(costs[k]):
+                break
+            if all(np.abs(postures[k] - other).max() > self.ALTERNATIVE_DISTANCE
+                   for other in found):
+                found.append(postures[k])
+                peaks.append(postures[k])
+        return peaks

@@ -13,15 +13,19 @@
 # limitations under the License.
 
 """The paper's NEDM estimators (methods.epp) and our field CEPP (methods.field_cepp)."""
+from pathlib import Path
+
 from epp_ros.core import PostureEstimator
 from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMethod
 from epp_ros.core.estimation.methods.epp import CEPP, EPP1, EPP2
 from epp_ros.core.estimation.methods.field_cepp import FieldCEPP
 from epp_ros.core.model.measurements import Measurements
-from epp_ros.core.simulation.simulate import truck_pump
+from epp_ros.core.simulation.simulate import truck_pump, xie3dim
 import numpy as np
 import pytest
+import yaml
 
+DATA = Path(__file__).resolve().parents[4] / 'data'
 MODEL = truck_pump()
 TRUTH = MODEL.forward_kinematics(0.4, np.radians([50.0, 25.0, 5.0, -20.0, -45.0]))
 #: Last frame's posture: the warm start.
@@ -353,3 +357,36 @@ def test_fold_search_turns_a_tip_stuck_at_the_wrong_pitch():
     assert any(np.linalg.norm(other[-1] - TRUTH[-1]) > 5.0 for other in info['alternatives'])
     stuck, info = FieldCEPP(MODEL, fold_search=False).solve(frame(False), wrong, warm=True)
     assert np.linalg.norm(stuck[-1] - TRUTH[-1]) > 5.0 and 'refolded' not in info
+
+
+def test_a_cold_search_hands_the_checks_the_other_peaks_its_chains_climb_to():
+    """
+    Every slew's chain climbs the likelihood: its other peaks are weighed as rivals.
+
+    CEPP solves from a few starts; the frame of ``xie3dim_far_frame.yaml`` was then
+    published 4 m off at a predicted RMSE of 1.2 m, no rival in sight. With the peaks the
+    beam's chains climb to, one within the ambiguity odds makes it refused.
+    """
+    model, truth = xie3dim()
+    ranges = np.array(yaml.safe_load((DATA / 'xie3dim_far_frame.yaml').read_text())['ranges'])
+    estimator = PostureEstimator(model, 'cepp', sigma=1.0, learn_noise=False)
+    estimator.update(ranges)
+    diagnostics = estimator.last_diagnostics
+    error = np.sqrt(np.mean(np.sum((diagnostics['estimate'] - truth) ** 2, axis=1)))
+    assert error > 3.0 * diagnostics['predicted_rmse']
+    assert not diagnostics.valid and diagnostics['status'] == 'ambiguous'
+    blind = PostureEstimator(model, 'cepp', sigma=1.0, learn_noise=False)
+    blind._solver._screened_peaks = lambda *args: []
+    blind.update(ranges)
+    assert blind.last_diagnostics.valid            # what the screen changes
+
+    method, joints = estimator._solver, diagnostics['estimate']
+    beam = method._beam(ranges)
+    peaks = method._screened_peaks(ranges, beam, [joints])
+    assert 0 < len(peaks) <= method.SCREEN_PEAKS
+    found = [joints] + peaks                        # apart from the fit and each other
+    assert all(np.abs(a - b).max() > method.ALTERNATIVE_DISTANCE
+               for i, a in enumerate(found) for b in found[:i])
+    costs = [method._fit_cost(peak, ranges) for peak in peaks]
+    assert np.all(np.diff(costs) >= -1e-9)          # likeliest first
+    assert method._screened_peaks(ranges, beam[:0], [joints]) == []
