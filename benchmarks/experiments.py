@@ -30,7 +30,7 @@ import time
 from typing import NamedTuple
 
 from epp_ros.core import BoomModel, METHODS, PostureEstimator
-from epp_ros.core.estimation import frame_rmse, pooled_rmse, wrong_frames
+from epp_ros.core.estimation import frame_rmse, IntegrityLimits, pooled_rmse, wrong_frames
 from epp_ros.core.estimation.methods import angles_from_joints, CEPP, ChainMethod
 from epp_ros.core.model import (crlb, fit_slew, from_plane, Measurements, Residuals, SensorNoise,
                                 to_plane)
@@ -125,7 +125,20 @@ class Xie3dimReport:
     rows: list                  #: :class:`MethodRow`
     #: Largest |slew - true slew| of the variants solved in the true plane, radians.
     truth_plane_slew_error_rad: float | None = None
+    ambiguity: list = field(default_factory=list)   #: :class:`AmbiguityRow`
     suite: str = 'xie3dim'
+
+
+@dataclass
+class AmbiguityRow:
+    """One method at one ``ambiguity_odds`` on the xie3dim frames: what it publishes."""
+
+    method: str
+    odds: float
+    published_fraction: float
+    valid_ratio: float          #: RMSE over the frames published / the CRLB
+    wrong_valid: int            #: published while more than 1 m off
+    confidently_wrong: int      #: of those, with a predicted RMSE under a third of the error
 
 
 @dataclass
@@ -179,6 +192,8 @@ class ControllerRow:
     p99_ms: float
     max_ms: float
     unanswered: int
+    refused: int                #: the node's count of frames it solved but did not publish
+    received: int               #: the node's count of frames received (warm-up included)
 
 
 @dataclass
@@ -560,11 +575,45 @@ def xie3dim_experiment(variants, trials, seed, options=None):
                          max(planes) if planes else None)
 
 
+#: The ambiguity odds of the xie3dim suite's sweep (``IntegrityLimits.ambiguity_odds``,
+#: by default 1000).
+AMBIGUITY_ODDS = (10.0, 30.0, 100.0, 1000.0)
+
+
+def ambiguity_sweep(methods, trials, seed):
+    """
+    Return what each method publishes on the xie3dim frames at each of :data:`AMBIGUITY_ODDS`.
+
+    Each method with its defaults (``cepp``: the field CEPP), told sigma, a cold start per
+    frame: how many frames the data decide at each odds, and what that costs in frames
+    published while wrong.
+    """
+    model, truth = xie3dim()
+    frames = xie3dim_frames(model, truth, trials, seed)
+    bound = crlb(model, *angles_from_joints(model, truth), XIE3DIM_SIGMA).rmse
+    rows = []
+    for method, odds in itertools.product(methods, AMBIGUITY_ODDS):
+        estimator = PostureEstimator(model, method, sigma=XIE3DIM_SIGMA, learn_noise=False,
+                                     integrity=IntegrityLimits(ambiguity_odds=odds))
+        summary = summarize(*run_frames(estimator, frames, [truth] * trials, cold=True))
+        rows.append(AmbiguityRow(method, odds, summary.published_fraction,
+                                 summary.valid_rmse_m / bound, summary.wrong_valid,
+                                 summary.confidently_wrong))
+    return rows
+
+
 def xie3dim_suite(methods, trials, seed, options):
-    """Run ``dev.py bench xie3dim``: each method as published (see :func:`xie3dim_experiment`)."""
+    """
+    Run ``dev.py bench xie3dim``: each method as published (see :func:`xie3dim_experiment`).
+
+    The chain and CEPP asked for also run at each ambiguity odds (:func:`ambiguity_sweep`).
+    """
     variants = [Variant(method, method, published=PUBLISHED_METHODS.get(method))
                 for method in methods]
-    return xie3dim_experiment(variants, trials, seed, options)
+    report = xie3dim_experiment(variants, trials, seed, options)
+    report.ambiguity = ambiguity_sweep([m for m in methods if m in ('chain', 'cepp')], trials,
+                                       seed)
+    return report
 
 
 def paper_xie3dim(runs, seed, methods):
@@ -656,10 +705,12 @@ def controller_suite(methods, seconds, seed):
     frames = [RangeNoise(sigma=0.1).apply(model.ranges(j), rng)[0] for j in trajectory.joints]
     rows = []
     for method in methods:
-        latencies, lost = pinned_latency(method, frames, 10.0, seconds)
+        latencies, lost, counts = pinned_latency(method, frames, 10.0, seconds)
         p50, p90, p99 = (1e3 * float(np.percentile(latencies, q)) for q in (50, 90, 99))
         rows.append(ControllerRow(method, latencies.size + lost, p50, p90, p99,
-                                  1e3 * float(latencies.max()), lost))
+                                  1e3 * float(latencies.max()), lost,
+                                  *((counts.get('unsolved', 0), counts['received'])
+                                    if 'received' in counts else (-1, -1))))
     return ControllerReport(seconds, rows)
 
 

@@ -19,6 +19,7 @@ import subprocess
 import sys
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray
 from epp_ros.app import contract
 from epp_ros.app.config import default_config_path, load_pump_config
 from epp_ros.nodes.messages import POSTURE_QOS, RANGES_INPUT_QOS, RANGES_QOS, to_time
@@ -137,13 +138,21 @@ def measure_latency(method, frames, rate, seconds):
     return _with_estimator(method, work)
 
 
+def _frame_counts(array):
+    """Return the estimator's frame counts of a DiagnosticArray ({} when it has none)."""
+    return {value.key[len('frames '):]: int(value.value) for status in array.status
+            if status.name.startswith('posture_estimator') for value in status.values
+            if value.key.startswith('frames ') and value.value.isdigit()}
+
+
 def pinned_latency(method, frames, rate, seconds, core=0):
     """
     :func:`measure_latency` with the estimator on one core that a busy process shares.
 
     A controller-class budget: the node gets half of one core (the scheduler shares it
     with a process that never sleeps), the feeder runs on the other cores. Returns the
-    latencies (s) and the frames not answered.
+    latencies (s), the frames not answered, and the node's own frame counts at the end
+    (``/diagnostics``: ``received``, ``published``, ``unsolved``, ...; warm-up included).
     """
     others = os.sched_getaffinity(0) - {core}
     if not others:
@@ -155,11 +164,19 @@ def pinned_latency(method, frames, rate, seconds, core=0):
         os.sched_setaffinity(0, others)
 
         def work(feeder):
+            counts = {}
+            feeder.create_subscription(DiagnosticArray, contract.DIAGNOSTICS.name,
+                                       lambda array: counts.update(_frame_counts(array)),
+                                       contract.DIAGNOSTICS.depth)
             _feed(feeder, frames, 10.0, 10)              # warm start and DDS settle
             feeder.sent.clear()
             feeder.answered.clear()
             lost = _feed(feeder, frames, rate, int(rate * seconds))
-            return np.array(list(feeder.answered.values())), lost
+            counts.clear()
+            deadline = time.perf_counter() + 5.0        # the node reports once a second
+            while not counts and time.perf_counter() < deadline:
+                rclpy.spin_once(feeder, timeout_sec=0.05)
+            return np.array(list(feeder.answered.values())), lost, counts
         return _with_estimator(method, work, core)
     finally:
         load.kill()

@@ -128,7 +128,22 @@ def xie3dim_markdown(report):
         lines.append('The variants with the plane from the truth solved in the true plane: '
                      'largest |slew - true slew| '
                      f'{report.truth_plane_slew_error_rad:.1e} rad.')
-    return '\n'.join(lines + [''] + published_xie3dim())
+    return '\n'.join(lines + [''] + published_xie3dim() + ambiguity_table(report.ambiguity))
+
+
+def ambiguity_table(rows):
+    """Return the xie3dim suite's ambiguity sweep as lines of markdown (none without rows)."""
+    if not rows:
+        return []
+    return ['', 'What the frames decide: each method with its defaults (cepp: the field CEPP), '
+            'told sigma, at each ambiguity_odds (the default 1000): a rival posture that '
+            'many times less likely than the estimate, or likelier, makes the frame '
+            'ambiguous.', '',
+            '| method | ambiguity_odds | published | valid: RMSE / CRLB | '
+            'valid > 1 m off / confidently |', '|---|---|---|---|---|',
+            *(f'| {row.method} | {row.odds:g} | {row.published_fraction:.0%} | '
+              f'{row.valid_ratio:.2f} | {row.wrong_valid} / {row.confidently_wrong} |'
+              for row in rows)]
 
 
 def tracking_markdown(report):
@@ -168,13 +183,14 @@ def controller_markdown(report):
     """Format a :class:`~benchmarks.experiments.ControllerReport`."""
     lines = [f'### posture_estimator on one core shared with a busy process, 10 Hz for '
              f'{report.seconds:g} s: uwb/ranges publish -> arm_posture receive', '',
-             '| method | frames | p50 [ms] | p90 | p99 | max | unanswered |',
-             '|---|---|---|---|---|---|---|']
+             '| method | frames | p50 [ms] | p90 | p99 | max | unanswered | the node: '
+             'received, refused |', '|---|---|---|---|---|---|---|---|']
     lines += [f'| {row.method} | {row.frames} | {row.p50_ms:.1f} | {row.p90_ms:.1f} | '
-              f'{row.p99_ms:.1f} | {row.max_ms:.1f} | {row.unanswered} |'
-              for row in report.rows]
-    lines += ['', 'Unanswered: no posture within 3 s of the last frame (refused frames '
-              'publish none, and count here).']
+              f'{row.p99_ms:.1f} | {row.max_ms:.1f} | {row.unanswered} | {row.received}, '
+              f'{row.refused} |' for row in report.rows]
+    lines += ['', 'Unanswered: no posture within 3 s of the last frame; refused frames '
+              'publish none and count here too. The counts of the node (its /diagnostics, the '
+              '10 warm-up frames included; -1: no report came) tell them apart.']
     return '\n'.join(lines)
 
 

@@ -180,6 +180,13 @@ def test_the_method_tables_score_what_a_user_gets_beside_every_frame():
     row = report.rows[0]
     assert 0.0 <= row.published_fraction <= 1.0 and row.wrong_valid >= 0
     assert f'{row.published_fraction:.0%} |' in reports.markdown(report)
+    # The sweep: the same frames at rising odds; a frame refused at lower odds stays refused.
+    sweep = report.ambiguity
+    assert [(r.method, r.odds) for r in sweep] == [('chain', odds)
+                                                   for odds in experiments.AMBIGUITY_ODDS]
+    published = [r.published_fraction for r in sweep]
+    assert published == sorted(published, reverse=True)
+    assert '| chain | 1000 |' in reports.markdown(report)
 
 
 def test_bench_refuses_tpsm_where_no_angles_are_simulated():
@@ -341,6 +348,9 @@ def test_bench_controller_runs_the_node_on_one_shared_core(capsys, monkeypatch):
     assert row['method'] == 'chain' and row['frames'] == 30
     assert 0.0 < row['p50_ms'] <= row['p90_ms'] <= row['p99_ms'] <= row['max_ms']
     assert row['unanswered'] <= 3           # a cold start's first frames can be refused
+    # The node saw every frame (and the 10 warm-up ones); what it refused published nothing.
+    assert row['received'] == row['frames'] + 10
+    assert 0 <= row['refused'] and row['unanswered'] <= row['refused']
     # The busy process and the estimator on core 0; this process elsewhere, then restored.
     cores = [cores for pid, cores in pinned]
     assert cores[0] == cores[2] == {0} and 0 not in cores[1]
