@@ -379,7 +379,7 @@ def evaluate(path, config, method='cepp', out=None, salvage=False, **options):
                        'be read)')
     model = config.model()
     estimator = PostureEstimator(model, method, moving_anchors=config.moving_anchor_indices,
-                                 **options)
+                                 **config.with_link_biases(options))
     run = _Evaluation(model, estimator, config)
     with _Bag(path) as bag:
         bag.connections(RANGES, TYPES[RANGES])            # there, and of the right type

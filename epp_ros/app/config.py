@@ -62,6 +62,10 @@ PUMP_PARAMETERS = {
     'pair_offsets': ([], "What each tag-anchor link adds beyond its tag's and anchor's "
                          'offsets, metres, tag-major [t0:a0, t0:a1, ...] (empty: none); '
                          'calibrated.'),
+    'link_offset_std': ([], "What a calibration leaves unknown of each link's offset (tag + "
+                            'anchor + own), metres, as pair_offsets (empty: link_bias_std '
+                            'for every link); where given, the estimator weighs each link by '
+                            'it instead of link_bias_std. Calibrated.'),
     'body_anchors': ([], 'Anchors on the truck body, by name: they define the truck frame '
                          'and calibration holds them; the others (outriggers) may move with '
                          'each set-up (empty: the first anchor).'),
@@ -107,6 +111,8 @@ class PumpConfig:
     tag_offsets: tuple = None       #: metres each tag adds to its ranges; None: zeros
     body_anchors: tuple = None      #: names of the anchors on the truck body; None: the first
     pair_offsets: tuple = None      #: metres each link adds beyond its devices', tag-major
+    #: metres, what is unknown of each link's offset, tag-major; None: ``link_bias_std``
+    link_offset_std: tuple = None
 
     @property
     def body_anchor_indices(self):
@@ -125,6 +131,18 @@ class PumpConfig:
         """Return the :class:`BoomModel` of this pump, with its device range offsets."""
         return BoomModel(self.arm_lengths, self.base, self.anchor_positions, self.pivot_offset,
                          self.anchor_offsets, self.tag_offsets, self.pair_offsets)
+
+    def with_link_biases(self, settings):
+        """
+        Return estimator settings (a dict) with each link's own bias as calibrated.
+
+        Where the description has ``link_offset_std``, it is ``link_bias_std``, one per link
+        (rows per tag); otherwise ``settings`` are returned as they are.
+        """
+        if self.link_offset_std is None:
+            return settings
+        per_link = np.reshape(self.link_offset_std, (len(self.tag_names), -1))
+        return {**settings, 'link_bias_std': per_link}
 
     @property
     def link_names(self):
@@ -336,6 +354,10 @@ def pump_config_from_parameters(values):
     tag_offsets = _offsets(get['tag_offsets'], 'tag_offsets', 'tag_names', len(tag_names))
     pair_offsets = _offsets(get['pair_offsets'], 'pair_offsets', 'tag_names x anchor_names',
                             len(tag_names) * len(anchor_names))
+    link_offset_std = _offsets(get['link_offset_std'], 'link_offset_std',
+                               'tag_names x anchor_names', len(tag_names) * len(anchor_names))
+    if link_offset_std is not None and min(link_offset_std) < 0:
+        raise ConfigError(f'link_offset_std: must be >= 0, got {_short(list(link_offset_std))}')
     body_anchors = _body_anchors(get['body_anchors'], anchor_names)
     try:
         BoomModel(arm_lengths, base, positions, pivot_offset, anchor_offsets, tag_offsets,
@@ -348,7 +370,7 @@ def pump_config_from_parameters(values):
                        get['source_anchors'], tag_ids, anchor_ids)
     return PumpConfig(frame_id, arm_lengths, base, tag_names, tag_ids, anchor_names,
                       anchor_ids, positions, sources, pivot_offset, anchor_offsets, tag_offsets,
-                      body_anchors, pair_offsets)
+                      body_anchors, pair_offsets, link_offset_std)
 
 
 def _body_anchors(values, anchor_names):

@@ -106,7 +106,9 @@ SETTINGS = {
     'lowest_joint': _told('lowest_joint', 'No joint is below this height, m (ground z = 0).',
                           -1e3, 1e3),
     'link_bias_std': _told('link_bias_std', "Std of each range's own bias left after the "
-                           'offsets (not averaged over frames), m.', 0.0, 10.0),
+                           'offsets (not averaged over frames), m; a pump description with '
+                           'link_offset_std (calibrated) gives one per link instead.', 0.0,
+                           10.0),
     'common_bias_std': _told('common_bias_std', 'Std of the bias common to all ranges left '
                              'after the offsets, m: adds to the predicted RMSE.', 0.0, 10.0),
     'bias_slope_std': _told('bias_slope_std', 'Std of the growth of that common bias with '

@@ -24,8 +24,9 @@ and luffs, fits the free anchors' positions, every tag's and anchor's range offs
 each link's own offset under a prior whose size it learns (epp_ros.core.calibration.fit), prints
 what changed with its standard deviation, and writes --out: the --config file with
 anchor_positions, anchor_offsets, tag_offsets and pair_offsets replaced, and with
-link_bias_std, common_bias_std and anchor_std set to what the calibration leaves unknown
-(the estimator counts them in its predicted stds), everything else kept, for the nodes to
+link_offset_std (each link's), link_bias_std (their RMS), common_bias_std and anchor_std
+set to what the calibration leaves unknown (the estimator weighs each link by its own and
+counts them in its predicted stds), everything else kept, for the nodes to
 start from (--params-file). The fixed anchors
 (--fixed-anchors, names or device ids, comma-separated) are those on the truck body
 (turret, cab): their configured positions define the truck frame; default: the first
@@ -563,6 +564,7 @@ def write_config(path, source_text, result):
               'anchor_offsets': result.anchor_offsets.tolist(),
               'tag_offsets': result.tag_offsets.tolist(),
               'pair_offsets': result.pair_offsets.ravel().tolist(),
+              'link_offset_std': result.link_bias_stds.ravel().tolist(),
               **result.left_unknown}
     if result.arm_length_std.any():         # fitted (--fit-arm-lengths)
         values['arm_lengths'] = result.arm_lengths.tolist()

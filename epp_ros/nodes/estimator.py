@@ -107,7 +107,7 @@ class PostureEstimatorNode(Node):
                                      **descriptor(setting))
                        for name, setting in SETTINGS.items()}
         try:
-            settings = estimator_settings(self.values)
+            settings = self.config.with_link_biases(estimator_settings(self.values))
             self.pipeline = RangePipeline(self.config, PostureEstimator(
                 self.model, moving_anchors=self.config.moving_anchor_indices, **settings))
             self.angle_samples = self._angle_samples(self.values)
@@ -190,7 +190,7 @@ class PostureEstimatorNode(Node):
             if parameter.name in SETTINGS:
                 values[parameter.name] = parameter.value
         try:
-            settings = estimator_settings(values)
+            settings = self.config.with_link_biases(estimator_settings(values))
             self._angle_samples(values)
             # A new method is built here, where a failure can still refuse the change (the
             # SDP baseline needs cvxpy); the change, once accepted, takes it.
@@ -209,7 +209,7 @@ class PostureEstimatorNode(Node):
         if not changed:
             return
         self.values.update(changed)
-        settings = estimator_settings(self.values)
+        settings = self.config.with_link_biases(estimator_settings(self.values))
         method = settings.pop('method')
         if method != self.estimator.method:
             self.pipeline.estimator = self.next_estimator

@@ -187,17 +187,27 @@ class CalibrationResult:
     nlos_duration: float = 0.0
 
     @property
+    def link_bias_stds(self):
+        """
+        Return what the calibration leaves unknown of each link's offset (p, m), metres.
+
+        The estimator's ``link_bias_std`` per link (``epp_calibrate`` writes it as
+        ``link_offset_std``). A link offset the recording does not determine counts as
+        unknown to :data:`UNKNOWN_OFFSET`.
+        """
+        return np.where(np.isfinite(self.link_offset_std),
+                        np.minimum(self.link_offset_std, UNKNOWN_OFFSET), UNKNOWN_OFFSET)
+
+    @property
     def bias_std(self):
         """
         Return what the calibration leaves unknown of the ranges' biases, metres.
 
-        (each link's own, RMS over the links; the part common to all): the estimator's
-        ``link_bias_std`` and ``common_bias_std`` for the calibrated model. A link offset
-        the recording does not determine counts as unknown to :data:`UNKNOWN_OFFSET`.
+        (each link's own, RMS over the links of :attr:`link_bias_stds`; the part common
+        to all): the estimator's ``link_bias_std`` and ``common_bias_std`` for the
+        calibrated model when told one number for every link.
         """
-        variance = np.where(np.isfinite(self.link_offset_std), self.link_offset_std,
-                            UNKNOWN_OFFSET) ** 2
-        return (float(np.sqrt(np.mean(variance))),
+        return (float(np.sqrt(np.mean(self.link_bias_stds ** 2))),
                 min(self.common_offset_std, UNKNOWN_OFFSET))
 
     @property
@@ -214,6 +224,17 @@ class CalibrationResult:
         std = np.where(np.isfinite(self.anchor_std), self.anchor_std, UNKNOWN_OFFSET)
         return {'link_bias_std': link_bias, 'common_bias_std': common_bias,
                 'anchor_std': float(min(np.max(std, initial=0.0), UNKNOWN_OFFSET))}
+
+    @property
+    def estimator_options(self):
+        """
+        Return ``PostureEstimator``'s options for the calibrated model (a dict).
+
+        :attr:`left_unknown` with ``link_bias_std`` one per link (:attr:`link_bias_stds`),
+        as posture_estimator reads the pump.yaml ``epp_calibrate`` writes:
+        ``PostureEstimator(result.model, **result.estimator_options)``.
+        """
+        return {**self.left_unknown, 'link_bias_std': self.link_bias_stds}
 
     @property
     def success(self):

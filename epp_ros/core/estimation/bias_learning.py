@@ -30,7 +30,7 @@ integrity checks count what is still unknown of it (:meth:`BiasLearner.covarianc
 Each link's own bias ``e`` does not average out over frames: a frame's estimate carries
 ``(D_perp^T D_perp)^-1 D_perp^T Sigma^-1/2 e``, so the learned one carries ``(Lambda_0 +
 Lambda)^-1 S e`` with ``S`` the frames' ``D_perp^T Sigma^-1/2`` summed (forgotten alike) over
-every link; its covariance ``link_std^2 (Lambda_0 + Lambda)^-1 S S^T (Lambda_0 +
+every link; its covariance ``(Lambda_0 + Lambda)^-1 S diag(link_std^2) S^T (Lambda_0 +
 Lambda)^-1`` is kept beside the statistical one.
 
 An anchor off the truck body (an outrigger's) may stand elsewhere than configured: set up
@@ -107,8 +107,9 @@ class BiasLearner:
         Prior standard deviation of the offset, metres.
     slope_std : float
         Prior standard deviation of the slope, metres per metre.
-    link_std : float
-        Each link's own bias, metres: the floor of what frames can tell of the common one.
+    link_std : float or array_like, shape (p, m)
+        Each link's own bias, metres (one for all, or one per link): the floor of what
+        frames can tell of the common one.
     links : int
         How many links there are (p m): the columns of ``S``.
     memory : int
@@ -150,7 +151,9 @@ class BiasLearner:
             if self.considered.any() else None
         self.prior_information = np.diag(np.where(self.fixed, 0.0, 1.0 / np.where(
             prior > 0, prior, 1.0) ** 2))
-        self.link_std = float(link_std)
+        #: Each link's own bias variance, m^2: one for all, or (links,) flat as the ranges.
+        self.link_variance = np.ravel(np.asarray(link_std, dtype=float) ** 2) \
+            if np.ndim(link_std) else float(link_std) ** 2
         self.forget = 1.0 - 1.0 / float(memory)
         self.information = np.zeros((size, size))
         self.weighted = np.zeros(size)                # information times the estimate
@@ -220,7 +223,7 @@ class BiasLearner:
     def _floor(self, statistical):
         """Return :meth:`floor` from :meth:`_statistical`'s covariance (q, q)."""
         carried = statistical @ self.through
-        return self.link_std ** 2 * carried @ carried.T
+        return (carried * self.link_variance) @ carried.T
 
     def observe(self, jacobian, sigma, residuals, distances, links, directions=None):
         """

@@ -43,7 +43,7 @@ from epp_ros.core.estimation.reacquisition import Reacquisition
 from epp_ros.core.model.bounds import RangeBiasPrior
 from epp_ros.core.model.measurements import Measurements, plausible_limits, Residuals, SensorNoise
 from epp_ros.core.model.nlos import NlosMixture
-from epp_ros.core.model.noise import DEFAULT_NOISE, NoiseModel
+from epp_ros.core.model.noise import DEFAULT_NOISE, link_bias_stds, NoiseModel
 from epp_ros.core.solvers.multilateration import cold_start_guess
 import numpy as np
 
@@ -90,7 +90,9 @@ def _integrity(model, told, limits, thresholds, moving=()):
     noise = SensorNoise(float(told['sigma']), float(told['tag_sigma']),
                         float(told['pitch_sigma']), float(told['slew_sigma']))
     nlos = NlosMixture(float(told['nlos_fraction']), float(told['nlos_gamma']))
-    bias = RangeBiasPrior(float(told['link_bias_std']), float(told['common_bias_std']),
+    links = (model.n_sections, model.n_anchors)
+    bias = RangeBiasPrior(link_bias_stds(told['link_bias_std'], links),
+                          float(told['common_bias_std']),
                           float(told['bias_slope_std']), float(told['anchor_std']), moving)
     return Integrity(model, noise, nlos, told['eta'], told['lowest_joint'], limits, thresholds,
                      bias)
@@ -143,7 +145,8 @@ class PostureEstimator:
         (tag-anchor range standard deviation, 0.1 m), ``eta`` (multiplicative range
         noise, 0), ``tag_sigma`` (tag-tag ranges; ``sigma``), ``pitch_sigma`` and
         ``slew_sigma`` (angle sensors, 0.5 deg), ``nlos_fraction`` (0.1) and ``nlos_gamma``
-        (1 m), ``lowest_joint`` (-0.5 m), ``link_bias_std`` (0.1 m), ``common_bias_std``
+        (1 m), ``lowest_joint`` (-0.5 m), ``link_bias_std`` (0.1 m; or one per link,
+        shape (p, m), as a calibration leaves each link's offset known), ``common_bias_std``
         (0.25 m) and ``bias_slope_std`` (0.01 m/m): what is not known of the ranges' biases
         once the model's offsets are taken off, each link's own and the part common to
         all, an offset and a growth with range (uncalibrated DW1000-class links: see

@@ -244,7 +244,7 @@ class Integrity:
         self.limits = limits
         self.thresholds = thresholds
         # The mixture's per-link constants, bound once where the sigmas are fixed.
-        fixed = np.ndim(noise.range_sigma) == 0 and not self.eta
+        fixed = np.ndim(noise.range_sigma) == 0 and not self.eta and np.ndim(bias.link_std) == 0
         self._link_loss = nlos.bind(np.hypot(float(noise.range_sigma), bias.link_std)) \
             if fixed else None
         self._tag_loss = nlos.bind(np.asarray(noise.tag_sigma, float))
@@ -260,7 +260,7 @@ class Integrity:
                                 measurements.ranges.shape)
         if self.eta:
             sigma = np.hypot(sigma, self.eta * np.nan_to_num(measurements.ranges))
-        if self.bias.link_std:
+        if np.any(self.bias.link_std):
             sigma = np.hypot(sigma, self.bias.link_std)
         return sigma
 
@@ -405,7 +405,7 @@ class Integrity:
                             np.where(tag_ranges, measurements.tag_ranges, np.nan),
                             measurements.pitches, measurements.slew)
         noise = self.noise
-        if self.eta or self.bias.link_std:
+        if self.eta or np.any(self.bias.link_std):
             noise = type(noise)(self.link_sigma(measurements), noise.tag_sigma,
                                 noise.pitch_sigma, noise.slew_sigma)
         residuals = Residuals(self.model, used, noise)

@@ -56,7 +56,7 @@ __all__ = ['fisher_information', 'Bound', 'crlb', 'bound_from_information',
            'posterior_information', 'posterior_crlb']
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class RangeBiasPrior:
     """
     What is not known of the biases left in the tag-anchor ranges.
@@ -67,7 +67,8 @@ class RangeBiasPrior:
     each link's own; all constant over frames. Zero: the ranges are unbiased once the
     model's offsets are taken off (the simulator's pumps). Uncalibrated DW1000-class links
     have a common part of ~0.2-0.4 m at a boom's ranges, growing by ~1 cm per metre, and
-    ~0.1 m of each link's own (``simulate.FIELD_EFFECTS['real_uwb']``).
+    ~0.1 m of each link's own (``simulate.FIELD_EFFECTS['real_uwb']``). ``link_std`` may
+    also be one per link, shape (p, m): what a calibration leaves unknown of each.
 
     An anchor in ``moving`` (off the truck body) may stand up to ``anchor_std`` (metres, per
     axis) from where configured: each of its ranges then carries ``-u . delta``, ``u`` the
@@ -82,7 +83,14 @@ class RangeBiasPrior:
 
     def __post_init__(self):
         object.__setattr__(self, 'moving', tuple(int(j) for j in self.moving))
-        for name in ('link_std', 'common_std', 'slope_std', 'anchor_std'):
+        if np.ndim(self.link_std) == 2:
+            per_link = np.array(self.link_std, dtype=float)
+            if not np.all(np.isfinite(per_link) & (per_link >= 0)):
+                raise ValueError(f'link_std: must be finite and >= 0, got {self.link_std!r}')
+            per_link.flags.writeable = False
+            object.__setattr__(self, 'link_std', per_link)
+        for name in ('link_std', 'common_std', 'slope_std', 'anchor_std')[
+                np.ndim(self.link_std) == 2:]:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float, np.integer,
                                                                  np.floating)) \
@@ -92,7 +100,7 @@ class RangeBiasPrior:
 
     def __bool__(self):
         """Whether any bias is unknown."""
-        return self.link_std > 0 or self.common_std > 0 or self.slope_std > 0 or (
+        return bool(np.any(self.link_std)) or self.common_std > 0 or self.slope_std > 0 or (
             self.anchor_std > 0 and bool(self.moving))
 
     def common_covariance(self):

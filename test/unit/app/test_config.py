@@ -16,6 +16,7 @@ from pathlib import Path
 
 from epp_ros.app.config import (ConfigError, load_pump_config, pump_config_from_parameters,
                                 PUMP_PARAMETERS, Source)
+from epp_ros.core import PostureEstimator
 import numpy as np
 import pytest
 import yaml
@@ -311,6 +312,21 @@ def test_device_offsets_are_optional_and_reach_the_model(tmp_path):
     np.testing.assert_allclose(model.link_offsets(), model.pair_offsets)
 
 
+def test_what_a_calibration_leaves_unknown_of_each_link_becomes_the_estimators():
+    values = shared_values()
+    config = pump_config_from_parameters(values)
+    settings = {'method': 'chain', 'link_bias_std': 0.1}
+    assert config.link_offset_std is None and config.with_link_biases(settings) == settings
+    values.update(link_offset_std=[0.01 + 0.001 * index for index in range(30)])
+    config = pump_config_from_parameters(values)
+    told = config.with_link_biases(settings)
+    expected = 0.01 + 0.001 * np.arange(30).reshape(5, 6)        # tag-major rows
+    np.testing.assert_allclose(told['link_bias_std'], expected)
+    assert told['method'] == 'chain' and settings['link_bias_std'] == 0.1
+    estimator = PostureEstimator(config.model(), **told)
+    np.testing.assert_allclose(estimator.integrity.bias.link_std, expected)
+
+
 @pytest.mark.parametrize('change, message', [
     ({'anchor_offsets': [0.1] * 5}, 'anchor_offsets: needs one offset per entry of '
                                     r'anchor_names \(6\) or none, got 5'),
@@ -321,6 +337,9 @@ def test_device_offsets_are_optional_and_reach_the_model(tmp_path):
     ({'tag_offsets': 0.1}, 'tag_offsets: must be a list'),
     ({'pair_offsets': [0.01] * 29}, r'pair_offsets: needs one offset per entry of tag_names x '
                                     r'anchor_names \(30\) or none, got 29'),
+    ({'link_offset_std': [0.01] * 31}, r'link_offset_std: needs one offset per entry of '
+                                       r'tag_names x anchor_names \(30\) or none, got 31'),
+    ({'link_offset_std': [0.01] * 29 + [-0.01]}, 'link_offset_std: must be >= 0'),
 ])
 def test_bad_offsets_give_one_line_naming_the_field(change, message):
     values = shared_values()

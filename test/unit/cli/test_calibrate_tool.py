@@ -111,11 +111,16 @@ def test_calibrates_a_synthesized_bag_and_writes_a_config_the_nodes_load(calibra
     for name in ('link_bias_std', 'common_bias_std', 'anchor_std'):
         assert abs(parameters[name] - printed[name]) <= 1e-6
         assert 0.0 < parameters[name] < 0.05
+    # Each link's own, as printed; link_bias_std is their RMS; the estimator gets each.
+    per_link = np.reshape(parameters['link_offset_std'], (5, 6))
+    np.testing.assert_allclose(per_link, printed['link_offset_std'], atol=1e-6)
+    assert abs(np.sqrt(np.mean(per_link ** 2)) - parameters['link_bias_std']) <= 2e-6
+    np.testing.assert_allclose(config.with_link_biases({})['link_bias_std'], per_link)
     # anchor_std: the largest std of a located anchor, as printed.
     located = np.array([anchor['std'] for anchor in printed['anchors'].values()])
     assert abs(parameters['anchor_std'] - located.max()) <= 1e-6
     for name in ('anchor_positions', 'anchor_offsets', 'tag_offsets', 'pair_offsets',
-                 'link_bias_std', 'common_bias_std', 'anchor_std'):
+                 'link_offset_std', 'link_bias_std', 'common_bias_std', 'anchor_std'):
         source['/**']['ros__parameters'].pop(name, None)
         written['/**']['ros__parameters'].pop(name)
     assert written == source
@@ -469,7 +474,7 @@ def configured_result():
     model = CONFIG.model()
     return SimpleNamespace(anchors=model.anchors, anchor_offsets=model.anchor_offsets,
                            tag_offsets=model.tag_offsets, pair_offsets=model.pair_offsets,
-                           left_unknown={'link_bias_std': 0.01, 'common_bias_std': 0.02,
+                           link_bias_stds=np.full((5, 6), 0.01), left_unknown={'link_bias_std': 0.01, 'common_bias_std': 0.02,
                                          'anchor_std': 0.03}, arm_length_std=np.zeros(5),
                            arm_lengths=model.arm_lengths)
 

@@ -41,7 +41,7 @@ from typing import NamedTuple
 from epp_ros.core.model.folds import folded_angles, tip_circle, tip_minima
 from epp_ros.core.model.measurements import Residuals, SensorNoise, wrap_angle
 from epp_ros.core.model.nlos import NlosMixture
-from epp_ros.core.model.noise import DEFAULT_NOISE
+from epp_ros.core.model.noise import DEFAULT_NOISE, fitted_link_bias
 from epp_ros.core.model.plane import fit_slew, to_plane
 from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt, \
     levenberg_marquardt_batch
@@ -204,6 +204,9 @@ class ChainMethod:
     lowest_joint : float
         No joint is below this height, metres (world z = 0 is the ground; the default
         leaves room for noise). Lower it for a boom that reaches below grade.
+    link_bias_std : float or array_like, shape (p, m)
+        What is unknown of each link's own bias, metres: per link, the fit weighs each
+        range by it (``core.model.noise.fitted_link_bias``); one number changes no weight.
 
     """
 
@@ -218,9 +221,10 @@ class ChainMethod:
                  nlos_fraction=DEFAULT_NOISE.nlos_fraction, nlos_gamma=DEFAULT_NOISE.nlos_gamma,
                  tol=1e-10,
                  max_iter=50, slew_starts=16, screen_iterations=4, lowest_joint=-0.5,
-                 search_budget=400):
+                 search_budget=400, link_bias_std=0.0):
         self.model = model
         self.eta = float(eta)
+        self.link_bias = fitted_link_bias(link_bias_std, (model.n_sections, model.n_anchors))
         self.noise = SensorNoise(float(sigma), float(sigma if tag_sigma is None else tag_sigma),
                                  float(pitch_sigma), float(slew_sigma))
         self.nlos = NlosMixture(float(nlos_fraction), float(nlos_gamma))
@@ -321,11 +325,12 @@ class ChainMethod:
         return Fit(result.x, result.cost, result.iterations, result.converged)
 
     def residuals_of(self, measurements):
-        """Return the frame's :class:`Residuals` under this chain's noise (``eta`` included)."""
+        """Return the frame's :class:`Residuals` under this chain's noise (with its own biases)."""
         noise = self.noise
-        if self.eta:
+        if self.eta or np.ndim(self.link_bias):
             distances = np.nan_to_num(measurements.ranges)
-            noise = replace(noise, range_sigma=np.hypot(noise.range_sigma, self.eta * distances))
+            noise = replace(noise, range_sigma=np.hypot(
+                np.hypot(noise.range_sigma, self.eta * distances), self.link_bias))
         return Residuals(self.model, measurements, noise)
 
     def refine(self, joints, residuals, max_iter=None):

@@ -97,6 +97,9 @@ class _EDMMethod:
     NOISE_FACTOR_RANGE = (0.1, 10.0)
     #: Weight the links by the range noise model (``_noise_factors``); False: H = 1.
     noise_weights = False
+    #: What the fit adds to each link's sigma for its own bias, metres: 0, or (p, m) (the
+    #: field CEPP's, told per link: ``core.model.noise.fitted_link_bias``).
+    link_bias = 0.0
     #: Stress weight of a fixed distance in the refinement: holds it to about a thousandth
     #: of the range errors the unit weights leave.
     FIXED_STRESS_WEIGHT = 1e6
@@ -201,7 +204,7 @@ class _EDMMethod:
             Links more likely NLOS than not.
 
         """
-        sigma = np.hypot(self.sigma, self.eta * np.nan_to_num(ranges))
+        sigma = self._range_sigma(ranges)
         measured = np.isfinite(ranges)
         excess = np.where(measured, ranges - self.model.ranges(joints), 0.0) / sigma
         _, slope, nlos = self.nlos.loss(excess, sigma)
@@ -209,6 +212,15 @@ class _EDMMethod:
         large = np.abs(excess) > 1.0
         weights[large] = np.clip(slope[large] / excess[large], self.MIN_WEIGHT, 1.0)
         return np.where(measured, np.sqrt(weights), np.nan), measured & (nlos > 0.5)
+
+    def _range_sigma(self, ranges):
+        """
+        Return each range's standard deviation for the fit (p, m), metres.
+
+        ``hypot(sigma, eta r)``, and what is unknown of the link's own bias beyond the
+        best-known link's (:attr:`link_bias`, ``core.model.noise.fitted_link_bias``).
+        """
+        return np.hypot(np.hypot(self.sigma, self.eta * np.nan_to_num(ranges)), self.link_bias)
 
     def _noise_factors(self, ranges):
         """
@@ -234,7 +246,7 @@ class _EDMMethod:
         if not self.noise_weights or not measured.any():
             return 1.0
         distance = np.maximum(np.where(measured, ranges, 0.0), self.sigma)
-        inverse = 1.0 / (distance * np.hypot(self.sigma, self.eta * distance))
+        inverse = 1.0 / (distance * self._range_sigma(distance))
         factors = inverse / np.median(inverse[measured])
         return np.where(measured, np.clip(factors, *self.NOISE_FACTOR_RANGE), np.nan)
 

@@ -47,6 +47,7 @@ from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMetho
 from epp_ros.core.estimation.methods.epp import CEPP
 from epp_ros.core.model.folds import fold_alternatives, keep_folds, tip_circle, tip_minima
 from epp_ros.core.model.measurements import Measurements
+from epp_ros.core.model.noise import fitted_link_bias
 from epp_ros.core.model.plane import fit_slew
 from epp_ros.core.solvers.edm import squared_distances
 import numpy as np
@@ -87,6 +88,10 @@ class FieldCEPP(CEPP):
         Weight in H of the prior's bends next to a silent tag (0: the frame is refused).
     lowest_joint : float
         No joint is below this height, metres: a search's fit below it is not kept.
+    link_bias_std : float or array_like, shape (p, m)
+        What is unknown of each link's own bias, metres: per link, H and the losses weigh
+        each range by it (``core.model.noise.fitted_link_bias``); one number changes no
+        weight.
     **options
         Of :class:`CEPP` and its base (``sigma``, ``eta``, ``nlos_*``, ``tol``, ...).
 
@@ -120,7 +125,8 @@ class FieldCEPP(CEPP):
 
     def __init__(self, model, predict_slew=True, irls_iterations=IRLS_ITERATIONS,
                  noise_weights=True, silent_weight=SILENT_WEIGHT, cold_search=True,
-                 fold_search=True, polish=True, lowest_joint=-0.5, **options):
+                 fold_search=True, polish=True, lowest_joint=-0.5, link_bias_std=0.0,
+                 **options):
         super().__init__(model, predict_slew=predict_slew, irls_iterations=irls_iterations,
                          **options)
         self.noise_weights = _switch('noise_weights', noise_weights)
@@ -129,10 +135,11 @@ class FieldCEPP(CEPP):
         self.polish = _switch('polish', polish)
         self.silent_weight = _finite('silent_weight', silent_weight, least=0.0)
         self.lowest_joint = _finite('lowest_joint', lowest_joint)
+        self.link_bias = fitted_link_bias(link_bias_std, (model.n_sections, model.n_anchors))
         self._finish = ChainMethod(model, self.sigma, self.eta,
                                    nlos_fraction=self.nlos.fraction,
                                    nlos_gamma=self.nlos.gamma, lowest_joint=self.lowest_joint,
-                                   max_iter=self.POLISH_ITERATIONS)
+                                   max_iter=self.POLISH_ITERATIONS, link_bias_std=link_bias_std)
 
     def tune(self, **noise):
         """Change the range noise (see the base's ``tune``); the polish follows it."""
@@ -290,16 +297,16 @@ class FieldCEPP(CEPP):
     def _tag_loss(self, k, points, ranges):
         """Return the NLOS-mixture loss of tag ``k``'s measured ranges at points (..., 3)."""
         valid = np.isfinite(ranges[k])
-        sigma = np.hypot(self.sigma, self.eta * ranges[k, valid])
+        sigma = self._range_sigma(ranges)[k, valid]
         distance = np.linalg.norm(np.asarray(points)[..., None, :] - self.model.anchors[valid],
                                   axis=-1)
         return np.sum(self.nlos.loss((ranges[k, valid] - distance) / sigma, sigma)[0], axis=-1)
 
     def _tag_losses(self, points, ranges):
         """Return :meth:`_tag_loss` of tags 0 .. q-1, each at its row of points (q, 3), (q,)."""
+        sigma = self._range_sigma(ranges)[:len(points)]
         ranges = ranges[:len(points)]
         valid = np.isfinite(ranges)
-        sigma = np.hypot(self.sigma, self.eta * np.where(valid, ranges, 0.0))
         distance = np.linalg.norm(points[:, None, :] - self.model.anchors, axis=-1)
         excess = np.where(valid, ranges - distance, 0.0) / sigma
         return np.sum(self.nlos.loss(excess, sigma)[0], axis=1)     # 0 at 0: the unheard
@@ -337,13 +344,13 @@ class FieldCEPP(CEPP):
         if joints[:, 2].min() < self.lowest_joint or not np.all(np.isfinite(joints)):
             return np.inf
         measured = np.isfinite(ranges)
-        sigma = np.hypot(self.sigma, self.eta * ranges[measured])
+        sigma = self._range_sigma(ranges)[measured]
         excess = (ranges[measured] - self.model.ranges(joints)[measured]) / sigma
         return float(np.sum(self.nlos.loss(excess, sigma)[0]))
 
     def _beam(self, ranges):
         """Return each slew of the beam search with its best chain: slews (s,), psi (s, p + 1)."""
-        sigma = np.hypot(self.sigma, self.eta * np.nan_to_num(ranges))
+        sigma = self._range_sigma(ranges)
         slews = np.linspace(-np.pi, np.pi, self.SEARCH_SLEWS, endpoint=False)
         pitches, costs = grow_chains(self.model, Measurements.ranges_only(ranges), sigma,
                                      self.nlos, slews, self.lowest_joint, width=4,
@@ -369,7 +376,7 @@ class FieldCEPP(CEPP):
         """
         if not len(beam):
             return []
-        sigma = np.hypot(self.sigma, self.eta * np.nan_to_num(ranges))
+        sigma = self._range_sigma(ranges)
         masks = np.ones((len(beam),) + ranges.shape, dtype=bool)
         postures, costs = self._finish.fit_links(beam, ranges, sigma, masks,
                                                  self.SCREEN_ROUNDS)

@@ -39,7 +39,7 @@ A start, or a fit lost, goes back to the chain's global search (``core.chain``).
 from dataclasses import dataclass
 
 from epp_ros.core.estimation.methods.chain import angles_from_joints, canonical_angles, ChainMethod
-from epp_ros.core.model.measurements import Residuals, wrap_angle
+from epp_ros.core.model.measurements import wrap_angle
 from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt
 import numpy as np
 from scipy.stats import chi2
@@ -102,7 +102,7 @@ class TrackMethod:
         For the chain estimator behind the searches and the loss: ``sigma``, ``eta``,
         ``tag_sigma``, ``pitch_sigma``, ``slew_sigma``, ``nlos_fraction``, ``nlos_gamma``,
         ``lowest_joint``, ``tol``, ``max_iter``, ``slew_starts``, ``screen_iterations``,
-        ``search_budget``.
+        ``search_budget``, ``link_bias_std``.
 
     """
 
@@ -217,7 +217,7 @@ class TrackMethod:
         """
         joints, info = self.chain.solve(measurements, prior, warm=warm)
         n = self.model.n_sections + 1
-        residuals = self._residuals(measurements)
+        residuals = self.chain.residuals_of(measurements)
         best = np.r_[info['slew'], info['pitches']]
         fits = [(self.chain.cost(best, residuals), best)]
         range_sigma = np.broadcast_to(residuals.link_sigma(), measurements.ranges.shape)
@@ -252,7 +252,7 @@ class TrackMethod:
     def _track(self, measurements, stamp, delays):
         """Predict every hypothesis to ``stamp`` and fit it; the bank, best first, and info."""
         elapsed = max(stamp - self._stamp, 0.0)
-        residuals = self._residuals(measurements)
+        residuals = self.chain.residuals_of(measurements)
         bank, iterations, manoeuvre, converged = [], 0, False, True
         process_noise = self.process_noise
         for hypothesis in self._bank:
@@ -386,14 +386,6 @@ class TrackMethod:
         covariance = np.einsum('kcq,qr,kcr->k', jacobian, hypothesis.covariance[:n, :n],
                                jacobian)
         return np.sqrt(np.maximum(covariance, 0.0))
-
-    def _residuals(self, measurements):
-        noise = self.chain.noise
-        if self.chain.eta:
-            distances = np.nan_to_num(measurements.ranges)
-            noise = type(noise)(np.hypot(noise.range_sigma, self.chain.eta * distances),
-                                noise.tag_sigma, noise.pitch_sigma, noise.slew_sigma)
-        return Residuals(self.model, measurements, noise)
 
 
 def _positive(name, value):

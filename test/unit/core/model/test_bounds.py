@@ -293,6 +293,10 @@ def test_range_biases_add_the_covariance_they_give_a_weighted_fit(link_std, comm
 
 def test_range_bias_prior_validates():
     assert not RangeBiasPrior() and RangeBiasPrior(0.0, 0.1)
-    for value in (-0.1, np.nan, np.inf, 'x', True, None):
+    for value in (-0.1, np.nan, np.inf, 'x', True, None, [[0.1, -0.1]], [[np.nan]]):
         with pytest.raises(ValueError, match='^link_std'):
             RangeBiasPrior(link_std=value)
+    # One per link: kept as a read-only array; known to be zero everywhere is no bias.
+    per_link = RangeBiasPrior(link_std=[[0.0, 0.1], [0.2, 0.0]])
+    assert per_link and not per_link.link_std.flags.writeable
+    assert not RangeBiasPrior(link_std=np.zeros((2, 2)))

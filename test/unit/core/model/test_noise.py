@@ -19,7 +19,8 @@ import math
 from epp_ros.core import PostureEstimator
 from epp_ros.core.estimation import ESTIMATOR_OPTIONS
 from epp_ros.core.estimation.methods import CEPP, EPP1
-from epp_ros.core.model import DEFAULT_NOISE, NoiseModel, SensorNoise
+from epp_ros.core.model import (DEFAULT_NOISE, fitted_link_bias, link_bias_stds, NoiseModel,
+                                SensorNoise)
 from epp_ros.core.simulation import truck_pump
 import numpy as np
 import pytest
@@ -70,3 +71,29 @@ def test_values_are_kept_as_floats_and_tag_sigma_follows_sigma():
     assert NoiseModel(tag_sigma=0.3).told()['tag_sigma'] == 0.3
     with pytest.raises(Exception):
         noise.sigma = 1.0                  # frozen: checked once, never changed
+
+
+def test_each_links_own_bias_may_be_told_one_per_link():
+    per_link = np.full((MODEL.n_sections, MODEL.n_anchors), 0.02)
+    per_link[-1] = 0.3                                  # the tip's links barely known
+    noise = NoiseModel(link_bias_std=per_link)
+    # Kept as rows of floats: the model stays frozen, hashable and comparable.
+    assert noise.link_bias_std == tuple(tuple(row) for row in per_link.tolist())
+    assert noise == NoiseModel(link_bias_std=per_link.tolist()) and hash(noise)
+    np.testing.assert_array_equal(link_bias_stds(noise.link_bias_std, per_link.shape),
+                                  per_link)
+    # The fit weighs links by what is unknown beyond the best-known link's.
+    np.testing.assert_allclose(fitted_link_bias(per_link), np.sqrt(per_link ** 2 - 0.02 ** 2))
+    assert fitted_link_bias(0.1) == 0.0 == fitted_link_bias(np.full((2, 3), 0.1)).max()
+    with pytest.raises(ValueError, match=r'link_bias_std: needs one number, or one per link '
+                                         r'\(5 tags x 6 anchors\), got shape \(6, 5\)'):
+        PostureEstimator(MODEL, 'chain', link_bias_std=per_link.T)
+    with pytest.raises(ValueError, match='link_bias_std: needs one number'):
+        fitted_link_bias(per_link[:-1], per_link.shape)
+
+
+@pytest.mark.parametrize('value', [[[0.1, -0.1]], [[0.1, np.nan]], [[0.1], [0.1, 0.2]], [],
+                                   [0.1, 0.2], '0.1', ['0.1']])
+def test_a_per_link_bias_that_is_not_rows_of_stds_is_refused(value):
+    with pytest.raises(ValueError, match='link_bias_std: must be a finite number >= 0 or rows'):
+        NoiseModel(link_bias_std=value)
