@@ -36,29 +36,43 @@ pytestmark = pytest.mark.usefixtures('fresh_listener')
 TRUTH_LAG = 0.6
 
 
+def checkable_frames(listener, since):
+    """
+    Return the range frames from ``since`` on whose cycles' truth was heard.
+
+    Cycles whose truth was not heard: a restarted emulator's until its publisher is
+    discovered again, and any a loaded listener lost (truth is keep-last). A frame whose
+    ranges may come from one of them has no truth to match.
+    """
+    if not listener.truth:
+        return []
+    stamps = np.array([to_seconds(m.header.stamp) for m in listener.truth])
+    first, last = stamps[0] + 0.15, stamps[-1]
+    holes = [(stamps[i], stamps[i + 1]) for i in np.flatnonzero(np.diff(stamps) > 0.15)]
+
+    def heard(stamp):
+        return not any(before < stamp and after > stamp - TRUTH_LAG for before, after in holes)
+    return [f for f in listener.ranges[since:]
+            if first + 0.15 <= to_seconds(f.header.stamp) <= last
+            and heard(to_seconds(f.header.stamp))]
+
+
 def check_ranges_against_truth(listener, config, since, tolerance):
     """
     Check every tag's ranges in every frame against the true postures.
 
     Every tag's ranges in every frame must match some true posture's (no noise) within
     the format's precision, and frames carry the configured names. (Tags on separate ports
-    are not synchronised: one frame may hold rows of adjacent cycles.)
+    are not synchronised: one frame may hold rows of adjacent cycles.) Waits, generously,
+    for three frames whose truth was heard: a loaded listener loses some.
     """
     checked = listener.ranges[min(since + 2, len(listener.ranges) - 1)]
-    first, last = truth_window(listener, covering=to_seconds(checked.header.stamp))
-    # Cycles whose truth was not heard: a restarted emulator's until its publisher is
-    # discovered again, and any a loaded listener lost (truth is keep-last). A frame whose
-    # ranges may come from one of them has no truth to match.
-    stamps = np.array([to_seconds(m.header.stamp) for m in listener.truth])
-    holes = [(stamps[i], stamps[i + 1]) for i in np.flatnonzero(np.diff(stamps) > 0.15)]
-
-    def heard(stamp):
-        return not any(before < stamp and after > stamp - TRUTH_LAG for before, after in holes)
+    truth_window(listener, covering=to_seconds(checked.header.stamp))
+    listener.spin_until(lambda: len(checkable_frames(listener, since)) >= 3, 30.0)
+    listener.spin_until(lambda: False, 0.5)      # the truth of the newest cycle comes last
+    frames = checkable_frames(listener, since)
     model = config.model()
     true_ranges = np.array([model.ranges(poses_to_joints(m)) for m in listener.truth])
-    frames = [f for f in listener.ranges[since:]
-              if first + 0.15 <= to_seconds(f.header.stamp) <= last
-              and heard(to_seconds(f.header.stamp))]
     assert len(frames) >= 3
     for frame in frames:
         check_range_ages(frame)
