@@ -474,7 +474,8 @@ def configured_result():
     model = CONFIG.model()
     return SimpleNamespace(anchors=model.anchors, anchor_offsets=model.anchor_offsets,
                            tag_offsets=model.tag_offsets, pair_offsets=model.pair_offsets,
-                           link_bias_stds=np.full((5, 6), 0.01), left_unknown={'link_bias_std': 0.01, 'common_bias_std': 0.02,
+                           link_bias_stds=np.full((5, 6), 0.01),
+                           left_unknown={'link_bias_std': 0.01, 'common_bias_std': 0.02,
                                          'anchor_std': 0.03}, arm_length_std=np.zeros(5),
                            arm_lengths=model.arm_lengths)
 
