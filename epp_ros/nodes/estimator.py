@@ -187,6 +187,10 @@ class PostureEstimatorNode(Node):
             if parameter.name in PUMP_PARAMETERS:
                 return SetParametersResult(successful=False, reason=(
                     f'{parameter.name} is read-only: the pump description is fixed at start'))
+            if parameter.name == 'link_bias_std' and self.config.link_offset_std is not None:
+                return SetParametersResult(successful=False, reason=(
+                    'link_bias_std is read-only here: each link has its own from the pump '
+                    "description's link_offset_std (calibrated)"))
             if parameter.name in SETTINGS:
                 values[parameter.name] = parameter.value
         try:

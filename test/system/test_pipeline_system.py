@@ -26,6 +26,7 @@ import rclpy
 from ros_processes import (Listener, poses_to_joints, PUMP_YAML, script, start_emulator,
                            truth_window, UNBIASED_ARGS)
 from sensor_msgs.msg import JointState
+import yaml
 
 pytestmark = pytest.mark.usefixtures('fresh_listener')
 CONFIG = load_pump_config(PUMP_YAML)
@@ -424,6 +425,49 @@ def test_parameters_are_applied_live_or_refused(listener, processes):
         assert listener.spin_until(lambda: len(listener.postures) >= 3, 10)
         assert reported('method') == 'chain' and reported('frames method_changes') == '1'
         np.testing.assert_allclose(poses_to_joints(listener.postures[-1]), joints, atol=1e-4)
+    finally:
+        listener.destroy_publisher(publisher)
+
+
+def test_a_calibrated_pump_weighs_each_link_by_its_own(listener, processes, tmp_path):
+    """A pump.yaml with link_offset_std: each link's own bias, link_bias_std not settable."""
+    from epp_ros.app.health import joint_stds
+    from epp_ros.core import PostureEstimator
+    document = yaml.safe_load(PUMP_YAML.read_text())
+    stds = np.full(30, 0.01)
+    stds[24:] = 0.3                                 # the tip's links known to 0.3 m
+    document['/**']['ros__parameters']['link_offset_std'] = stds.tolist()
+    calibrated = tmp_path / 'pump.yaml'
+    calibrated.write_text(yaml.safe_dump(document))
+    processes([script('posture_estimator'), '--ros-args', '--params-file', str(calibrated),
+               *UNBIASED_ARGS, '-p', 'learn_noise:=false'])
+    # What the library predicts for the tip told so, and told one number for every link.
+    told = {'learn_noise': False, 'common_bias_std': 0.0, 'bias_slope_std': 0.0, 'anchor_std': 0.0}
+    tip = {}
+    for name, link_bias_std in (('per link', stds.reshape(5, 6)), ('none', 0.0)):
+        estimator = PostureEstimator(CONFIG.model(), 'cepp', link_bias_std=link_bias_std,
+                                     **told)
+        for _ in range(3):
+            estimator.update(CONFIG.model().ranges(StillBoom.JOINTS))
+        tip[name] = estimator.last_diagnostics['joint_std'][-1]
+    assert tip['per link'] > 1.1 * tip['none']
+    boom = StillBoom(listener)
+    publisher, publish = boom.publisher, boom.publish
+
+    def reported_tip_std():
+        statuses = listener.statuses('posture_estimator')
+        values = {kv.key: kv.value for kv in statuses[-1].values} if statuses else {}
+        return joint_stds(values, 5)[-1]
+    try:
+        assert listener.spin_until(lambda: publisher.get_subscription_count() >= 2, 10)
+        assert listener.spin_until(lambda: publish() or len(listener.postures) >= 3, 20)
+        np.testing.assert_allclose(poses_to_joints(listener.postures[-1]), StillBoom.JOINTS,
+                                   atol=1e-3)
+        assert listener.spin_until(lambda: np.isfinite(reported_tip_std()), 10)
+        assert reported_tip_std() == pytest.approx(tip['per link'], rel=1e-2)
+        [(successful, reason)] = set_parameters(listener, '/posture_estimator',
+                                                link_bias_std=0.2)
+        assert not successful and 'link_offset_std' in reason
     finally:
         listener.destroy_publisher(publisher)
 
