@@ -93,7 +93,7 @@ def update_pump_yaml(text, values):
     pump_config_from_parameters({name: value for name, value in section.items()
                                  if name in PUMP_PARAMETERS})
     try:
-        updated = _edit_in_place(text, values)
+        updated = _edit_in_place(text, values, len(section.get('anchor_names') or ()) or 1)
     except (yaml.YAMLError, ValueError, StopIteration):
         updated = None
     if updated is None or yaml.safe_load(updated) != document:
@@ -101,7 +101,11 @@ def update_pump_yaml(text, values):
     return updated
 
 
-def _edit_in_place(text, values):
+#: Per-link lists, tag-major: written one tag's links a line.
+PER_LINK = ('pair_offsets', 'link_offset_std')
+
+
+def _edit_in_place(text, values, anchors):
     """Return ``text`` with the values replaced in place (ValueError where it cannot)."""
     top = yaml.compose(text)
     shared = next(v for k, v in top.value if k.value == '/**')
@@ -117,7 +121,8 @@ def _edit_in_place(text, values):
         if isinstance(numbers, float):
             written = _yaml_number(numbers)
         else:
-            per_line = 3 if name == 'anchor_positions' else len(numbers) or 1
+            per_line = 3 if name == 'anchor_positions' else anchors if name in PER_LINK \
+                else len(numbers) or 1
             start = entries[name][1].start_mark.column if name in entries \
                 else column + len(name) + 2
             written = _yaml_list(numbers, start, per_line)

@@ -18,6 +18,7 @@ from epp_ros.app.pump_yaml import update_pump_yaml
 import numpy as np
 import pytest
 from ros_processes import PUMP_YAML
+import yaml
 
 CONFIG = load_pump_config(PUMP_YAML)
 
@@ -51,3 +52,12 @@ def test_update_pump_yaml_keeps_the_file_and_replaces_the_values(tmp_path):
         '    link_bias_std: 0.0123', '    common_bias_std: 0.004'}
     with pytest.raises(ConfigError, match='link_bias_std: must be a finite number >= 0'):
         update_pump_yaml(text, {'link_bias_std': -0.1})
+    # Per-link lists, tag-major: one tag's links a line, read back as written.
+    stds = [0.01 * (k + 1) + 0.001 * j for k in range(5) for j in range(6)]
+    per_link = update_pump_yaml(text, {'link_offset_std': stds, 'pair_offsets': [0.0] * 30})
+    for name in ('link_offset_std', 'pair_offsets'):
+        start = per_link.index(f'    {name}: [')
+        written = per_link[start:per_link.index(']', start) + 1]
+        assert written.count('\n') == 4                  # five tags, five lines
+    parsed = yaml.safe_load(per_link)['/**']['ros__parameters']
+    assert parsed['link_offset_std'] == pytest.approx(stds, abs=1e-6)
