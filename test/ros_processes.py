@@ -21,7 +21,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from epp_ros.app.config import load_pump_config
-from epp_ros.nodes.messages import POSTURE_QOS, RANGES_QOS, to_seconds
+from epp_ros.nodes.messages import POSTURE_QOS, RANGES_QOS, to_seconds, TRUTH_QOS
 from geometry_msgs.msg import PoseArray
 import numpy as np
 import pytest
@@ -74,7 +74,7 @@ class Listener(Node):
         self.ranges, self.truth, self.diagnostics, self.postures = [], [], [], []
         self.create_subscription(JointState, 'uwb/ranges', self.ranges.append, RANGES_QOS)
         self.create_subscription(PoseArray, 'arm_posture/ground_truth', self.truth.append,
-                                 POSTURE_QOS)
+                                 TRUTH_QOS)
         self.create_subscription(PoseArray, 'arm_posture', self.postures.append, POSTURE_QOS)
         self.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append, 10)
 

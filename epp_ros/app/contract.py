@@ -103,7 +103,9 @@ ANCHOR_RANGES = Topic('uwb/anchor_ranges', 'sensor_msgs/msg/JointState', depth=1
 ANGLES = Topic('boom_angles', 'sensor_msgs/msg/JointState', depth=None)
 POSTURE = Topic('arm_posture', 'geometry_msgs/msg/PoseArray')
 MARKERS = Topic('arm_posture/markers', 'visualization_msgs/msg/MarkerArray')
-TRUTH = Topic('arm_posture/ground_truth', 'geometry_msgs/msg/PoseArray')
+#: Reliable and deep, as ``uwb/ranges``: whoever checks the ranges against it loses no cycle
+#: while it is busy.
+TRUTH = Topic('arm_posture/ground_truth', 'geometry_msgs/msg/PoseArray', depth=100)
 DIAGNOSTICS = Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray')
 #: The published postures' joint positions (``robot_description.joint_names``), radians.
 JOINT_STATES = Topic('joint_states', 'sensor_msgs/msg/JointState')

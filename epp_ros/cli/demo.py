@@ -119,7 +119,7 @@ class Monitor:
     def __init__(self):
         from diagnostic_msgs.msg import DiagnosticArray
         from epp_ros.app import contract
-        from epp_ros.nodes.messages import POSTURE_QOS, RANGES_QOS
+        from epp_ros.nodes.messages import POSTURE_QOS, RANGES_QOS, TRUTH_QOS
         from geometry_msgs.msg import PoseArray
         import rclpy
         from sensor_msgs.msg import JointState
@@ -138,7 +138,7 @@ class Monitor:
         self.node.create_subscription(PoseArray, contract.POSTURE.name, self.on_posture,
                                       POSTURE_QOS)
         self.node.create_subscription(PoseArray, contract.TRUTH.name, self.on_truth,
-                                      POSTURE_QOS)
+                                      TRUTH_QOS)
         self.node.create_subscription(JointState, contract.RANGES.name, self.on_ranges,
                                       RANGES_QOS)
         self.node.create_subscription(DiagnosticArray, contract.DIAGNOSTICS.name,

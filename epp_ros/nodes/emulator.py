@@ -45,7 +45,7 @@ from epp_ros.app.config import ConfigError, load_pump_config
 from epp_ros.cli.arguments import (add_field_options, DURATION_S, field_effects_of, FRACTION,
                                    host_port, NOISE_M, Parser, RATE_HZ, SEED, settle_noise_options)
 from epp_ros.core.simulation import FieldSimulator, make_motion, Motion, RangeNoise, working_cycle
-from epp_ros.nodes.messages import posture_message, POSTURE_QOS
+from epp_ros.nodes.messages import posture_message, TRUTH_QOS
 from epp_ros.nodes.runtime import run_node
 from epp_ros.nodes.stopping import shutdown_on_signals
 from epp_ros.uwb.emulation import (anchor_lines, anchor_rounds, channel_devices, corrupt,
@@ -221,7 +221,7 @@ class UwbEmulator(Node):
         self.rng = np.random.default_rng(args.seed)
         self.measure = range_source(args, self.model, self.rng, config.moving_anchor_indices)
         self.reports_anchor_ranges = reports_anchor_ranges(args.protocol)
-        self.truth = (self.create_publisher(PoseArray, contract.TRUTH.name, POSTURE_QOS)
+        self.truth = (self.create_publisher(PoseArray, contract.TRUTH.name, TRUTH_QOS)
                       if args.truth else None)
         self.cycle = 0
         # Taken at the first cycle: with use_sim_time the clock reads 0 until /clock comes.

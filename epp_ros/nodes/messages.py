@@ -40,6 +40,7 @@ RANGES_INPUT_QOS = qos(contract.RANGES_INPUT)
 RANGES_INPUT_PROFILES = {'reliable': RANGES_INPUT_QOS,
                          'sensor_data': qos(contract.RANGES_SENSOR_DATA)}
 POSTURE_QOS = qos(contract.POSTURE)
+TRUTH_QOS = qos(contract.TRUTH)
 
 
 def to_time(seconds):
