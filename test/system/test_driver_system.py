@@ -47,14 +47,14 @@ def checkable_frames(listener, since):
     if not listener.truth:
         return []
     stamps = np.array([to_seconds(m.header.stamp) for m in listener.truth])
-    first, last = stamps[0] + 0.15, stamps[-1]
+    # Three cycles after the first truth heard: the rows of earlier ones have none.
+    first, last = stamps[0] + 0.3, stamps[-1]
     holes = [(stamps[i], stamps[i + 1]) for i in np.flatnonzero(np.diff(stamps) > 0.15)]
 
     def heard(stamp):
         return not any(before < stamp and after > stamp - TRUTH_LAG for before, after in holes)
     return [f for f in listener.ranges[since:]
-            if first + 0.15 <= to_seconds(f.header.stamp) <= last
-            and heard(to_seconds(f.header.stamp))]
+            if first <= to_seconds(f.header.stamp) <= last and heard(to_seconds(f.header.stamp))]
 
 
 def check_ranges_against_truth(listener, config, since, tolerance):

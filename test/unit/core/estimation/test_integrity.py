@@ -243,25 +243,37 @@ def test_predicted_uncertainty_is_the_bound_at_the_estimate():
     assert estimator.last_diagnostics['predicted_rmse'] > 1.5 * widened.rmse
 
 
-def test_predicted_std_covers_link_biases_the_noise_alone_would_not():
-    # Each link's own bias, constant over frames: per frame one more error per range. Told
-    # about it, the checks keep the frames and the predicted std covers their errors.
-    slew, pitches, joints = random_posture(MODEL, np.random.default_rng(21))
+def biased_trials(method, joints, stds, link_bias_std, trials=200, sigma=0.05):
+    """
+    Fit one frame per trial whose links carry their own biases ~ N(0, stds^2), constant.
+
+    The estimator is told ``link_bias_std``; returns, over the frames it calls valid, each
+    joint's squared error and predicted variance (two lists of (p,) arrays).
+    """
     rng = np.random.default_rng(22)
-    trials, sigma, link_std = 200, 0.05, 0.1
+    shape = (MODEL.n_sections, MODEL.n_anchors)
     squared, predicted = [], []
     for _ in range(trials):
-        bias = link_std * rng.standard_normal((MODEL.n_sections, MODEL.n_anchors))
-        ranges = MODEL.ranges(joints) + bias + sigma * rng.standard_normal(bias.shape)
-        estimator = PostureEstimator(MODEL, 'chain', learn_noise=False, sigma=sigma,
-                                     nlos_fraction=0.0, **{**UNBIASED,
-                                                           'link_bias_std': link_std})
+        ranges = (MODEL.ranges(joints) + stds * rng.standard_normal(shape)
+                  + sigma * rng.standard_normal(shape))
+        estimator = PostureEstimator(MODEL, method, learn_noise=False, sigma=sigma,
+                                     nlos_fraction=0.0,
+                                     **{**UNBIASED, 'link_bias_std': link_bias_std})
         estimator.reset(joints)
         estimator.update(ranges)
         result = estimator.last_diagnostics
         if result['valid']:
             squared.append(np.sum((result['estimate'] - joints) ** 2, axis=1))
             predicted.append(result['joint_std'] ** 2)
+    return squared, predicted
+
+
+def test_predicted_std_covers_link_biases_the_noise_alone_would_not():
+    # Each link's own bias, constant over frames: per frame one more error per range. Told
+    # about it, the checks keep the frames and the predicted std covers their errors.
+    slew, pitches, joints = random_posture(MODEL, np.random.default_rng(21))
+    trials, link_std = 200, 0.1
+    squared, predicted = biased_trials('chain', joints, link_std, link_std, trials)
     # The residual test's false alarms and the NLOS mixture's doubts refuse a few.
     assert len(squared) >= 0.9 * trials
     # Per joint, the mean squared error over the trials against the predicted variance:
@@ -275,31 +287,16 @@ def test_a_link_whose_bias_is_known_worse_is_weighted_as_such(method):
     # A calibration that leaves the tip's links and three of joint 3's known to 0.3 m and
     # the rest to 2 cm, told link by link, and told as their RMS for every link.
     slew, pitches, joints = random_posture(MODEL, np.random.default_rng(21))
-    p, m = MODEL.n_sections, MODEL.n_anchors
-    stds = np.full((p, m), 0.02)
+    stds = np.full((MODEL.n_sections, MODEL.n_anchors), 0.02)
     stds[-1], stds[2, :3] = 0.3, 0.3
-    trials, sigma = 200, 0.05
+    trials = 200
     errors = {}
-    for told in ('per link', 'RMS'):
-        link_bias_std = stds if told == 'per link' else float(np.sqrt(np.mean(stds ** 2)))
-        rng = np.random.default_rng(22)
-        squared, predicted = [], []
-        for _ in range(trials):
-            ranges = (MODEL.ranges(joints) + stds * rng.standard_normal((p, m))
-                      + sigma * rng.standard_normal((p, m)))
-            estimator = PostureEstimator(MODEL, method, learn_noise=False, sigma=sigma,
-                                         nlos_fraction=0.0,
-                                         **{**UNBIASED, 'link_bias_std': link_bias_std})
-            estimator.reset(joints)
-            estimator.update(ranges)
-            result = estimator.last_diagnostics
-            if result['valid']:
-                squared.append(np.sum((result['estimate'] - joints) ** 2, axis=1))
-                predicted.append(result['joint_std'] ** 2)
+    for told, link_bias_std in (('per link', stds), ('RMS', float(np.sqrt(np.mean(stds ** 2))))):
+        squared, predicted = biased_trials(method, joints, stds, link_bias_std, trials)
         assert len(squared) >= 0.9 * trials
         errors[told] = np.mean(squared, axis=0), np.mean(predicted, axis=0)
     # Weighted link by link, the fit leans on the links known well: the tip's mean squared
-    # error falls about fivefold (measured 0.20 against 1.13 m^2); and the predicted
+    # error falls about fivefold (chain: 0.20 against 1.13 m^2); and the predicted
     # variance is the fit's (relative standard error about sqrt(2 / trials) per joint).
     measured, expected = errors['per link']
     assert measured[-1] < 0.5 * errors['RMS'][0][-1]
