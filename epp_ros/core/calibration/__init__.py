@@ -14,14 +14,16 @@
 
 """Offline calibration: anchors, offsets, links; its verdict; the survey."""
 from .blockage import BlockageChain, DURATIONS
+from .correlation import fit_noise_correlation, integrated_autocorrelation, NoiseCorrelation
 from .fit import calibrate, CalibrationResult
 from .survey import ANCHOR_TOLERANCE, AnchorPairs, OFFSET_TOLERANCE, survey_anchors, SurveyResult
-from .verdict import (common_offset_std, CONDITION_LIMIT, implausible, integrated_autocorrelation,
-                      link_offset_std, misfit, MISFIT_RATIO, MISFIT_Z, PLAUSIBLE_OFFSET,
-                      poorly_determined, scaled_covariance, verdict)
+from .verdict import (common_offset_std, CONDITION_LIMIT, implausible, link_offset_std, misfit,
+                      MISFIT_RATIO, MISFIT_Z, PLAUSIBLE_OFFSET, poorly_determined,
+                      scaled_covariance, verdict)
 
 __all__ = ['BlockageChain', 'DURATIONS', 'CalibrationResult', 'calibrate', 'SurveyResult',
            'survey_anchors', 'AnchorPairs', 'ANCHOR_TOLERANCE', 'OFFSET_TOLERANCE',
            'CONDITION_LIMIT', 'MISFIT_RATIO', 'MISFIT_Z', 'PLAUSIBLE_OFFSET', 'scaled_covariance',
            'poorly_determined', 'link_offset_std', 'common_offset_std', 'implausible',
-           'integrated_autocorrelation', 'misfit', 'verdict']
+           'integrated_autocorrelation', 'NoiseCorrelation', 'fit_noise_correlation', 'misfit',
+           'verdict']

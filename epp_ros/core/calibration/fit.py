@@ -77,11 +77,12 @@ from dataclasses import dataclass, field, replace
 import time
 
 from epp_ros.core.calibration.blockage import BlockageChain
+from epp_ros.core.calibration.correlation import fit_noise_correlation, NoiseCorrelation
 from epp_ros.core.calibration.survey import (anchor_range_rounds, ANCHOR_TOLERANCE, AnchorPairs,
                                              fixed_indices, irls, OFFSET_TOLERANCE, survey_anchors)
-from epp_ros.core.calibration.verdict import (common_offset_std, implausible,
-                                              integrated_autocorrelation, link_offset_std, misfit,
-                                              poorly_determined, scaled_covariance, verdict)
+from epp_ros.core.calibration.verdict import (common_offset_std, implausible, link_offset_std,
+                                              misfit, poorly_determined, scaled_covariance,
+                                              verdict)
 from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMethod, SearchExhausted
 from epp_ros.core.estimation.noise_learning import NoiseLearner, RangeNoiseEstimate
 from epp_ros.core.model.boom import ANCHOR_SEPARATION
@@ -116,6 +117,10 @@ LINK_STD_START = 0.05
 LINK_STD_FLOOR = 0.01
 #: Most rounds of learning it (each a fit from the last; it stops at a 5 % change).
 LINK_ROUNDS = 6
+
+#: Standard deviations within which a range judged blocked still counts as noise when the
+#: residuals' correlation in time is fitted.
+NOISE_REACH = 3.0
 
 #: Metres: how far off a link offset the recording does not determine counts as.
 UNKNOWN_OFFSET = 1.0
@@ -385,15 +390,17 @@ class _Problem:
             return self.model.arm_lengths
         return np.maximum(x[self.length_index], 1e-3)     # a trial step may overshoot
 
-    def set_link_prior(self, link_std, correlation=1.0):
+    def set_link_prior(self, link_std, correlation=NoiseCorrelation()):
         """
         Hold each link's own offset to ``N(0, link_std^2)`` from now on (metres).
 
-        ``correlation``: the residuals' integrated autocorrelation time, in frames; the
-        recording then weighs as many times less against the prior.
+        ``correlation``: the residuals' :class:`NoiseCorrelation`; the recording weighs its
+        integrated autocorrelation time (``self.correlation``, frames) times less against
+        the prior.
         """
         self.link_std = float(link_std)
-        self.correlation = float(correlation)
+        self.noise_correlation = correlation
+        self.correlation = correlation.time
         self.pair_weight = self.correlation / self.link_std ** 2 if self.n_pairs else 0.0
 
     def located(self, tip=False):
@@ -980,10 +987,14 @@ def _uncertainty(problem, psi, q, frames):
     """
     Return the covariance of x, the condition, residual scale and the NLOS probabilities.
 
-    The information of the shared parameters with the angles eliminated, divided by the
-    residuals' integrated autocorrelation time (``problem.correlation``: correlated
-    frames weigh as fewer independent ones), plus the anchor-anchor ranges' and the links'
-    offsets prior's; scaled by the residual variance; inf along what it misses.
+    The shared parameters' information with the angles eliminated, divided by the
+    residuals' integrated autocorrelation time (``problem.correlation``: correlated frames
+    weigh as fewer independent ones, as the fit weighs them against the links' prior),
+    plus the anchor-anchor ranges' and the links' offsets prior's. The covariance is that
+    information's inverse about the spread of the fit's gradient under the residuals'
+    :class:`NoiseCorrelation` (each link's reduced Jacobian rows correlated in time):
+    a parameter told by slow swings of the geometry is told by few independent frames, of
+    whatever the residuals' time. Scaled by the residual variance; inf along what it misses.
     """
     p = problem.p
     x = problem.x0 + problem.basis @ q
@@ -991,10 +1002,11 @@ def _uncertainty(problem, psi, q, frames):
     _, slope, weights, nlos_links = problem.robust(scaled, problem.mask[frames], frames)
     blocks, coupling, shared_block, _, _ = normal_equations(angle, shared, slope, weights)
     pair_information, pair_parts = problem.anchor_pair_terms(q)
-    information = (eliminate(blocks, coupling, shared_block, pseudo=True)[0]
-                   / problem.correlation + pair_information)
+    reduced, inverse = eliminate(blocks, coupling, shared_block, pseudo=True)
+    prior = pair_information
     if problem.n_pairs:
-        information += problem.prior_terms(x, 1.0 / problem.link_std ** 2)[2]
+        prior = prior + problem.prior_terms(x, 1.0 / problem.link_std ** 2)[2]
+    information = reduced / problem.correlation + prior
     squares, count = np.sum(weights * scaled ** 2), float(weights.sum())
     if pair_parts is not None:
         squares += np.sum(pair_parts[1] * pair_parts[0] ** 2)
@@ -1002,6 +1014,10 @@ def _uncertainty(problem, psi, q, frames):
     dof = max(count - frames.size * (p + 1) - q.size, 1.0)
     residual_scale = float(np.sqrt(squares / dof))
     covariance_q, condition = scaled_covariance(information, residual_scale)
+    rows = weights[..., None] * (shared - angle @ (inverse @ coupling))     # (n, links, q)
+    spread = (np.einsum('nlq,nlr->qr', rows, problem.noise_correlation.correlate(rows))
+              / problem.correlation ** 2 + prior)
+    covariance_q = _sandwich(covariance_q, spread, residual_scale)
     if problem.n_pairs:     # how well the recording excites the devices' parameters
         condition = scaled_covariance(_marginal(information, problem.n_pairs), 1.0)[1]
     with np.errstate(invalid='ignore'):
@@ -1010,6 +1026,15 @@ def _uncertainty(problem, psi, q, frames):
     covariance[undetermined, :] = np.inf
     covariance[:, undetermined] = np.inf
     return covariance, condition, residual_scale, nlos_links
+
+
+def _sandwich(covariance, spread, scale):
+    """Return ``C spread C / scale^2`` for C = ``covariance`` (inf rows and columns kept)."""
+    known = np.isfinite(np.diag(covariance))
+    inner = covariance[np.ix_(known, known)]
+    result = covariance.copy()
+    result[np.ix_(known, known)] = inner @ spread[np.ix_(known, known)] @ inner / scale ** 2
+    return result
 
 
 def _residual_spread(problem, psi, q, frames):
@@ -1039,11 +1064,20 @@ def _marginal(information, trailing):
 
 
 def _correlation(problem, psi, q, frames):
-    """Return the clear tag-anchor residuals' integrated autocorrelation time, frames."""
+    """
+    Return the tag-anchor residuals' :class:`NoiseCorrelation`.
+
+    Over the clear ranges and every measured one within :data:`NOISE_REACH` standard
+    deviations: on a moving body the noise's slow swings look like blockage, and leaving
+    out all that the fit judged blocked took them out of the estimate (the time read 24
+    frames for 37; 30 with them), while a blocked range's excess is mostly far beyond.
+    """
     n = problem.n_links
     scaled = problem.evaluate(psi, problem.x0 + problem.basis @ q, frames, jacobian=False)[0]
     weights = problem.robust(scaled, problem.mask[frames], frames)[2]
-    return integrated_autocorrelation(scaled[:, :n], weights[:, :n] > 0.5)
+    scaled, within = scaled[:, :n], problem.mask[frames][:, :n]
+    counted = (weights[:, :n] > 0.5) | (within & (np.abs(scaled) < NOISE_REACH))
+    return fit_noise_correlation(scaled, counted)
 
 
 def _link_terms(problem, psi, q, frames, settings, learn):
@@ -1074,7 +1108,7 @@ def _link_terms(problem, psi, q, frames, settings, learn):
                                  posinf=problem.link_std ** 2)
         learned = max(float(np.sqrt(np.mean(x[own] ** 2 + variance))), LINK_STD_FLOOR)
         change = abs(learned / problem.link_std - 1.0)
-        problem.set_link_prior(learned, problem.correlation)
+        problem.set_link_prior(learned, problem.noise_correlation)
         if change < 0.05:
             break
     return psi, q, iterations, converged

@@ -25,7 +25,7 @@ import numpy as np
 
 __all__ = ['CONDITION_LIMIT', 'MISFIT_RATIO', 'MISFIT_Z', 'PLAUSIBLE_OFFSET',
            'scaled_covariance', 'poorly_determined', 'link_offset_std', 'common_offset_std',
-           'implausible', 'integrated_autocorrelation', 'misfit', 'verdict']
+           'implausible', 'misfit', 'verdict']
 
 #: A tag's, an anchor's or a link's mean squared residual this many times the others' ...
 MISFIT_RATIO = 1.3
@@ -147,33 +147,6 @@ def common_offset_std(problem, covariance):
     offsets = covariance[np.ix_(problem.offset_index, problem.offset_index)]
     rows = _link_rows(problem, offsets.shape[0])
     return float(np.sqrt(_combined_variance(rows.mean(axis=0, keepdims=True), offsets)[0]))
-
-
-def integrated_autocorrelation(residuals, mask, window=5.0):
-    """
-    Return the integrated autocorrelation time of residual series, in frames (>= 1).
-
-    ``residuals`` (n, links) in time order, ``mask`` (n, links) where they count; each
-    link's mean is taken off, the lags' correlations are pooled over the links, and the
-    sum stops at the first lag of at least ``window`` times the time so far (Sokal's
-    window). n frames of it weigh as n / time independent ones.
-    """
-    mask = np.asarray(mask, bool)
-    counts = np.maximum(mask.sum(axis=0), 1)
-    centred = np.where(mask, residuals - np.where(mask, residuals, 0.0).sum(axis=0) / counts,
-                       0.0)
-    variance = np.sum(centred ** 2) / max(mask.sum(), 1)
-    time = 1.0
-    if variance <= 0:
-        return time
-    for lag in range(1, len(centred) // 4):
-        both = mask[lag:] & mask[:-lag]
-        if not both.any():
-            break
-        time += 2.0 * np.sum(centred[lag:] * centred[:-lag]) / both.sum() / variance
-        if lag >= window * time:
-            break
-    return max(time, 1.0)
 
 
 def _mean_square(squares, expected):

@@ -13,7 +13,7 @@
 # limitations under the License.
 
 from epp_ros.core import BoomModel, calibrate, PostureEstimator, SurveyResult
-from epp_ros.core.calibration.verdict import implausible, integrated_autocorrelation, misfit
+from epp_ros.core.calibration.verdict import implausible, misfit
 from epp_ros.core.model.measurements import Measurements
 from epp_ros.core.simulation.simulate import (FieldEffects, FieldSimulator, StillMotion,
                                               truck_body_anchors, truck_outriggers, truck_pump,
@@ -290,24 +290,6 @@ def test_misfit_names_the_tag_the_anchor_or_the_link_that_fits_worse():
     offsets[4] = 0.8
     (advice,) = implausible(offsets)
     assert 'tag 4' in advice and '+0.80 m' in advice
-
-
-def test_integrated_autocorrelation_of_known_processes():
-    """AR(1) of lag-one correlation rho: (1 + rho) / (1 - rho) frames; white noise: 1."""
-    rng = np.random.default_rng(7)
-    rho, frames, links = 0.8, 4000, 30
-    series = np.empty((frames, links))
-    series[0] = rng.standard_normal(links)
-    for t in range(1, frames):
-        series[t] = rho * series[t - 1] + np.sqrt(1 - rho ** 2) * rng.standard_normal(links)
-    mask = rng.random(series.shape) > 0.1           # a tenth of the ranges missing
-    # Sokal's estimate over 120,000 draws: its standard deviation about
-    # tau sqrt(2 (2 M + 1) / N) with M ~ 5 tau, 0.5 frames here.
-    time = integrated_autocorrelation(series + 3.0, mask)     # each link's mean off
-    assert abs(time - 9.0) < 2.0
-    white = integrated_autocorrelation(rng.standard_normal((frames, links)), mask)
-    assert 1.0 <= white < 1.3
-    assert integrated_autocorrelation(np.zeros((10, 3)), np.ones((10, 3), bool)) == 1.0
 
 
 def test_correlated_noise_weighs_as_fewer_frames():
