@@ -44,6 +44,9 @@ from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt
 import numpy as np
 from scipy.stats import chi2
 
+#: Largest size of a correction in its standard deviations that the adaptation counts.
+LARGEST_SCALED = np.sqrt(10.0)
+
 __all__ = ['TrackMethod', 'Hypothesis', 'constant_velocity']
 
 
@@ -113,6 +116,10 @@ class TrackMethod:
     #: Process noise bounds, rad^2/s^3, and how fast it adapts (frames).
     PROCESS_NOISE_RANGE = (1e-7, 1.0)
     ADAPTATION_FRAMES = 50.0
+    #: Lag-one correlation of successive corrections (over as many frames) above which
+    #: corrections smaller than expected lower no process noise: the ranges' errors persist
+    #: from frame to frame (real links' noise on a moving body), not the boom steadier.
+    PERSISTENT_CORRECTIONS = 0.3
     #: Process noise of a manoeuvre, rad^2/s^3: the rates are free.
     MANOEUVRE_NOISE = 10.0
     #: A gap after which the rates are forgotten, s.
@@ -129,6 +136,7 @@ class TrackMethod:
         self.process_noise = np.full(n, _positive('process_noise', process_noise))
         self.initial_process_noise = self.process_noise.copy()
         self.adapt_process_noise = bool(adapt_process_noise)
+        self._corrections = None        # the last scaled correction, running means
         self.max_rate = _positive('max_rate', max_rate)
         self.max_hypotheses = int(max_hypotheses)
         self.ambiguity_odds = _positive('ambiguity_odds', ambiguity_odds)
@@ -147,6 +155,7 @@ class TrackMethod:
         self.chain.reset()
         self._bank, self._stamp, self._pending = [], None, None
         self.process_noise = self.initial_process_noise.copy()
+        self._corrections = None
         if joints is not None:
             slew, pitches = angles_from_joints(self.model, np.asarray(joints, dtype=float))
             n = self.model.n_sections + 1
@@ -198,13 +207,14 @@ class TrackMethod:
                     posterior_joint_std=self._joint_std(best),
                     fitted_dof=best.fitted_dof,
                     timed_joints=timed[np.arange(n - 1), np.arange(n - 1)])
-        self._pending = (bank, stamp, info.pop('process_noise', self.process_noise))
+        adaptation = info.pop('adaptation', (self.process_noise, self._corrections))
+        self._pending = (bank, stamp, adaptation)
         return joints, info
 
     def accept(self):
         """Commit the last :meth:`solve` as the state (its frame was judged to fit)."""
         if self._pending is not None:
-            self._bank, stamp, self.process_noise = self._pending
+            self._bank, stamp, (self.process_noise, self._corrections) = self._pending
             self._stamp = stamp if np.isfinite(stamp) else None
             self._pending = None
 
@@ -254,7 +264,7 @@ class TrackMethod:
         elapsed = max(stamp - self._stamp, 0.0)
         residuals = self.chain.residuals_of(measurements)
         bank, iterations, manoeuvre, converged = [], 0, False, True
-        process_noise = self.process_noise
+        adaptation = (self.process_noise, self._corrections)
         for hypothesis in self._bank:
             predicted = self._predict(hypothesis, elapsed, self.process_noise)
             fitted, used, done, surprise = self._update(predicted, residuals, delays)
@@ -267,11 +277,11 @@ class TrackMethod:
                     fitted, done, manoeuvre = refit, refit_done, True
             converged &= done
             if self.adapt_process_noise and hypothesis is self._bank[0]:
-                process_noise = self._adapted(predicted, fitted, elapsed)
+                adaptation = self._adapted(predicted, fitted, elapsed)
             bank.append(fitted)
         bank = self._prune(bank)
         return bank, {'iterations': iterations, 'converged': converged, 'searched': False,
-                      'manoeuvre': manoeuvre, 'process_noise': process_noise}
+                      'manoeuvre': manoeuvre, 'adaptation': adaptation}
 
     def _predict(self, hypothesis, elapsed, process_noise):
         n = self.model.n_sections + 1
@@ -349,17 +359,35 @@ class TrackMethod:
 
         A correction of angle i has variance ``P_prior,ii - P_post,ii`` when the model holds
         (covariance matching); corrections larger on average mean the boom accelerates
-        more than ``q`` allows. Committed with the frame, by :meth:`accept`.
+        more than ``q`` allows. That assumes each frame's range errors new: where successive
+        corrections are correlated (:data:`PERSISTENT_CORRECTIONS`) the prediction carries
+        the last frame's errors into this one and the corrections seem small, so ``q`` is
+        then only raised. Also the corrections' memory; both committed with the frame, by
+        :meth:`accept`.
         """
         if elapsed <= 0.0:
-            return self.process_noise
+            return self.process_noise, self._corrections
         n = self.model.n_sections + 1
         correction = wrap_angle(fitted.state[:n] - predicted.state[:n])
         expected = np.diag(predicted.covariance - fitted.covariance)[:n]
-        ratio = np.clip(correction ** 2 / np.maximum(expected, 1e-18), 0.0, 10.0)
+        scaled = np.clip(correction / np.sqrt(np.maximum(expected, 1e-18)), -LARGEST_SCALED,
+                         LARGEST_SCALED)
         # Stochastic approximation of E[ratio] = 1 (a mean: a log would settle low).
-        step = 1.0 + (ratio - 1.0) / self.ADAPTATION_FRAMES
-        return np.clip(self.process_noise * step, *self.PROCESS_NOISE_RANGE)
+        step = 1.0 + (scaled ** 2 - 1.0) / self.ADAPTATION_FRAMES
+        corrections = self._remembered(scaled)
+        _, product, square = corrections
+        step = np.where(product > self.PERSISTENT_CORRECTIONS * square, np.maximum(step, 1.0),
+                        step)
+        return np.clip(self.process_noise * step, *self.PROCESS_NOISE_RANGE), corrections
+
+    def _remembered(self, scaled):
+        """Return ``scaled`` and the running means of successive corrections' products, squares."""
+        if self._corrections is None:
+            return scaled, np.zeros_like(scaled), scaled ** 2
+        last, product, square = self._corrections
+        weight = 1.0 / self.ADAPTATION_FRAMES
+        return (scaled, product + weight * (scaled * last - product),
+                square + weight * (scaled ** 2 - square))
 
     def _prune(self, bank):
         """Best first; folds far less likely dropped, those that met merged."""
