@@ -33,12 +33,15 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import lfilter
 
-__all__ = ['NoiseCorrelation', 'fit_noise_correlation', 'integrated_autocorrelation']
+__all__ = ['NoiseCorrelation', 'fit_noise_correlation', 'integrated_autocorrelation',
+           'pooled_autocorrelation']
 
 #: The memories tried, frames: from white to the whole recording, about 10 % apart.
 MEMORY_STEPS = 80
 #: The shares tried, 0 to 1.
 SHARE_STEPS = 41
+#: Most lags fitted, frames (100 s at 10 Hz): a long recording's far lags add only cost.
+MOST_LAGS = 1000
 
 
 @dataclass(frozen=True)
@@ -75,19 +78,26 @@ class NoiseCorrelation:
         return (1.0 - self.share) * rows + self.share * (forward + backward - rows)
 
 
-def _pooled_autocorrelation(residuals, mask, lags):
-    """Return the autocorrelation at lags 1..``lags`` pooled over links, and frames per link."""
+def pooled_autocorrelation(residuals, mask, lags):
+    """
+    Return the autocorrelation at lags 1..``lags`` pooled over links, and frames per link.
+
+    Each link's products at a lag and their count summed over the links, by FFT.
+    """
     counts = np.maximum(mask.sum(axis=0), 1)
     centred = np.where(mask, residuals - np.where(mask, residuals, 0.0).sum(axis=0) / counts,
                        0.0)
     variance = np.sum(centred ** 2) / max(mask.sum(), 1)
-    correlation = np.zeros(lags)
     if variance <= 0:
-        return correlation, float(np.mean(counts))
-    for lag in range(1, lags + 1):
-        both = mask[lag:] & mask[:-lag]
-        correlation[lag - 1] = np.sum(centred[lag:] * centred[:-lag]) / max(both.sum(), 1)
-    return correlation / variance, float(np.mean(counts))
+        return np.zeros(lags), float(np.mean(counts))
+    size = 1 << int(2 * len(centred) - 1).bit_length()     # no wrap-around
+
+    def lagged(series):
+        spectrum = np.fft.rfft(series, size, axis=0)
+        return np.fft.irfft(spectrum * spectrum.conj(), size, axis=0)[1:lags + 1].sum(axis=1)
+
+    pairs = np.maximum(np.rint(lagged(mask.astype(float))), 1.0)
+    return lagged(centred) / pairs / variance, float(np.mean(counts))
 
 
 def fit_noise_correlation(residuals, mask):
@@ -104,9 +114,10 @@ def fit_noise_correlation(residuals, mask):
     Returns
     -------
     NoiseCorrelation
-        Least squares over lags 1 to n / 4 of the pooled autocorrelation against its
-        expectation with each link's mean taken off, ``(share a^k - time / n) / (1 - time /
-        n)``, over a grid of memories (0.3 frames to n, ~10 % apart) and shares (0 to 1).
+        Least squares over lags 1 to n / 4 (at most :data:`MOST_LAGS`) of the pooled
+        autocorrelation against its expectation with each link's mean taken off,
+        ``(share a^k - time / n) / (1 - time / n)``, over a grid of memories (0.3 frames to
+        n, ~10 % apart) and shares (0 to 1).
         White (share 0) for fewer than 8 frames or residuals that do not vary.
 
     """
@@ -115,8 +126,8 @@ def fit_noise_correlation(residuals, mask):
     frames = residuals.shape[0]
     if frames < 8:
         return NoiseCorrelation()
-    lags = np.arange(1, frames // 4 + 1)
-    measured, per_link = _pooled_autocorrelation(residuals, mask, lags.size)
+    lags = np.arange(1, min(frames // 4, MOST_LAGS) + 1)
+    measured, per_link = pooled_autocorrelation(residuals, mask, lags.size)
     if not measured.any():
         return NoiseCorrelation()
     memories = np.geomspace(0.3, frames, MEMORY_STEPS)[:, None, None]

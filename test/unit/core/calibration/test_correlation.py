@@ -14,6 +14,7 @@
 
 from epp_ros.core.calibration import fit_noise_correlation, integrated_autocorrelation
 from epp_ros.core.calibration import NoiseCorrelation
+from epp_ros.core.calibration.correlation import pooled_autocorrelation
 import numpy as np
 
 
@@ -74,3 +75,19 @@ def test_correlate_sums_the_rows_under_the_autocorrelation():
     assert correlation.time == 1.0 + 2.0 * 0.6 * correlation.decay / (1.0 - correlation.decay)
     np.testing.assert_array_equal(NoiseCorrelation().correlate(rows), rows)
     assert NoiseCorrelation().time == 1.0
+
+
+def testpooled_autocorrelation_is_the_sum_over_links_of_their_lagged_products():
+    """The FFT's sums against the lag-by-lag loop, with a mask and each link's mean off."""
+    rng = np.random.default_rng(1)
+    residuals = rng.standard_normal((300, 7)) + rng.normal(0.0, 2.0, 7)
+    mask = rng.random(residuals.shape) > 0.2
+    measured, per_link = pooled_autocorrelation(residuals, mask, 40)
+    counts = mask.sum(axis=0)
+    centred = np.where(mask, residuals - np.where(mask, residuals, 0.0).sum(axis=0) / counts,
+                       0.0)
+    variance = np.sum(centred ** 2) / mask.sum()
+    looped = [np.sum(centred[lag:] * centred[:-lag]) / np.sum(mask[lag:] & mask[:-lag])
+              / variance for lag in range(1, 41)]
+    np.testing.assert_allclose(measured, looped, rtol=1e-10, atol=1e-12)
+    assert per_link == counts.mean()
