@@ -372,7 +372,7 @@ class TrackMethod:
         expected = np.diag(predicted.covariance - fitted.covariance)[:n]
         scaled = np.clip(correction / np.sqrt(np.maximum(expected, 1e-18)), -LARGEST_SCALED,
                          LARGEST_SCALED)
-        # Stochastic approximation of E[ratio] = 1 (a mean: a log would settle low).
+        # Stochastic approximation of E[scaled^2] = 1 (a mean: a log would settle low).
         step = 1.0 + (scaled ** 2 - 1.0) / self.ADAPTATION_FRAMES
         corrections = self._remembered(scaled)
         _, product, square = corrections
