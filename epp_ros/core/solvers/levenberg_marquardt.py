@@ -42,6 +42,8 @@ GROWTH = 4.0
 FALL = 3.0
 #: Beyond this damping the step is too short to matter: the start is a minimum.
 MAX_DAMPING = 1e10
+#: Converged when an accepted step lowered the cost by at most this fraction of it.
+STALL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -85,7 +87,7 @@ def marquardt_step(ridge=1e-9):
     return step
 
 
-def levenberg_marquardt(x, evaluate, normal_equations, *, max_iter, tol, step=None, stall=1e-6,
+def levenberg_marquardt(x, evaluate, normal_equations, *, max_iter, tol, step=None, stall=STALL,
                         damping_floor=1e-9, refine=None, done=None):
     """
     Minimise a cost by Levenberg–Marquardt from ``x``.

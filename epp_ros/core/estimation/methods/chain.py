@@ -44,7 +44,7 @@ from epp_ros.core.model.nlos import NlosMixture
 from epp_ros.core.model.noise import DEFAULT_NOISE, fitted_link_bias
 from epp_ros.core.model.plane import fit_slew, to_plane
 from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt, \
-    levenberg_marquardt_batch
+    levenberg_marquardt_batch, STALL
 import numpy as np
 
 __all__ = ['ChainMethod', 'Fit', 'SearchExhausted', 'angles_from_joints', 'canonical_angles',
@@ -316,12 +316,18 @@ class ChainMethod:
             gradient += sinking.T @ depth[depth > 0]
         return normal, gradient
 
-    def fit(self, psi, residuals, max_iter=None):
-        """Return the Levenberg–Marquardt :class:`Fit` from ``psi`` on a :class:`Residuals`."""
+    def fit(self, psi, residuals, max_iter=None, stall=STALL):
+        """
+        Return the Levenberg–Marquardt :class:`Fit` from ``psi`` on a :class:`Residuals`.
+
+        It stops after ``max_iter`` iterations (the chain's own by default), or when an
+        accepted step lowered the cost by at most ``stall`` of itself.
+        """
         result = levenberg_marquardt(
             psi, lambda x: self._evaluate(x, residuals),
             lambda x, parts: self._normal_equations(x, residuals, *parts),
-            max_iter=self.max_iter if max_iter is None else max_iter, tol=self.tol)
+            max_iter=self.max_iter if max_iter is None else max_iter, tol=self.tol,
+            stall=stall)
         return Fit(result.x, result.cost, result.iterations, result.converged)
 
     def residuals_of(self, measurements):

@@ -126,6 +126,10 @@ class TrackMethod:
     LONGEST_COAST = 5.0
     #: Hypotheses closer than this in every angle are one, rad.
     SAME_FOLD = 0.05
+    #: A fold's fit stops when a step lowers its cost by at most this fraction of it: its
+    #: cost decides its place in the bank (against log ambiguity_odds), later frames its
+    #: angles; on a frame nothing explains, settling further cost most of a start.
+    FOLD_STALL = 1e-4
 
     def __init__(self, model, process_noise=1e-4, adapt_process_noise=True, max_rate=0.35,
                  max_hypotheses=4, ambiguity_odds=1000.0, manoeuvre_false_alarm=1e-3,
@@ -233,7 +237,7 @@ class TrackMethod:
         range_sigma = np.broadcast_to(residuals.link_sigma(), measurements.ranges.shape)
         for start in (self.chain.folds(best)
                       + self.chain.tip_alternatives(best, measurements, range_sigma)):
-            fit = self.chain.fit(start, residuals)
+            fit = self.chain.fit(start, residuals, stall=self.FOLD_STALL)
             fits.append((fit.cost, fit.psi))
         bank = []
         fits.sort(key=lambda fit: fit[0])

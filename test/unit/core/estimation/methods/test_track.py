@@ -14,9 +14,11 @@
 
 """The tracking estimator: time, silence, folds and manoeuvres."""
 from epp_ros.core import PostureEstimator
+from epp_ros.core.estimation.methods.chain import ChainMethod
 from epp_ros.core.estimation.methods.track import constant_velocity, TrackMethod
 from epp_ros.core.simulation.simulate import (field_effects, FieldEffects, JoystickMotion,
                                               simulate_field, truck_pump, WorkingMotion)
+from epp_ros.core.solvers.levenberg_marquardt import STALL
 from monte_carlo import UNBIASED
 import numpy as np
 import pytest
@@ -114,6 +116,49 @@ def test_both_folds_are_kept_until_the_data_decides():
     assert estimator.last_diagnostics['status'] == 'ok'
     assert estimator.last_diagnostics['hypotheses'] == 1
     np.testing.assert_allclose(estimate, joints, atol=1e-3)
+
+
+def started(monkeypatch, stall, frames):
+    """Run the track on ``frames``, its folds settled to ``stall``; (costs evaluated, diags)."""
+    evaluated = []
+    evaluate = ChainMethod._evaluate
+
+    def counted(self, psi, residuals):
+        evaluated.append(1)
+        return evaluate(self, psi, residuals)
+    monkeypatch.setattr(ChainMethod, '_evaluate', counted)
+    monkeypatch.setattr(TrackMethod, 'FOLD_STALL', stall)
+    estimator = PostureEstimator(MODEL, 'track')
+    diagnostics = []
+    for k, ranges in enumerate(frames):
+        estimator.update(ranges, stamp=k * PERIOD)
+        diagnostics.append(estimator.last_diagnostics)
+    monkeypatch.undo()
+    return len(evaluated), diagnostics
+
+
+def test_a_start_settles_its_folds_as_far_as_the_bank_needs(monkeypatch):
+    """
+    The folds' fits stop at FOLD_STALL: the same bank and verdicts as settled fully.
+
+    On ranges no posture explains (uniform 0-80 m) every frame is a start, and settling
+    each fold to the chain's own stall was most of its cost.
+    """
+    rng = np.random.default_rng(7)
+    joints = MODEL.forward_kinematics(0.3, np.radians([50.0, 20.0, -10.0, -20.0, -40.0]))
+    silent = MODEL.ranges(joints) + rng.normal(0.0, 0.05, (5, MODEL.n_anchors))
+    silent[2] = np.nan                  # joint 3 could fold either way
+    good = [silent] * 3 + [MODEL.ranges(joints)] * 3
+    _, settled = started(monkeypatch, STALL, good)
+    _, stopped = started(monkeypatch, TrackMethod.FOLD_STALL, good)
+    for full, early in zip(settled, stopped):
+        assert (full['status'], full['hypotheses']) == (early['status'], early['hypotheses'])
+        np.testing.assert_allclose(full['estimate'], early['estimate'], atol=1e-3)
+    garbage = list(rng.uniform(0.0, 80.0, (60, MODEL.n_sections, MODEL.n_anchors)))
+    settling, refused = started(monkeypatch, STALL, garbage)
+    stopping, _ = started(monkeypatch, TrackMethod.FOLD_STALL, garbage)
+    assert not any(d['valid'] for d in refused)
+    assert stopping < 0.9 * settling        # 0.81 measured; most of it is the searches
 
 
 def test_joystick_starts_and_stops_cost_no_accuracy_against_the_chain():
