@@ -43,7 +43,7 @@ Fits the searches found elsewhere are returned as ``alternatives`` for the integ
 """
 from numbers import Real
 
-from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMethod, grow_chains
+from epp_ros.core.estimation.methods.chain import canonical_angles, ChainMethod, grow_chains
 from epp_ros.core.estimation.methods.epp import CEPP
 from epp_ros.core.model.folds import fold_alternatives, keep_folds, tip_circle, tip_minima
 from epp_ros.core.model.measurements import Measurements
@@ -228,8 +228,8 @@ class FieldCEPP(CEPP):
         polished, fit = self._finish.refine(joints, self._finish.residuals_of(ranged))
         if not np.all(np.isfinite(polished)):
             return joints, info
-        return polished, dict(info, slew=float(angles_from_joints(self.model, polished)[0]),
-                              polish_iterations=fit.iterations)
+        slew = canonical_angles(fit.psi, self.model.pivot_offset)[0]     # the polished's
+        return polished, dict(info, slew=float(slew), polish_iterations=fit.iterations)
 
     def _searched(self, measurements, prior, warm):
         """Return :meth:`solve`'s fit before the polish."""
@@ -294,22 +294,21 @@ class FieldCEPP(CEPP):
                                       if np.abs(other - joints).max() > self.ALTERNATIVE_DISTANCE]
         return joints, found_info
 
-    def _tag_loss(self, k, points, ranges):
+    def _tag_loss(self, k, points, ranges, sigma):
         """Return the NLOS-mixture loss of tag ``k``'s measured ranges at points (..., 3)."""
         valid = np.isfinite(ranges[k])
-        sigma = self._range_sigma(ranges)[k, valid]
         distance = np.linalg.norm(np.asarray(points)[..., None, :] - self.model.anchors[valid],
                                   axis=-1)
-        return np.sum(self.nlos.loss((ranges[k, valid] - distance) / sigma, sigma)[0], axis=-1)
+        excess = (ranges[k, valid] - distance) / sigma[k, valid]
+        return np.sum(self.nlos.loss(excess, sigma[k, valid])[0], axis=-1)
 
-    def _tag_losses(self, points, ranges):
-        """Return :meth:`_tag_loss` of tags 0 .. q-1, each at its row of points (q, 3), (q,)."""
-        sigma = self._range_sigma(ranges)[:len(points)]
-        ranges = ranges[:len(points)]
-        valid = np.isfinite(ranges)
-        distance = np.linalg.norm(points[:, None, :] - self.model.anchors, axis=-1)
-        excess = np.where(valid, ranges - distance, 0.0) / sigma
-        return np.sum(self.nlos.loss(excess, sigma)[0], axis=1)     # 0 at 0: the unheard
+    def _tag_losses(self, points, ranges, sigma):
+        """Return :meth:`_tag_loss` of tags 0 .. q-1, each at its row of points (..., q, 3)."""
+        q = points.shape[-2]
+        valid = np.isfinite(ranges[:q])
+        distance = np.linalg.norm(points[..., None, :] - self.model.anchors, axis=-1)
+        excess = np.where(valid, ranges[:q] - distance, 0.0) / sigma[:q]
+        return np.sum(self.nlos.loss(excess, sigma[:q])[0], axis=-1)   # 0 at 0: the unheard
 
     def _fold_starts(self, joints, ranges):
         """
@@ -318,19 +317,20 @@ class FieldCEPP(CEPP):
         At most ``FOLD_STARTS``, the largest gains first (``core.model.folds``).
         """
         p = self.model.n_sections
+        sigma = self._range_sigma(ranges)
         heard = np.isfinite(ranges).any(axis=1)
         folded = fold_alternatives(self.model, joints)
-        fold_gains = self._tag_losses(joints[:-1], ranges) - self._tag_losses(folded, ranges)
-        gains = [(fold_gains[k], k, folded[k]) for k in np.flatnonzero(heard[:-1])]
+        fitted, refolded = self._tag_losses(np.stack([joints[:-1], folded]), ranges, sigma)
+        gains = [(fitted[k] - refolded[k], k, folded[k]) for k in np.flatnonzero(heard[:-1])]
         if heard[-1]:
             hinge = joints[-2] if p > 1 else self.model.pivot_of(joints)
             _, ends = tip_circle(self.model, hinge, fit_slew(joints, self.model.base))
-            loss = self._tag_loss(p - 1, ends, ranges)
+            # The circle and, last, the tip where it was fitted.
+            loss = self._tag_loss(p - 1, np.vstack([ends, joints[-1]]), ranges, sigma)
             away = np.linalg.norm(ends - joints[-1], axis=1) > self.ALTERNATIVE_DISTANCE
-            others = tip_minima(loss, away)
+            others = tip_minima(loss[:-1], away)
             if others.size:
-                gains.append((self._tag_loss(p - 1, joints[-1], ranges) - loss[others[0]],
-                              p - 1, ends[others[0]]))
+                gains.append((loss[-1] - loss[others[0]], p - 1, ends[others[0]]))
         starts = []
         for gain, k, position in sorted(gains, key=lambda g: -g[0])[:self.FOLD_STARTS]:
             if gain > self.FOLD_MARGIN:
