@@ -38,9 +38,9 @@ from dataclasses import dataclass, replace
 import time
 
 from epp_ros.core import PostureEstimator
-from epp_ros.core.estimation import wrong_frames
+from epp_ros.core.estimation import IntegrityLimits, wrong_frames
 from epp_ros.core.estimation.methods import angles_from_joints, ChainMethod
-from epp_ros.core.model import crlb, posterior_crlb
+from epp_ros.core.model import crlb, fold_alternatives, NlosMixture, posterior_crlb, tip_circle
 from epp_ros.core.model import Measurements, Residuals, SensorNoise
 from epp_ros.core.simulation import (field_effects, FieldEffects, JoystickMotion, Motion,
                                      simulate_field, truck_outriggers, truck_pump, WorkingMotion,
@@ -118,6 +118,43 @@ def _clean_bound(model, frame, effects):
     return crlb(model, frame.slew_true, frame.pitches_true, sigma).rmse
 
 
+def truth_decides(model, frame, effects, ambiguous_joints):
+    """
+    Whether the frame's own ranges rule out every other position of the joints called ambiguous.
+
+    The information a frame holds, by an oracle: at the true posture, under the noise the
+    simulator draws (``sigma0 + k r``, its NLOS fraction and excess; biases unknown, as to
+    the estimator), each flagged joint's fold (an inner joint) or the tip at any pitch more
+    than ``ambiguity_distance`` away must cost more than log ``ambiguity_odds`` in its own
+    ranges. ``ambiguous_joints``: 1-based, as in the diagnostics. False when a tag is silent
+    (one frame cannot place its joint).
+    """
+    ranges = frame.inputs()['ranges']
+    if not np.isfinite(ranges).any(axis=1).all():
+        return False
+    limits = IntegrityLimits()
+    joints = frame.joints
+    mixture = NlosMixture(effects.nlos_fraction, effects.nlos_gamma)
+    sigma = effects.sigma + effects.sigma_per_metre * model.ranges(joints)
+    p = model.n_sections
+    for k in np.asarray(ambiguous_joints, dtype=int) - 1:
+        if k < p - 1:
+            others = fold_alternatives(model, joints)[k][None]
+        else:
+            circle = tip_circle(model, joints[-2] if p > 1 else model.pivot(frame.slew_true),
+                                frame.slew_true)[1]
+            others = circle[np.linalg.norm(circle - joints[-1], axis=1)
+                            > limits.ambiguity_distance]
+        seen = np.isfinite(ranges[k])
+        positions = np.vstack([joints[k], others])
+        distance = np.linalg.norm(positions[:, None, :] - model.anchors[seen], axis=-1)
+        link_sigma = np.broadcast_to(sigma[k, seen], distance.shape)
+        cost = mixture.loss((ranges[k, seen] - distance) / link_sigma, link_sigma)[0].sum(1)
+        if np.min(cost[1:] - cost[0]) < np.log(limits.ambiguity_odds):
+            return False
+    return True
+
+
 def run_case(name, seconds, seed):
     """Return per method (squared errors, valid count) and the bounds of one case."""
     effects_names, motion_name = CASES[name] if name in CASES else ('', name)
@@ -132,7 +169,7 @@ def run_case(name, seconds, seed):
     bounds = np.array([_clean_bound(model, f, effects) for f in frames])[scored]
     results = {}
     for method, estimator in _estimators(model, effects).items():
-        squared, valid, times, published, predicted = [], 0, [], [], []
+        squared, valid, times, published, predicted, decidable = [], 0, [], [], [], 0
         for frame, score in zip(frames, scored):
             start = time.perf_counter()
             returned = estimator.update(**frame.inputs())
@@ -145,10 +182,12 @@ def run_case(name, seconds, seed):
                 valid += diagnostics['valid']
                 published.append(bool(diagnostics['valid']))
                 predicted.append(diagnostics.get('predicted_rmse', np.nan))
+                decidable += diagnostics['status'] == 'ambiguous' and truth_decides(
+                    model, frame, effects, diagnostics['ambiguous_joints'])
         results[method] = {'squared': np.array(squared), 'valid': valid,
                            'published': np.array(published, dtype=bool),
                            'predicted': np.array(predicted, dtype=float),
-                           'ms': 1e3 * float(np.median(times))}
+                           'ms': 1e3 * float(np.median(times)), 'decidable': decidable}
     return results, bounds, frames, model
 
 
@@ -194,7 +233,11 @@ def _method_cell(runs, bounds, heard):
     published = np.concatenate([run['published'] for run in runs])
     predicted = np.concatenate([run['predicted'] for run in runs])
     wrong, confident = wrong_frames(squared, published, predicted)
-    return {'ratio': _ratio(squared, bounds), 'heard_ratio': _ratio_over(squared, bounds, heard),
+    decidable = sum(run['decidable'] for run in runs)
+    return {'decidable': decidable,
+            # of the frames the information allows: published, and refused the truth decides
+            'allowed_share': published.sum() / max(published.sum() + decidable, 1),
+            'ratio': _ratio(squared, bounds), 'heard_ratio': _ratio_over(squared, bounds, heard),
             'published_ratio': _ratio_over(squared, bounds, published),
             'valid': sum(run['valid'] for run in runs) / bounds.size,
             'gross': sum(run['gross'] for run in runs),

@@ -478,6 +478,20 @@ def _field_published_table(rows):
         + ' |' for row in rows]
 
 
+def _field_information_table(rows):
+    """
+    Return the lines of the table of what the frames' information allows.
+
+    Per method: the frames refused as ambiguous that the truth's own ranges decide
+    (``field_bench.truth_decides``), and the published share of the frames allowed.
+    """
+    methods = field_bench.METHODS
+    return ['| case | ' + ' | '.join(methods) + ' |', '|---|' + '---|' * len(methods)] + [
+        f'| {row["case"]} | ' + ' | '.join(
+            f'{100 * row[m]["allowed_share"]:.0f} % ({row[m]["decidable"]})' for m in methods)
+        + ' |' for row in rows]
+
+
 def _field_heard_lines(rows):
     """Return a line per case with a tag unheard: the ratios over the frames with every tag."""
     # with a silent tag, no single frame determines its joint
@@ -508,7 +522,11 @@ def field_markdown(report):
              'What each method published as valid: the ratio over those frames (the fraction '
              'published; frames valid while > 1 m off / of those, with a predicted RMSE under '
              'a third of the error):', '',
-             *_field_published_table(report.rows), '', *_field_heard_lines(report.rows), '',
+             *_field_published_table(report.rows), '',
+             'Of the frames the information allows, the share published (frames refused as '
+             'ambiguous whose true posture the ranges decide by the ambiguity odds, at the '
+             "simulator's noise; a silent tag's frame allows none):", '',
+             *_field_information_table(report.rows), '', *_field_heard_lines(report.rows), '',
              f'Track where its motion model holds (``cv``, {posterior["frames"]} frames): '
              f'{posterior["posterior_ratio"]:.2f} x the posterior CRLB, '
              f'{posterior["single_ratio"]:.2f} x the single-frame CRLB (the posterior bound '

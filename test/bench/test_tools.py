@@ -14,6 +14,7 @@
 
 """The console tools run end to end and keep their output contracts."""
 import argparse
+from dataclasses import replace
 import json
 import os
 from pathlib import Path
@@ -22,7 +23,8 @@ import sys
 
 from benchmarks import bench, experiments, field_bench, reports
 from epp_ros.cli import demo
-from epp_ros.core.simulation import RangeNoise, truck_pump, working_cycle
+from epp_ros.core.simulation import (FieldEffects, RangeNoise, simulate_field, truck_pump,
+                                     working_cycle, WorkingMotion)
 import numpy as np
 import pytest
 
@@ -308,6 +310,23 @@ def test_bench_field_prints_every_case_against_the_bounds(capsys):
         assert all(np.isfinite(row[method]['ratio']) for method in field_bench.METHODS)
     assert 0.0 < report['posterior']['posterior_ratio'] < 10.0
     assert '| all |' in out and 'posterior CRLB' in out and 'scipy least_squares' in out
+    for row in report['rows']:
+        for method in field_bench.METHODS:
+            assert 0.0 <= row[method]['allowed_share'] <= 1.0 and row[method]['decidable'] >= 0
+    assert 'the information allows' in out
+
+
+def test_the_information_oracle_decides_a_fold_only_where_the_ranges_do():
+    """A fold metres away at sigma 0.1 m is decided; at 50 m it is not, nor a silent tag."""
+    model = truck_pump()
+    effects = FieldEffects()
+    frame = simulate_field(model, WorkingMotion(model, np.random.default_rng(0)), 1.0,
+                           effects, np.random.default_rng(1), 0.1)[-1]
+    assert field_bench.truth_decides(model, frame, effects, [2, 5])
+    assert not field_bench.truth_decides(model, frame, replace(effects, sigma=50.0), [2, 5])
+    assert field_bench.truth_decides(model, frame, replace(effects, sigma=50.0), [])
+    frame.ranges[2] = np.nan
+    assert not field_bench.truth_decides(model, frame, effects, [])
 
 
 def test_bench_speed_prints_times_ratios_and_growth(capsys):
