@@ -271,23 +271,27 @@ class _EDMMethod:
         coords : ndarray, shape (p, d)
         info : dict
             The last solve's, with ``iterations`` and ``inner_iterations`` summed over all,
-            ``irls_iterations`` (re-solves done) and ``link_weights`` (p, m) when reweighted.
+            ``irls_iterations`` (re-solves done) and ``link_weights`` (p, m) when reweighted;
+            ``blocked_links`` (p, m) when the last solution's links were judged (the
+            second output of :meth:`_link_weights`).
 
         """
         weights = np.ones(ranges.shape) if weights is None else weights
         noise = self._noise_factors(ranges)
         joints, coords, info = solve(np.nan_to_num(noise * weights), None)
         totals = {'iterations': info['iterations'], 'inner_iterations': info['inner_iterations']}
-        done = 0
+        done, blocked = 0, None
         while done < self.irls_iterations:
-            new, _ = self._link_weights(joints, ranges)
+            new, blocked = self._link_weights(joints, ranges)
             if not np.nanmax(np.abs(new - weights), initial=0.0) > self.IRLS_TOL:
                 break
-            weights, done = new, done + 1
+            weights, done, blocked = new, done + 1, None
             joints, coords, info = solve(np.nan_to_num(noise * weights), coords)
             for key in totals:
                 totals[key] += info[key]
         info.update(totals, irls_iterations=done)
+        if blocked is not None:         # the links the last solution's weights call blocked
+            info['blocked_links'] = blocked
         if self.irls_iterations:
             info['link_weights'] = np.where(np.isfinite(ranges), weights, np.nan)
         return joints, coords, info
@@ -375,6 +379,7 @@ class EPP1(_EDMMethod):
             return joints, joints, info
 
         joints, _, info = self._reweighted(solve, measurements.ranges)
+        info.pop('blocked_links', None)
         return joints, info
 
 
@@ -505,14 +510,16 @@ class CEPP(_EDMMethod):
             # Each plane starts from the last one's weights: its blocked links are known.
             joints, coords, info = self._solve_in_plane(measurements, prior, slew, weights,
                                                         warm)
+            blocked = info.pop('blocked_links', None)
             weights = info.get('link_weights')
             for key in totals:
                 totals[key] += info[key]
             if attempt == self.slew_iterations:
                 break
             if self.irls_iterations:            # the slew from the links that look clear
-                ranges = np.where(self._link_weights(joints, measurements.ranges)[1], np.nan,
-                                  measurements.ranges)
+                if blocked is None:
+                    blocked = self._link_weights(joints, measurements.ranges)[1]
+                ranges = np.where(blocked, np.nan, measurements.ranges)
             step = slew_step(coords, ranges, self.model.anchors, self.model.base, slew)
             if abs(step) <= self.slew_tol:
                 break

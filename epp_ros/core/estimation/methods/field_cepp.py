@@ -273,9 +273,12 @@ class FieldCEPP(CEPP):
         if not self.fold_search:
             return joints, info
         ranges = measurements.ranges
+        starts = self._fold_starts(joints, ranges)
+        if not starts:
+            return joints, info
         best = (self._fit_cost(joints, ranges), joints, info)
         others = []
-        for start in self._fold_starts(joints, ranges):
+        for start in starts:
             found, found_info = self._solve_from(measurements, start, True)
             info['iterations'] += found_info['iterations']
             info['inner_iterations'] += found_info['inner_iterations']
