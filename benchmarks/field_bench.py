@@ -40,7 +40,7 @@ import time
 from epp_ros.core import PostureEstimator
 from epp_ros.core.estimation import IntegrityLimits, wrong_frames
 from epp_ros.core.estimation.methods import angles_from_joints, ChainMethod
-from epp_ros.core.model import crlb, fold_alternatives, NlosMixture, posterior_crlb, tip_circle
+from epp_ros.core.model import crlb, posterior_crlb
 from epp_ros.core.model import Measurements, Residuals, SensorNoise
 from epp_ros.core.simulation import (field_effects, FieldEffects, JoystickMotion, Motion,
                                      simulate_field, truck_outriggers, truck_pump, WorkingMotion,
@@ -120,38 +120,39 @@ def _clean_bound(model, frame, effects):
 
 def truth_decides(model, frame, effects, ambiguous_joints):
     """
-    Whether the frame's own ranges rule out every other position of the joints called ambiguous.
+    Whether the frame's own ranges rule out every other fit of the joints called ambiguous.
 
-    The information a frame holds, by an oracle: at the true posture, under the noise the
+    The information a frame holds, by an oracle that knows the truth: under the noise the
     simulator draws (``sigma0 + k r``, its NLOS fraction and excess; biases unknown, as to
-    the estimator), each flagged joint's fold (an inner joint) or the tip at any pitch more
-    than ``ambiguity_distance`` away must cost more than log ``ambiguity_odds`` in its own
-    ranges. ``ambiguous_joints``: 1-based, as in the diagnostics. False when a tag is silent
-    (one frame cannot place its joint).
+    the estimator; the ranges alone), the chain is fitted from the true posture and from
+    it with each flagged joint folded (an inner joint) or the tip at its other fitting
+    pitches; each such posture, and its fit, that puts a joint more than
+    ``ambiguity_distance`` away must be more than ``ambiguity_odds`` times less likely. ``ambiguous_joints``: 1-based, as in
+    the diagnostics. False when a tag is silent (one frame cannot place its joint).
     """
     ranges = frame.inputs()['ranges']
     if not np.isfinite(ranges).any(axis=1).all():
         return False
     limits = IntegrityLimits()
-    joints = frame.joints
-    mixture = NlosMixture(effects.nlos_fraction, effects.nlos_gamma)
-    sigma = effects.sigma + effects.sigma_per_metre * model.ranges(joints)
-    p = model.n_sections
+    sigma = effects.sigma + effects.sigma_per_metre * model.ranges(frame.joints)
+    measurements = Measurements.ranges_only(ranges)
+    chain = ChainMethod(model, effects.sigma, nlos_fraction=effects.nlos_fraction,
+                        nlos_gamma=effects.nlos_gamma)
+    residuals = Residuals(model, measurements, SensorNoise(sigma))
+    truth = chain.fit(np.r_[frame.slew_true, frame.pitches_true], residuals)
+    starts = []
     for k in np.asarray(ambiguous_joints, dtype=int) - 1:
-        if k < p - 1:
-            others = fold_alternatives(model, joints)[k][None]
-        else:
-            circle = tip_circle(model, joints[-2] if p > 1 else model.pivot(frame.slew_true),
-                                frame.slew_true)[1]
-            others = circle[np.linalg.norm(circle - joints[-1], axis=1)
-                            > limits.ambiguity_distance]
-        seen = np.isfinite(ranges[k])
-        positions = np.vstack([joints[k], others])
-        distance = np.linalg.norm(positions[:, None, :] - model.anchors[seen], axis=-1)
-        link_sigma = np.broadcast_to(sigma[k, seen], distance.shape)
-        cost = mixture.loss((ranges[k, seen] - distance) / link_sigma, link_sigma)[0].sum(1)
-        if np.min(cost[1:] - cost[0]) < np.log(limits.ambiguity_odds):
-            return False
+        starts += ([chain.folds(truth.psi)[k]] if k < model.n_sections - 1
+                   else chain.tip_alternatives(truth.psi, measurements, sigma))
+    there = model.forward_kinematics(truth.psi[0], truth.psi[1:])
+    for start in starts:
+        # The fold itself is a posture; its fit may find a likelier one, or slide back.
+        for psi, cost in ((start, chain.cost(start, residuals)),
+                          chain.fit(start, residuals)[:2]):
+            moved = np.linalg.norm(model.forward_kinematics(psi[0], psi[1:]) - there, axis=1)
+            if moved.max() > limits.ambiguity_distance and \
+                    cost - truth.cost < np.log(limits.ambiguity_odds):
+                return False
     return True
 
 
