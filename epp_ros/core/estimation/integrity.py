@@ -503,9 +503,18 @@ class Integrity:
         return [posture for posture in postures if np.all(np.isfinite(posture))]
 
     def _near(self, joint_std):
-        """Per joint, metres: alternatives closer than this do not matter (p,)."""
+        """
+        Per joint, metres: alternatives closer than this do not matter (p,).
+
+        ``ambiguity_distance``, or where the joint's own Gaussian posterior (its predicted
+        std) stops putting positions within ``ambiguity_odds`` of the estimate,
+        ``sqrt(2 ln odds)`` std (3.7 at 1000:1), if further: nearer, the std already says
+        the joint may be there, and calling its own tail a rival refused frames the std
+        covered.
+        """
+        tail = math.sqrt(2.0 * math.log(self.limits.ambiguity_odds))
         return np.maximum(self.limits.ambiguity_distance,
-                          3.0 * np.nan_to_num(joint_std, posinf=0.0))
+                          tail * np.nan_to_num(joint_std, posinf=0.0))
 
     def fold_spread(self, joints, measurements, slew):
         """
@@ -527,8 +536,8 @@ class Integrity:
 
         A fold of an inner joint, or the tip at another pitch, counts when its ranges make
         it no more than ``ambiguity_odds`` times less likely than the estimate, when it is
-        further than ``ambiguity_distance`` and three predicted standard deviations
-        ``joint_std`` (p,) away, and, given how far each joint can have moved since the
+        further than ``ambiguity_distance`` and the joint's own Gaussian tail (:meth:`_near`;
+        ``joint_std`` (p,)) away, and, given how far each joint can have moved since the
         last accepted posture (``reach``: that posture and the distances, see
         :meth:`reach`), when it could have got there.
         """

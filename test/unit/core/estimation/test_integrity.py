@@ -17,9 +17,11 @@ from pathlib import Path
 
 from epp_ros.core import PostureEstimator
 from epp_ros.core.estimation.integrity import (_binomial_tail, _chi_square_limit,
-                                               fold_alternatives, IntegrityLimits, Thresholds)
+                                               fold_alternatives, Integrity, IntegrityLimits,
+                                               Thresholds)
 from epp_ros.core.model.bounds import crlb
-from epp_ros.core.model.measurements import Measurements
+from epp_ros.core.model.measurements import Measurements, SensorNoise
+from epp_ros.core.model.nlos import NlosMixture
 from epp_ros.core.simulation.simulate import (FIELD_EFFECTS, make_motion, random_posture,
                                               RangeNoise, simulate_field, truck_pump,
                                               working_cycle)
@@ -176,6 +178,34 @@ def test_a_joint_with_one_range_is_ambiguous_unless_time_rules_the_fold_out():
     estimate = tracking.update(ranges, stamp=0.05)      # the fold is 2.7 m away: unreachable
     assert tracking.last_diagnostics['valid']
     np.testing.assert_allclose(estimate, joints, atol=1e-6)
+
+
+def test_a_joints_own_gaussian_tail_is_not_a_rival():
+    """
+    The tip's ranges place it on its circle with a std of 0.45 m (exact ranges, sigma told).
+
+    Its position 1.57 m along the circle (3.5 std) fits within 1000:1 (3.6 nats): no more
+    than the std already says, so no rival. Claimed at 0.3 m, the tip has one there; the
+    circle's other side fits 20 nats worse.
+    """
+    slew = 0.3
+    joints = MODEL.forward_kinematics(slew, np.radians([50.0, 20.0, 0.0, -20.0, 20.0]))
+    across = np.array([-np.sin(slew), np.cos(slew), 0.0])        # normal to the boom's plane
+    tangent = np.cross(across, joints[-1] - joints[-2])
+    tangent /= np.linalg.norm(tangent)
+    units = joints[-1] - MODEL.anchors
+    units /= np.linalg.norm(units, axis=1)[:, None]
+    tip_std = 0.45
+    sigma = tip_std * np.sqrt(np.sum((units @ tangent) ** 2))
+    integrity = Integrity(MODEL, SensorNoise(sigma), NlosMixture(0.0, 1.0))
+    measurements = Measurements.ranges_only(MODEL.ranges(joints))
+    joint_std = np.full(MODEL.n_sections, 0.05)
+    joint_std[-1] = tip_std
+    assert integrity.ambiguous_joints(joints, measurements, joint_std, slew) == {}
+    joint_std[-1] = 0.3
+    rival = integrity.ambiguous_joints(joints, measurements, joint_std, slew)
+    assert list(rival) == [MODEL.n_sections - 1]
+    assert 1.5 < np.linalg.norm(rival[MODEL.n_sections - 1] - joints[-1]) < 1.6
 
 
 def test_a_fit_that_took_blocked_links_for_clear_ones_is_refused_as_ambiguous():
