@@ -127,8 +127,9 @@ def truth_decides(model, frame, effects, ambiguous_joints):
     the estimator; the ranges alone), the chain is fitted from the true posture and from
     it with each flagged joint folded (an inner joint) or the tip at its other fitting
     pitches; each such posture, and its fit, that puts a joint more than
-    ``ambiguity_distance`` away must be more than ``ambiguity_odds`` times less likely. ``ambiguous_joints``: 1-based, as in
-    the diagnostics. False when a tag is silent (one frame cannot place its joint).
+    ``ambiguity_distance`` away must be more than ``ambiguity_odds`` times less likely.
+    ``ambiguous_joints``: 1-based, as in the diagnostics. False when a tag is silent (one
+    frame cannot place its joint).
     """
     ranges = frame.inputs()['ranges']
     if not np.isfinite(ranges).any(axis=1).all():

@@ -544,6 +544,7 @@ def _monitored(args, config, config_path, workdir, log, view, live, stop_request
         if recorder is not None:
             stop([recorder], RECORD_WAIT)
     executor.remove_node(monitor.node)
+    executor.shutdown(timeout_sec=0)    # before the context: its __del__ would touch it after
     monitor.node.destroy_node()
     rclpy.try_shutdown()
     return monitor, failure, recorder

@@ -134,6 +134,7 @@ def _spin(node, stop):
             executor.spin_once(timeout_sec=SIGNAL_POLL)
     finally:
         executor.remove_node(node)
+        executor.shutdown(timeout_sec=0)    # its __del__ must not outlive the context
 
 
 def _close(node):
