@@ -111,11 +111,15 @@ def _estimators(model, effects):
             'chain told': PostureEstimator(model, 'chain', learn_noise=False, **told)}
 
 
+def _true_sigma(model, frame, effects):
+    """Return each link's range std as the simulator draws it (p, m): ``sigma0 + k r``."""
+    return effects.sigma + effects.sigma_per_metre * model.ranges(frame.joints)
+
+
 def _clean_bound(model, frame, effects):
     """Return the clean line-of-sight bound (m) at the true posture and noise."""
-    distances = model.ranges(frame.joints)
-    sigma = effects.sigma + effects.sigma_per_metre * distances
-    return crlb(model, frame.slew_true, frame.pitches_true, sigma).rmse
+    return crlb(model, frame.slew_true, frame.pitches_true,
+                _true_sigma(model, frame, effects)).rmse
 
 
 def truth_decides(model, frame, effects, ambiguous_joints):
@@ -135,15 +139,15 @@ def truth_decides(model, frame, effects, ambiguous_joints):
     if not np.isfinite(ranges).any(axis=1).all():
         return False
     limits = IntegrityLimits()
-    sigma = effects.sigma + effects.sigma_per_metre * model.ranges(frame.joints)
+    sigma = _true_sigma(model, frame, effects)
     measurements = Measurements.ranges_only(ranges)
     chain = ChainMethod(model, effects.sigma, nlos_fraction=effects.nlos_fraction,
                         nlos_gamma=effects.nlos_gamma)
     residuals = Residuals(model, measurements, SensorNoise(sigma))
     truth = chain.fit(np.r_[frame.slew_true, frame.pitches_true], residuals)
-    starts = []
+    folds, starts = chain.folds(truth.psi), []
     for k in np.asarray(ambiguous_joints, dtype=int) - 1:
-        starts += ([chain.folds(truth.psi)[k]] if k < model.n_sections - 1
+        starts += ([folds[k]] if k < model.n_sections - 1
                    else chain.tip_alternatives(truth.psi, measurements, sigma))
     there = model.forward_kinematics(truth.psi[0], truth.psi[1:])
     for start in starts:

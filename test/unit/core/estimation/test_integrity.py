@@ -184,9 +184,9 @@ def test_a_joints_own_gaussian_tail_is_not_a_rival():
     """
     The tip's ranges place it on its circle with a std of 0.45 m (exact ranges, sigma told).
 
-    Its position 1.57 m along the circle (3.5 std) fits within 1000:1 (3.6 nats): no more
-    than the std already says, so no rival. Claimed at 0.3 m, the tip has one there; the
-    circle's other side fits 20 nats worse.
+    Its position 1.57 m along the circle (3.5 std) fits within 1000:1 (3.6 nats), inside
+    the 3.7 std where the std itself puts positions within those odds: no rival. Claimed
+    at 0.3 m, the tip has one there; the circle's other side fits 20 nats worse.
     """
     slew = 0.3
     joints = MODEL.forward_kinematics(slew, np.radians([50.0, 20.0, 0.0, -20.0, 20.0]))
