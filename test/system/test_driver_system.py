@@ -61,10 +61,12 @@ def check_ranges_against_truth(listener, config, since, tolerance):
     """
     Check every tag's ranges in every frame against the true postures.
 
-    Every tag's ranges in every frame must match some true posture's (no noise) within
-    the format's precision, and frames carry the configured names. (Tags on separate ports
-    are not synchronised: one frame may hold rows of adjacent cycles.) Waits, generously,
-    for three frames whose truth was heard: a loaded listener loses some.
+    Every tag's ranges in every frame must match the true postures (no noise) of one cycle
+    or of two adjacent ones within the format's precision, and frames carry the configured
+    names. (Tags on separate ports are not synchronised: one frame may hold rows of adjacent
+    cycles. Where each range is its own line, a cycle closed by its ``frame_period`` on a
+    loaded machine leaves its late lines to the next frame, beside that cycle's first ones.)
+    Waits, generously, for three frames whose truth was heard: a loaded listener loses some.
     """
     checked = listener.ranges[min(since + 2, len(listener.ranges) - 1)]
     truth_window(listener, covering=to_seconds(checked.header.stamp))
@@ -83,8 +85,9 @@ def check_ranges_against_truth(listener, config, since, tolerance):
         assert np.isfinite(measured).any()
         for row in np.flatnonzero(np.isfinite(measured).any(axis=1)):
             reported = np.isfinite(measured[row])
-            errors = np.abs(true_ranges[:, row, reported] - measured[row, reported])
-            assert errors.max(axis=1).min() <= tolerance
+            matches = np.abs(true_ranges[:, row, reported] - measured[row, reported]) <= tolerance
+            of_two_cycles = matches[:-1] | matches[1:]
+            assert of_two_cycles.all(axis=1).any(), (row, measured[row])
 
 
 def check_range_ages(frame, frame_period=0.1, slack=0.1):
