@@ -20,7 +20,7 @@ from .folds import (fold_alternatives, folded_angles, keep_folds, reflect, tip_c
                     tip_minima, TIP_PITCHES)
 from .measurements import (Measurements, plausible_limits, range_spikes, Residuals, SensorNoise,
                            SPIKE_M, wrap_angle)
-from .nlos import LinkLoss, NlosMixture
+from .nlos import LinkLoss, NlosMixture, range_excess
 from .noise import DEFAULT_NOISE, fitted_link_bias, link_bias_stds, NoiseModel
 from .plane import fit_plane_to_ranges, fit_slew, from_plane, project_ranges, slew_step, to_plane
 from .poses import boom_frames, boom_quaternions, rotation_to_quaternion
@@ -29,7 +29,8 @@ __all__ = ['BoomModel', 'MAX_RANGE_OFFSET', 'fisher_information', 'Bound', 'crlb
            'bound_from_information', 'bound_from_covariance', 'RangeBiasPrior', 'bias_covariance',
            'posterior_information', 'posterior_crlb', 'SensorNoise', 'Measurements', 'Residuals',
            'plausible_limits', 'range_spikes', 'SPIKE_M', 'wrap_angle', 'NlosMixture', 'LinkLoss',
-           'NoiseModel', 'DEFAULT_NOISE', 'fitted_link_bias', 'link_bias_stds', 'fit_slew',
-           'fit_plane_to_ranges', 'slew_step', 'to_plane', 'from_plane', 'project_ranges',
-           'boom_frames', 'rotation_to_quaternion', 'boom_quaternions', 'TIP_PITCHES', 'reflect',
+           'range_excess', 'NoiseModel', 'DEFAULT_NOISE', 'fitted_link_bias', 'link_bias_stds',
+           'fit_slew', 'fit_plane_to_ranges', 'slew_step', 'to_plane', 'from_plane',
+           'project_ranges', 'boom_frames', 'rotation_to_quaternion', 'boom_quaternions',
+           'TIP_PITCHES', 'reflect',
            'fold_alternatives', 'folded_angles', 'keep_folds', 'tip_circle', 'tip_minima']

@@ -34,12 +34,40 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import expit, log_ndtr
 
-__all__ = ['NlosMixture', 'LinkLoss']
+__all__ = ['NlosMixture', 'LinkLoss', 'range_excess']
 
 _HALF_LOG_2PI = 0.5 * np.log(2.0 * np.pi)
 
 #: Closest a link's own prior NLOS probability comes to 0 or 1.
 PRIOR_LIMIT = 1e-6
+
+
+def range_excess(points, anchors, ranges, sigma):
+    """
+    Return measured ranges less the distances from candidate points, in units of sigma.
+
+    What the losses here take, for scoring where tags could be.
+
+    Parameters
+    ----------
+    points : ndarray, shape (..., 3) or (..., q, 3)
+        Candidate positions of one tag, or of q tags (one row each), metres.
+    anchors : ndarray, shape (m, 3)
+        The anchors, metres.
+    ranges : ndarray, shape (m,) or (q, m)
+        That tag's (those tags') measured ranges, metres, NaN where none.
+    sigma : ndarray, shape like ``ranges``
+        Their standard deviations, metres, finite.
+
+    Returns
+    -------
+    ndarray, shape (..., m) or (..., q, m)
+        ``(measured - distance) / sigma``; 0 where a range is missing, which every loss
+        here scores 0.
+
+    """
+    distance = np.linalg.norm(np.asarray(points)[..., None, :] - anchors, axis=-1)
+    return np.where(np.isfinite(ranges), ranges - distance, 0.0) / sigma
 
 
 @dataclass(frozen=True)

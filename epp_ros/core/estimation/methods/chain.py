@@ -40,7 +40,7 @@ from typing import NamedTuple
 
 from epp_ros.core.model.folds import folded_angles, tip_circle, tip_minima
 from epp_ros.core.model.measurements import Residuals, SensorNoise, wrap_angle
-from epp_ros.core.model.nlos import NlosMixture
+from epp_ros.core.model.nlos import NlosMixture, range_excess
 from epp_ros.core.model.noise import DEFAULT_NOISE, fitted_link_bias
 from epp_ros.core.model.plane import fit_slew, to_plane
 from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt, \
@@ -148,11 +148,8 @@ def grow_chains(model, measurements, range_sigma, mixture, slews, lowest_joint, 
 
 def _tag_loss(model, mixture, k, ends, measurements, range_sigma):
     """Approximate NLOS loss of tag ``k``'s measured ranges at candidate joints (..., 3)."""
-    valid = np.isfinite(measurements.ranges[k])
-    distance = np.linalg.norm(ends[..., None, :] - model.anchors[valid], axis=-1)
-    sigma = range_sigma[k, valid]
-    excess = (measurements.ranges[k, valid] - distance) / sigma
-    return mixture.approximate_loss(excess, sigma).sum(axis=-1)
+    excess = range_excess(ends, model.anchors, measurements.ranges[k], range_sigma[k])
+    return mixture.approximate_loss(excess, range_sigma[k]).sum(axis=-1)
 
 
 class Fit(NamedTuple):

@@ -47,6 +47,7 @@ from epp_ros.core.estimation.methods.chain import canonical_angles, ChainMethod,
 from epp_ros.core.estimation.methods.epp import CEPP
 from epp_ros.core.model.folds import fold_alternatives, keep_folds, tip_circle, tip_minima
 from epp_ros.core.model.measurements import Measurements
+from epp_ros.core.model.nlos import range_excess
 from epp_ros.core.model.noise import fitted_link_bias
 from epp_ros.core.model.plane import fit_slew
 from epp_ros.core.solvers.edm import squared_distances
@@ -297,21 +298,10 @@ class FieldCEPP(CEPP):
                                       if np.abs(other - joints).max() > self.ALTERNATIVE_DISTANCE]
         return joints, found_info
 
-    def _tag_loss(self, k, points, ranges, sigma):
-        """Return the NLOS-mixture loss of tag ``k``'s measured ranges at points (..., 3)."""
-        valid = np.isfinite(ranges[k])
-        distance = np.linalg.norm(np.asarray(points)[..., None, :] - self.model.anchors[valid],
-                                  axis=-1)
-        excess = (ranges[k, valid] - distance) / sigma[k, valid]
-        return np.sum(self.nlos.loss(excess, sigma[k, valid])[0], axis=-1)
-
     def _tag_losses(self, points, ranges, sigma):
-        """Return :meth:`_tag_loss` of tags 0 .. q-1, each at its row of points (..., q, 3)."""
-        q = points.shape[-2]
-        valid = np.isfinite(ranges[:q])
-        distance = np.linalg.norm(points[..., None, :] - self.model.anchors, axis=-1)
-        excess = np.where(valid, ranges[:q] - distance, 0.0) / sigma[:q]
-        return np.sum(self.nlos.loss(excess, sigma[:q])[0], axis=-1)   # 0 at 0: the unheard
+        """Return the NLOS-mixture loss of q tags' ranges (q, m) at points (..., q, 3)."""
+        excess = range_excess(points, self.model.anchors, ranges, sigma)
+        return np.sum(self.nlos.loss(excess, sigma)[0], axis=-1)    # 0 at 0: the unheard
 
     def _fold_starts(self, joints, ranges):
         """
@@ -323,13 +313,15 @@ class FieldCEPP(CEPP):
         sigma = self._range_sigma(ranges)
         heard = np.isfinite(ranges).any(axis=1)
         folded = fold_alternatives(self.model, joints)
-        fitted, refolded = self._tag_losses(np.stack([joints[:-1], folded]), ranges, sigma)
+        fitted, refolded = self._tag_losses(np.stack([joints[:-1], folded]), ranges[:-1],
+                                            sigma[:-1])
         gains = [(fitted[k] - refolded[k], k, folded[k]) for k in np.flatnonzero(heard[:-1])]
         if heard[-1]:
             hinge = joints[-2] if p > 1 else self.model.pivot_of(joints)
             _, ends = tip_circle(self.model, hinge, fit_slew(joints, self.model.base))
             # The circle and, last, the tip where it was fitted.
-            loss = self._tag_loss(p - 1, np.vstack([ends, joints[-1]]), ranges, sigma)
+            loss = self._tag_losses(np.vstack([ends, joints[-1]])[:, None], ranges[-1:],
+                                    sigma[-1:])[:, 0]
             away = np.linalg.norm(ends - joints[-1], axis=1) > self.ALTERNATIVE_DISTANCE
             others = tip_minima(loss[:-1], away)
             if others.size:

@@ -16,7 +16,7 @@
 from epp_ros.core import PostureEstimator
 from epp_ros.core.estimation.methods.chain import ChainMethod
 from epp_ros.core.model.measurements import Measurements, Residuals
-from epp_ros.core.model.nlos import NlosMixture
+from epp_ros.core.model.nlos import NlosMixture, range_excess
 from epp_ros.core.simulation.simulate import observe, random_posture, RangeNoise, truck_pump
 import numpy as np
 import pytest
@@ -78,6 +78,23 @@ def test_approximate_loss_stays_within_log_two_of_the_loss(sigma):
              - np.log(np.sqrt(2 * np.pi) * sigma) + np.log1p(-model.fraction))
     gap = exact - model.approximate_loss(excess, sigma)
     assert np.all(gap <= 1e-9) and np.all(gap >= -np.log(2.0) - 1e-9)
+
+
+def test_range_excess_is_in_sigmas_per_tag_and_zero_where_unheard():
+    anchors = np.array([[0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [0.0, 4.0, 0.0]])
+    ranges = np.array([[5.5, np.nan, 4.0], [1.0, 2.0, np.nan]])
+    sigma = np.array([[0.5, 0.5, 2.0], [0.1, 0.2, 0.1]])
+    points = np.array([[3.0, 4.0, 0.0], [0.0, 0.0, 1.0]])     # one per tag
+    expected = np.array([[0.5 / 0.5, 0.0, (4.0 - 3.0) / 2.0],
+                         [0.0, (2.0 - np.sqrt(10.0)) / 0.2, 0.0]])
+    np.testing.assert_allclose(range_excess(points, anchors, ranges, sigma), expected)
+    # One tag at many candidates; the loss of a missing range is nothing.
+    candidates = np.stack([points[0], points[0] + [0.0, 0.0, 12.0]])
+    one_tag = range_excess(candidates, anchors, ranges[0], sigma[0])
+    assert one_tag.shape == (2, 3) and np.all(one_tag[:, 1] == 0.0)
+    np.testing.assert_allclose(one_tag[0], expected[0])
+    np.testing.assert_allclose(one_tag[1, 0], (5.5 - 13.0) / 0.5)
+    assert NlosMixture(FRACTION, GAMMA).loss(one_tag, sigma[0])[0][:, 1].tolist() == [0.0, 0.0]
 
 
 def test_cold_start_finds_the_global_fit_with_blocked_links():
