@@ -732,6 +732,8 @@ class Integrity:
         seen = joints + shift
         values['noise_rmse'] = float(np.sqrt(np.mean(joint_std ** 2)))
         self._observability(total_std, checks, values)
+        if reference is not None:
+            self._turns(joints, total_std, reference, reference_std, elapsed, checks, values)
         if chain and all(level < ERROR for level, _, _ in checks):
             alternatives = list(alternatives) + self.separated(joints, measurements, kept)
         spread, found = self._joint_rivals(seen, measurements, joint_std, angles[0], reach)
@@ -808,6 +810,41 @@ class Integrity:
             if jumped.size:
                 checks.append((ERROR, 'implausible', f'joint {jumped[0] + 1} moved '
                                f'{moved[jumped[0]]:.1f} m in {elapsed:.2f} s'))
+
+    def section_turns(self, joints, reference):
+        """
+        Return the angle (p,) each section's direction turned from ``reference`` to ``joints``.
+
+        Radians, in [0, pi]: the slew and the section's pitch together, free of how the
+        angles are written (a first section past vertical, a slew wrapped). Both (p, 3).
+        """
+        def steps(chain):
+            return np.diff(np.vstack([self.model.pivot_of(chain), chain]), axis=0)
+        now, then = steps(joints), steps(reference)
+        return np.arctan2(_norm(np.cross(now, then)), np.einsum('ki,ki->k', now, then))
+
+    def _turns(self, joints, joint_std, reference, reference_std, elapsed, checks, values):
+        """
+        Append a section that turned further than the boom can since ``reference``.
+
+        Slew and pitch at ``max_angular_rate`` each turn a section by at most twice the
+        rate times ``elapsed``; what either posture's joints are unsure of (stds (p,),
+        metres, across the section's length) widens it by three standard deviations. This
+        is the rate's own limit, where :meth:`reach` is a bound on each joint's distance that
+        every angle at once allows: a tip turned over between frames, within that distance,
+        stays out.
+        """
+        def direction_std(std):
+            ends = np.r_[0.0, np.asarray(std, dtype=float)]
+            return (ends[:-1] + ends[1:]) / self.model.arm_lengths
+        turned = self.section_turns(joints, reference)
+        allowed = (2.0 * self.limits.max_angular_rate * elapsed
+                   + 3.0 * np.hypot(direction_std(joint_std), direction_std(reference_std)))
+        values['turned'] = float(np.max(turned))
+        over = np.flatnonzero(turned > allowed)
+        if over.size:
+            checks.append((ERROR, 'implausible', f'section {over[0] + 1} turned '
+                           f'{turned[over[0]]:.2f} rad in {elapsed:.2f} s'))
 
 
 def _mirror_planes(model):

@@ -155,6 +155,36 @@ def test_a_jump_faster_than_the_boom_moves_is_implausible():
     assert estimator.last_diagnostics['valid']
 
 
+def test_a_section_turned_faster_than_the_boom_turns_is_implausible_within_its_reach():
+    """
+    A tip turned over (1.4 rad) in 0.4 s is refused, though within the distance it allows.
+
+    Every angle at once allows the tip 18 m in 0.4 s; a section turns by at most slew and
+    pitch at ``max_angular_rate``.
+    """
+    slew, pitches = 0.3, np.radians([50.0, 20.0, 0.0, -20.0, -40.0])
+    reference = MODEL.forward_kinematics(slew, pitches)
+    integrity = Integrity(MODEL, SensorNoise(0.05), NlosMixture(0.0, 1.0))
+    reference_std = np.full(MODEL.n_sections, 0.05)
+
+    def verdict(turned_pitches, elapsed):
+        joints = MODEL.forward_kinematics(slew, turned_pitches)
+        measurements = Measurements.ranges_only(MODEL.ranges(joints))
+        moved = np.linalg.norm(joints - reference, axis=1)
+        assert np.all(moved <= integrity.reach(reference, elapsed, reference_std))
+        return integrity.judge(joints, measurements, reference, elapsed, reference_std)
+
+    over = np.r_[pitches[:-1], np.radians(40.0)]
+    turned = verdict(over, 0.4)
+    assert turned.status == 'implausible' and 'section 5 turned 1.40 rad' in turned.message
+    assert verdict(over, 2.5).valid                     # 0.7 rad/s for 2.5 s: 1.75 rad
+    rate_limited = np.r_[pitches[:-1], pitches[-1] + 2.0 * 0.35 * 0.4 * 0.95]
+    assert verdict(rate_limited, 0.4).valid
+    np.testing.assert_allclose(integrity.section_turns(MODEL.forward_kinematics(slew, over),
+                                                       reference),
+                               np.r_[np.zeros(4), np.radians(80.0)], atol=1e-9)
+
+
 def test_fold_alternatives_keep_the_section_lengths():
     rng = np.random.default_rng(6)
     joints = random_posture(MODEL, rng)[2]
