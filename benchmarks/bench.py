@@ -52,6 +52,11 @@ Suites:
             the truth, as RMSE over the clean Cramér–Rao bound; track over the posterior
             bound; the authors' geometry at sigma 1 and 2 m from cold starts (--trials);
             cost of track and chain, and of the chain's fit against scipy. Not default.
+  family    The real links' preset (real_uwb) varied as sites and devices vary it: each
+            real-link figure doubled, outliers ten times as often and 3 m, device offsets
+            0.15 m, and with the other field effects and the joystick (--seeds runs of
+            --seconds per case): what each method publishes, its RMSE over the clean bound
+            on those frames, frames valid while > 1 m off and confidently so. Not default.
   calibration  Calibration from --seconds of working cycle (--seeds pumps, offsets 0.15 m,
             outriggers 0.3 m off): anchor and link-offset errors, computation time, and chain
             and track over the clean CRLB with the configured and the calibrated model on a
@@ -152,6 +157,10 @@ def _field(args):
     return field_bench.run(args.seconds, args.seeds, args.seed, args.trials)
 
 
+def _family(args):
+    return field_bench.run_family(args.seconds, args.seeds)
+
+
 def _speed(args):
     return speed_bench.run(args.methods or ['chain', 'cepp', 'track'], int(args.seconds * 10),
                            args.seed)
@@ -183,6 +192,7 @@ SUITES = {
     'soak': Suite(_soak),
     'fuzz': Suite(_fuzz),
     'field': Suite(_field),
+    'family': Suite(_family),
     'calibration': Suite(_calibration),
     'speed': Suite(_speed),
 }
@@ -209,7 +219,7 @@ def parser():
                         help='controller: seconds per method (default 600)')
     result.add_argument('--seed', type=int, default=0)
     result.add_argument('--seeds', type=integer(1, 1000), default=2,
-                        help='field: runs per case; calibration: pumps (default 2)')
+                        help='field, family: runs per case; calibration: pumps (default 2)')
     result.add_argument('--option', type=parse_option, action='append', default=[],
                         metavar='KEY=VALUE', help='estimator option, repeatable')
     result.add_argument('--json', action='store_true', help='also print the reports as JSON')

@@ -33,6 +33,10 @@ noise (every link measured, none blocked; ``sigma0 + k r`` per link):
 Offsets and moved anchors are calibration's (no target here): they must not diverge. The
 moved anchors are the outriggers (``simulate.truck_outriggers``): the turret's and the cab's
 define the truck frame and stay.
+
+``python3 dev.py bench family`` runs the same scoring on the ``real_uwb`` preset varied
+(:data:`FAMILY`): real links differ by site, device and mounting, and what the package
+publishes must hold on the family, not on the preset's figures alone.
 """
 from dataclasses import dataclass, replace
 import time
@@ -42,13 +46,13 @@ from epp_ros.core.estimation import IntegrityLimits, wrong_frames
 from epp_ros.core.estimation.methods import angles_from_joints, ChainMethod
 from epp_ros.core.model import crlb, posterior_crlb
 from epp_ros.core.model import Measurements, Residuals, SensorNoise
-from epp_ros.core.simulation import (field_effects, FieldEffects, JoystickMotion, Motion,
-                                     simulate_field, truck_outriggers, truck_pump, WorkingMotion,
-                                     xie3dim)
+from epp_ros.core.simulation import (FIELD_EFFECTS, field_effects, FieldEffects, JoystickMotion,
+                                     Motion, simulate_field, truck_outriggers, truck_pump,
+                                     WorkingMotion, xie3dim)
 import numpy as np
 from scipy.optimize import least_squares
 
-__all__ = ['CASES', 'FieldReport', 'run']
+__all__ = ['CASES', 'FAMILY', 'FamilyReport', 'FieldReport', 'run', 'run_family']
 
 RATE = 10.0                     #: frames per second
 WARM_UP_S = 5.0                 #: seconds not scored: a cold start, the noise being learned
@@ -69,6 +73,38 @@ CASES = {
     'real_uwb': ('real_uwb', 'working'),
 }
 CALIBRATION = ('offsets', 'anchors_moved', 'real_uwb')
+
+
+def _real_uwb_family():
+    """Return :data:`FAMILY`: the ``real_uwb`` preset with one thing changed in each."""
+    real = FIELD_EFFECTS['real_uwb']
+    curve_doubled = tuple((distance, 2.0 * bias) for distance, bias in real.bias_curve)
+    slow = {'correlated_fraction': 0.9, 'noise_correlation_time': 6.0}
+    return {
+        'pair terms x2': (replace(real, link_offset=2.0 * real.link_offset), 'working'),
+        'range curve x2': (replace(real, bias_curve=curve_doubled), 'working'),
+        'orientation x2': (replace(real, orientation_bias=2.0 * real.orientation_bias),
+                           'working'),
+        'slow noise': (replace(real, **slow), 'working'),
+        'outliers x10, 3 m': (replace(real, outlier_rate=10.0 * real.outlier_rate,
+                                      outlier_size=3.0), 'working'),
+        'devices 0.15 m': (replace(real, tag_offset=0.15, anchor_offset=0.15, range_bias=0.0),
+                           'working'),
+        'all x2': (replace(real, sigma=0.1, link_offset=2.0 * real.link_offset,
+                           bias_curve=curve_doubled,
+                           orientation_bias=2.0 * real.orientation_bias, **slow), 'working'),
+        '+ nlos_persistent': ('real_uwb,nlos_persistent', 'working'),
+        '+ dropouts': ('real_uwb,dropouts', 'working'),
+        '+ tdma': ('real_uwb,tdma', 'working'),
+        '+ all four': ('real_uwb,nlos_persistent,tdma,dropouts', 'working'),
+        'on joystick': ('real_uwb', 'joystick'),
+    }
+
+
+#: name: (effects, motion): the real links' preset varied as sites, devices and mountings
+#: vary it (each real-link figure doubled; outliers ten times as often and 3 m; device
+#: offsets of 0.15 m), and with the other field effects and the joystick.
+FAMILY = _real_uwb_family()
 TARGETS = {'chain': 1.15, 'cepp': 1.3, 'track': 0.7}
 #: The process noise of the ``cv`` case, rad^2/s^3.
 CV_PROCESS_NOISE = 1e-4
@@ -163,10 +199,11 @@ def truth_decides(model, frame, effects, ambiguous_joints):
 
 def run_case(name, seconds, seed):
     """Return per method (squared errors, valid count) and the bounds of one case."""
-    effects_names, motion_name = CASES[name] if name in CASES else ('', name)
+    spec, motion_name = CASES.get(name) or FAMILY.get(name) or ('', name)
     model = truck_pump()
     rng = np.random.default_rng([seed, sum(map(ord, name))])
-    effects = field_effects(effects_names) if effects_names else FieldEffects()
+    effects = spec if isinstance(spec, FieldEffects) else \
+        field_effects(spec) if spec else FieldEffects()
     if effects.moving_anchors is None:      # the body's anchors stay on the body
         effects = replace(effects, moving_anchors=truck_outriggers(model))
     motion = _motion(motion_name, model, seconds, rng)
@@ -250,10 +287,10 @@ def _method_cell(runs, bounds, heard):
             'wrong_valid': wrong, 'confidently_wrong': confident}
 
 
-def field_rows(seconds, seeds):
-    """Ratio to the clean bound per case and method, pooled over seeds."""
+def field_rows(seconds, seeds, names=tuple(CASES)):
+    """Ratio to the clean bound per case (of :data:`CASES` or :data:`FAMILY`) and method."""
     rows = []
-    for name in CASES:
+    for name in names:
         bounds, heard, runs = _case_runs(name, seconds, seeds)
         rows.append({'case': name, 'frames': int(bounds.size),
                      'bound_m': float(np.sqrt(np.mean(bounds ** 2))),
@@ -368,6 +405,21 @@ class FieldReport:
     authors: list
     cost: dict
     suite: str = 'field'
+
+
+@dataclass
+class FamilyReport:
+    """The report of ``python3 dev.py bench family``: :func:`field_rows` of :data:`FAMILY`."""
+
+    seconds: float
+    seeds: int
+    rows: list
+    suite: str = 'family'
+
+
+def run_family(seconds=60.0, seeds=2, names=tuple(FAMILY)):
+    """Run the cases of :data:`FAMILY` named; the :class:`FamilyReport`."""
+    return FamilyReport(seconds, seeds, field_rows(seconds, seeds, names))
 
 
 def run(seconds=60.0, seeds=2, seed=0, trials=100):

@@ -541,6 +541,18 @@ def field_markdown(report):
     return '\n'.join(lines)
 
 
+def family_markdown(report):
+    """Format a :class:`~benchmarks.field_bench.FamilyReport`: what is published, per variant."""
+    return '\n'.join([
+        f"### The real links' family: the real_uwb preset varied, defaults, uncalibrated "
+        f'({report.seeds} x {report.seconds:g} s per case at {field_bench.RATE:g} Hz, first '
+        f'{field_bench.WARM_UP_S:g} s not scored)', '',
+        'Per method: RMSE over the clean line-of-sight CRLB over the frames published as '
+        'valid (the fraction published; frames valid while > 1 m off / of those, with a '
+        'predicted RMSE under a third of the error: confidently wrong):', '',
+        *_field_published_table(report.rows)])
+
+
 def _soak_row(name, part):
     """Return the table row of a soak's part: ``'in-process'`` or ``'live node'``."""
     if name == 'in-process':
@@ -722,6 +734,7 @@ MARKDOWN = {
     PaperReport: paper_markdown,
     integrity_bench.IntegrityReport: integrity_markdown,
     field_bench.FieldReport: field_markdown,
+    field_bench.FamilyReport: family_markdown,
     soak_bench.SoakReport: soak_markdown,
     fuzz_bench.FuzzReport: fuzz_markdown,
     driver_bench.DriverReport: driver_markdown,

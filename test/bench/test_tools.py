@@ -23,8 +23,8 @@ import sys
 
 from benchmarks import bench, experiments, field_bench, reports
 from epp_ros.cli import demo
-from epp_ros.core.simulation import (FieldEffects, RangeNoise, simulate_field, truck_pump,
-                                     working_cycle, WorkingMotion)
+from epp_ros.core.simulation import (FIELD_EFFECTS, field_effects, FieldEffects, RangeNoise,
+                                     simulate_field, truck_pump, working_cycle, WorkingMotion)
 import numpy as np
 import pytest
 
@@ -314,6 +314,26 @@ def test_bench_field_prints_every_case_against_the_bounds(capsys):
         for method in field_bench.METHODS:
             assert 0.0 <= row[method]['allowed_share'] <= 1.0 and row[method]['decidable'] >= 0
     assert 'the information allows' in out
+
+
+def test_the_real_links_family_is_each_a_real_uwb_variant_and_printed(capsys):
+    """Each variant changes the real_uwb preset; a short run of two prints their rows."""
+    real = FIELD_EFFECTS['real_uwb']
+    for name, (spec, motion) in field_bench.FAMILY.items():
+        effects = spec if isinstance(spec, FieldEffects) else field_effects(spec)
+        assert effects.link_offset > 0 and effects.bias_curve, name
+        assert effects != real or motion != 'working', name
+    names = ('outliers x10, 3 m', '+ dropouts')
+    report = field_bench.run_family(6.0, 1, names)
+    assert [row['case'] for row in report.rows] == list(names)
+    for row in report.rows:
+        for method in field_bench.METHODS:
+            cell = row[method]
+            assert 0.0 <= cell['valid'] <= 1.0 and cell['confidently_wrong'] >= 0
+            assert np.isfinite(cell['ratio'])
+    printed = reports.markdown(report)
+    assert "real links' family" in printed and '| outliers x10, 3 m |' in printed
+    assert 'family' in bench.parse_args(['family']).suites
 
 
 def test_the_information_oracle_decides_a_fold_only_where_the_ranges_do():
