@@ -25,6 +25,7 @@ and do not import this one (but ``python -m benchmarks.driver_bench``, when it p
 """
 import dataclasses
 import json
+import math
 from pathlib import Path
 import subprocess
 
@@ -311,6 +312,11 @@ def paper_markdown(report):
 
 
 # -- the suites with a module of their own --------------------------------------------------
+def _finite(value):
+    """Return ``value``, or None where it is NaN (a ratio over no frames)."""
+    return None if value is None or not math.isfinite(value) else value
+
+
 def _or_dash(value, spec='.1f', unit=''):
     """Format a figure that may be missing (None: '-')."""
     return '-' if value is None else f'{value:{spec}}{unit}'
@@ -471,11 +477,13 @@ def _field_published_table(rows):
     of their error (confidently wrong).
     """
     methods = field_bench.METHODS
+
+    def cell(figures):          # no frame published: no ratio
+        return (f'{_or_dash(_finite(figures["published_ratio"]), ".2f")} '
+                f'({100 * figures["valid"]:.0f} %; {figures["wrong_valid"]} / '
+                f'{figures["confidently_wrong"]})')
     return ['| case | ' + ' | '.join(methods) + ' |', '|---|' + '---|' * len(methods)] + [
-        f'| {row["case"]} | ' + ' | '.join(
-            f'{row[m]["published_ratio"]:.2f} ({100 * row[m]["valid"]:.0f} %; '
-            f'{row[m]["wrong_valid"]} / {row[m]["confidently_wrong"]})' for m in methods)
-        + ' |' for row in rows]
+        f'| {row["case"]} | ' + ' | '.join(cell(row[m]) for m in methods) + ' |' for row in rows]
 
 
 def _field_information_table(rows):

@@ -333,6 +333,9 @@ def test_the_real_links_family_is_each_a_real_uwb_variant_and_printed(capsys):
             assert np.isfinite(cell['ratio'])
     printed = reports.markdown(report)
     assert "real links' family" in printed and '| outliers x10, 3 m |' in printed
+    unpublished = dict(report.rows[0]['chain'], valid=0.0, published_ratio=float('nan'))
+    nothing = dict(report.rows[0], chain=unpublished)
+    assert '| outliers x10, 3 m | - (0 %; ' in reports.markdown(replace(report, rows=[nothing]))
     assert 'family' in bench.parse_args(['family']).suites
 
 
