@@ -73,6 +73,7 @@ CASES = {
     'real_uwb': ('real_uwb', 'working'),
 }
 CALIBRATION = ('offsets', 'anchors_moved', 'real_uwb')
+TARGETS = {'chain': 1.15, 'cepp': 1.3, 'track': 0.7}
 
 
 def _real_uwb_family():
@@ -105,7 +106,6 @@ def _real_uwb_family():
 #: vary it (each real-link figure doubled; outliers ten times as often and 3 m; device
 #: offsets of 0.15 m), and with the other field effects and the joystick.
 FAMILY = _real_uwb_family()
-TARGETS = {'chain': 1.15, 'cepp': 1.3, 'track': 0.7}
 #: The process noise of the ``cv`` case, rad^2/s^3.
 CV_PROCESS_NOISE = 1e-4
 
