@@ -180,6 +180,10 @@ def report(diagnostics, lengths):
         blocked = np.asarray(diagnostics.nlos_links)
         values['NLOS links'] = str(int(np.sum(blocked)))
         values[NLOS_FLAGGED] = nlos_text(blocked)
+    if diagnostics.outlier_links is not None:       # set aside as no noise explains them
+        outlying = np.asarray(diagnostics.outlier_links)
+        values['outlier links'] = str(int(np.sum(outlying)))
+        values['outlier flagged links'] = nlos_text(outlying)
     if diagnostics.chi_square is not None:
         values['range chi-square'] = (f'{diagnostics.chi_square:.1f} (limit '
                                       f'{diagnostics.chi_square_limit:.1f})')

@@ -89,7 +89,7 @@ def _integrity(model, told, limits, thresholds, moving=()):
     """Return the :class:`Integrity` of the noise the estimator is told (``moving``: anchors)."""
     noise = SensorNoise(float(told['sigma']), float(told['tag_sigma']),
                         float(told['pitch_sigma']), float(told['slew_sigma']))
-    nlos = NlosMixture(float(told['nlos_fraction']), float(told['nlos_gamma']))
+    nlos = NlosMixture(float(told['nlos_fraction']), float(told['nlos_gamma'])).judged()
     links = (model.n_sections, model.n_anchors)
     bias = RangeBiasPrior(link_bias_stds(told['link_bias_std'], links),
                           float(told['common_bias_std']),
@@ -184,7 +184,7 @@ class PostureEstimator:
         ``range_residual_rms`` (m), ``missing_links`` (including ``implausible_links``,
         those dropped as longer than the geometry allows), ``iterations``, ``solve_time``
         (s), the integrity's statistics (``chi_square``, ``chi_square_limit``,
-        ``nlos_links`` (p, m), ``predicted_rmse`` (m), ``joint_std`` (p,),
+        ``nlos_links`` and ``outlier_links`` (p, m), ``predicted_rmse`` (m), ``joint_std`` (p,),
         ``ambiguous_joints``), the method's ``estimate`` (p, 3) whether valid or not,
         ``noise`` (the range noise in use, :class:`RangeNoiseEstimate`), and solver
         details (``converged``, ...; track: ``rates`` (p + 1,), ``hypotheses``,
@@ -339,9 +339,9 @@ class PostureEstimator:
         if self._learned is None or verdict.status not in ('ok', 'unobservable'):
             return
         kept = np.isfinite(measurements.ranges)
-        blocked = verdict.values.get('nlos_links')
-        if blocked is not None:
-            kept &= ~np.asarray(blocked, dtype=bool)
+        for set_aside in ('nlos_links', 'outlier_links'):
+            if verdict.values.get(set_aside) is not None:
+                kept &= ~np.asarray(verdict.values[set_aside], dtype=bool)
         sigma = self.integrity.link_sigma(measurements)
         rows = verdict.los_rows
         if rows is None:        # a method not held to the chain: not in its judgement
@@ -573,14 +573,17 @@ class PostureEstimator:
 
     def _suspicious(self, verdict, measurements, stamp):
         """
-        Judge whether a fit calls too many of a tag's links blocked (``Reacquisition``).
+        Judge whether a fit sets too many of a tag's links aside (``Reacquisition``).
 
-        Not for a method with a state of its own (a motion model): one frame's search
-        would replace what many frames built.
+        Blocked or outliers. Not for a method with a state of its own (a motion model): one
+        frame's search would replace what many frames built.
         """
         blocked = verdict.values.get('nlos_links')
         if blocked is None or hasattr(self._solver, 'accept'):
             return False
+        outlying = verdict.values.get('outlier_links')
+        if outlying is not None:
+            blocked = blocked | outlying
         return self._reacquisition.suspicious(blocked, measurements.ranges, stamp)
 
     def _second_opinion(self, solved, measurements, stamp, verdict):

@@ -77,6 +77,20 @@ def _excess_tail(total, count, gamma):
     return np.where(count > 0, tail, 1.0)
 
 
+def _explained_otherwise(loss, excess, measured):
+    """
+    Return which measured links a ``LinkLoss`` takes for blocked, and which for outliers.
+
+    Whichever is likelier, where line of sight is less likely than the two together.
+    ``excess`` in sigmas, NaN where not ``measured``; two boolean arrays shaped like it.
+    """
+    if not measured.any():
+        return measured.copy(), measured.copy()
+    nlos, outlier = loss.posteriors(_zero_nan(excess))
+    other = measured & (nlos + outlier > 0.5)
+    return other & (nlos >= outlier), other & (nlos < outlier)
+
+
 def _norm(vectors):
     """Euclidean norms over the last axis (np.linalg.norm's overhead dominates here)."""
     return np.sqrt(np.einsum('...i,...i->...', vectors, vectors))
@@ -338,11 +352,11 @@ class Integrity:
         links, tag_links = self._excess(joints, measurements)
         measured, tag_measured = np.isfinite(links), np.isfinite(tag_links)
         sigma = self.link_sigma(measurements)
-        blocked = measured & (self._mixture(_zero_nan(links), sigma)[2] > 0.5)
-        tag_blocked = tag_measured.copy()
-        if tag_measured.any():
-            tag_blocked &= self._tag_loss(_zero_nan(tag_links))[2] > 0.5
-        kept, tag_kept = measured & ~blocked, tag_measured & ~tag_blocked
+        loss = self._link_loss if self._link_loss is not None else self.nlos.bind(sigma)
+        blocked, outlying = _explained_otherwise(loss, links, measured)
+        tag_blocked, tag_outlying = _explained_otherwise(self._tag_loss, tag_links, tag_measured)
+        kept = measured & ~blocked & ~outlying
+        tag_kept = tag_measured & ~tag_blocked & ~tag_outlying
         p = self.model.n_sections
         statistic = float(np.sum(links[kept] ** 2) + np.sum(tag_links[tag_kept] ** 2))
         dof = max(int(kept.sum() + tag_kept.sum()) - (p + 1), 1)
@@ -354,6 +368,9 @@ class Integrity:
             failures.append(f'range residuals chi-square {statistic:.1f} > {limit:.1f}')
         if _binomial_tail(n_blocked, n_links, self.nlos.fraction) < alpha:
             failures.append(f'{n_blocked} of {n_links} links look blocked')
+        n_outlying = int(outlying.sum() + tag_outlying.sum())
+        if _binomial_tail(n_outlying, n_links, self.nlos.outliers) < alpha:
+            failures.append(f'{n_outlying} of {n_links} ranges look like outliers')
         # Blocked links: as many, and as long, as the NLOS prior makes believable.
         metres = np.where(blocked, _zero_nan(links) * sigma, 0.0)
         tag_metres = np.where(tag_blocked, _zero_nan(tag_links) * self.noise.tag_sigma, 0.0)
@@ -363,9 +380,10 @@ class Integrity:
         tag_statistic = np.sum(np.where(kept, links, 0.0) ** 2, axis=1)
         tag_limit = _chi_square_limit(alpha / p, np.maximum(kept.sum(axis=1), 1))
         blocked_count = blocked.sum(axis=1)
-        tag_tail = np.minimum(
+        tag_tail = np.minimum.reduce([
             _binomial_tail(blocked_count, measured.sum(axis=1), self.nlos.fraction),
-            _excess_tail(metres.sum(axis=1), blocked_count, self.nlos.gamma))
+            _excess_tail(metres.sum(axis=1), blocked_count, self.nlos.gamma),
+            _binomial_tail(outlying.sum(axis=1), measured.sum(axis=1), self.nlos.outliers)])
         bad_tags = np.flatnonzero((tag_statistic > tag_limit) | (tag_tail < alpha / p))
         if bad_tags.size:
             failures.append('ranges of joint(s) ' + ', '.join(str(k + 1) for k in bad_tags)
@@ -373,6 +391,7 @@ class Integrity:
         los_metres = (links * sigma)[kept]
         values = {'chi_square': statistic, 'chi_square_limit': limit, 'links': n_links,
                   'nlos_links': blocked, 'nlos_tag_links': tag_blocked,
+                  'outlier_links': outlying, 'outlier_tag_links': tag_outlying,
                   'tag_chi_square': tag_statistic,
                   'los_residual_rms': float(np.sqrt(np.mean(los_metres ** 2)))
                   if los_metres.size else 0.0}

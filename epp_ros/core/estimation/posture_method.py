@@ -108,6 +108,7 @@ class FrameResult(Mapping):
     joint_std: Optional[np.ndarray] = None  #: (p,) m, each joint's predicted std
     noise_rmse: Optional[float] = None      #: m, the bound without the common bias
     nlos_links: Optional[np.ndarray] = None   #: (p, m) bool, links judged NLOS
+    outlier_links: Optional[np.ndarray] = None   #: (p, m) bool, links judged outliers
     chi_square: Optional[float] = None      #: the ranges' consistency statistic
     chi_square_limit: Optional[float] = None   #: its limit at the integrity's alpha
     ambiguous_joints: Optional[list] = None    #: joints (1-based) with another fit as good

@@ -54,6 +54,15 @@ def test_the_links_judged_nlos_are_named_joint_then_anchor():
     ranges[1, 2] += 6.0                         # joint 2's tag to anchor 3
     _, _, values = assess(diagnostics_of('chain', ranges), MODEL.arm_lengths)
     assert values['NLOS links'] == '2' and values['NLOS flagged links'] == '2:3 5:2'
+    assert values['outlier links'] == '0' and values['outlier flagged links'] == ''
+    # Joint 4's tag to anchor 5, 1 m short of the frame before: no noise explains it.
+    estimator = PostureEstimator(MODEL, 'track')
+    estimator.update(MODEL.ranges(JOINTS))
+    short = MODEL.ranges(JOINTS)
+    short[3, 4] -= 1.0
+    estimator.update(short)
+    _, _, values = assess(estimator.last_diagnostics, MODEL.arm_lengths)
+    assert values['outlier links'] == '1' and values['outlier flagged links'] == '4:5'
     _, _, values = assess(diagnostics_of('chain', MODEL.ranges(JOINTS)), MODEL.arm_lengths)
     assert values['NLOS links'] == '0' and values['NLOS flagged links'] == ''
     blocked = np.zeros((5, 6), dtype=bool)

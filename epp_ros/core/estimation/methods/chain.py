@@ -152,6 +152,61 @@ def _tag_loss(model, mixture, k, ends, measurements, range_sigma):
     return mixture.approximate_loss(excess, range_sigma[k]).sum(axis=-1)
 
 
+def judged_minimum(minimise, losses, scaled_of, judged_cost, start, also=(), refit=True):
+    """
+    Minimise a frame's loss as the judge weighs it (``NlosMixture.judged``: with outliers).
+
+    First under the fit's NLOS mixture alone, whose pull never fades: a start metres off
+    still finds its way, where the judge's loss would stop with the ranges not reached
+    yet taken for outliers. Then under the judge's: from that fit where a range there
+    looks like an outlier, and from ``start`` and each of ``also`` where the judge likes
+    it better than the first fit (that fit ran from a range no noise explains).
+
+    Parameters
+    ----------
+    minimise : callable
+        ``minimise(x, judged) -> LevenbergMarquardtResult`` from ``x``, under the
+        judge's loss or the fit's.
+    losses : (LinkLoss, LinkLoss)
+        The frame's ranges' bound losses, the fit's and the judge's (the same object when
+        they are one).
+    scaled_of : callable
+        ``scaled_of(result)``: the ranges' scaled residuals (n,) where ``result`` stopped.
+    judged_cost : callable
+        ``judged_cost(x)``: the judge's cost at ``x``.
+    start : ndarray
+        Where the first fit starts.
+    also : sequence of ndarray
+        More starts.
+    refit : bool
+        False: the first fit only (a screening fit), at the judge's cost; or ``start``
+        unmoved, where the judge likes it better.
+
+    Returns
+    -------
+    LevenbergMarquardtResult
+        The one with the lowest judge's cost, that cost its ``cost``; ``iterations`` of
+        all the fits together.
+
+    """
+    fitting, judging = losses
+    first = minimise(start, False)
+    if judging is fitting:
+        return first
+    scaled = scaled_of(first)
+    first = replace(first, cost=first.cost
+                    + float(np.sum(judging(-scaled)[0] - fitting(-scaled)[0])))
+    start_cost = judged_cost(start)
+    if not refit:
+        return replace(first, x=start, cost=start_cost) if start_cost < first.cost else first
+    starts = [first.x] if np.any(judging.posteriors(-scaled)[1] > 0.5) else []
+    starts += [x for x, cost in zip((start, *also), (start_cost, *map(judged_cost, also)))
+               if cost < first.cost]
+    results = [first] + [minimise(x, True) for x in starts]
+    best = min(results, key=lambda result: result.cost)
+    return replace(best, iterations=sum(result.iterations for result in results))
+
+
 class Fit(NamedTuple):
     """A Levenberg–Marquardt fit: where it stopped and whether it had converged there."""
 
@@ -211,6 +266,8 @@ class ChainMethod:
     holds_chain = True
     #: How far, metres, a joint may sink below ``lowest_joint`` per unit of cost.
     GROUND_SIGMA = 0.05
+    #: Sigmas of the ranges in a cold search's screening fits, times theirs (:meth:`_screen`).
+    SCREEN_SIGMA_FACTOR = 5.0
     inputs = ('ranges', 'tag_ranges', 'pitches', 'slew')
 
     def __init__(self, model, sigma=DEFAULT_NOISE.sigma, eta=DEFAULT_NOISE.eta, tag_sigma=None,
@@ -235,7 +292,8 @@ class ChainMethod:
             raise ValueError(f'search_budget: must be an integer >= 1, got {search_budget!r}')
         self.search_budget = int(search_budget)
         self._carry = ([], 0)           # an exhausted search: its best fits, starts screened
-        self._link_loss = (None, None)      # (Residuals, its ranges' bound NLOS loss)
+        # (Residuals, its ranges' bound losses: the fit's and the judge's)
+        self._link_loss = (None, None, None)
 
     def tune(self, *, sigma, eta, nlos_fraction, nlos_gamma, tag_sigma=None):
         """
@@ -249,7 +307,7 @@ class ChainMethod:
         if not (np.isfinite(eta) and eta >= 0):
             raise ValueError(f'eta: must be a finite number >= 0, got {eta!r}')
         self.noise, self.nlos, self.eta = noise, mixture, float(eta)
-        self._link_loss = (None, None)
+        self._link_loss = (None, None, None)
 
     def enough_information(self, measurements):
         """
@@ -268,18 +326,27 @@ class ChainMethod:
         self._carry = ([], 0)
 
     # -- the least-squares problem --------------------------------------------------------
-    def loss(self, scaled, residuals):
+    def losses(self, residuals):
+        """Return the frame's ranges' bound losses: the fit's mixture, the judge's (outliers)."""
+        if self._link_loss[0] is not residuals:
+            sigma = residuals.sigma[:residuals.n_ranged]
+            fitting, judging = self.nlos, self.nlos.judged()
+            bound = fitting.bind(sigma)
+            self._link_loss = (residuals, bound,
+                               bound if judging is fitting else judging.bind(sigma))
+        return self._link_loss[1:]
+
+    def loss(self, scaled, residuals, judged=False):
         """
         Cost, its slope in the scaled residuals, Gauss-Newton weights, NLOS probabilities.
 
-        Ranges follow the NLOS mixture (on their excess, ``-scaled``); angles are Gaussian.
+        Ranges follow the NLOS mixture (on their excess, ``-scaled``), with outliers when
+        ``judged`` (``NlosMixture.judged``); angles are Gaussian.
         """
         n = residuals.n_ranged                   # ranges come first
-        if self._link_loss[0] is not residuals:
-            self._link_loss = (residuals, self.nlos.bind(residuals.sigma[:n]))
         cost, slope = 0.5 * scaled ** 2, scaled.copy()
         nlos = np.zeros_like(scaled)
-        cost[:n], excess_slope, nlos[:n] = self._link_loss[1](-scaled[:n])
+        cost[:n], excess_slope, nlos[:n] = self.losses(residuals)[judged](-scaled[:n])
         slope[:n] = -excess_slope
         # IRLS curvature slope / residual: 1 for Gaussian rows, small on a blocked link.
         large = np.abs(scaled) > 1.0
@@ -287,7 +354,7 @@ class ChainMethod:
         weights[large] = np.clip(slope[large] / scaled[large], 1e-3, 1.0)
         return float(np.sum(cost)), slope, weights, nlos
 
-    def _evaluate(self, psi, residuals):
+    def _evaluate(self, psi, residuals, judged=False):
         """
         Cost at ``psi`` and what a step needs: (cost, (slope, weights, state)).
 
@@ -295,14 +362,14 @@ class ChainMethod:
         the ground, which a fit must respect rather than be discarded for.
         """
         scaled, geometry = residuals.residuals(psi)
-        cost, slope, weights, _ = self.loss(scaled, residuals)
+        cost, slope, weights, _ = self.loss(scaled, residuals, judged)
         heights = geometry[2][:, 2]
         depth = np.maximum(self.lowest_joint - heights, 0.0) / self.GROUND_SIGMA
-        return cost + 0.5 * float(depth @ depth), (slope, weights, (geometry, depth))
+        return cost + 0.5 * float(depth @ depth), (slope, weights, (geometry, depth, scaled))
 
     def _normal_equations(self, psi, residuals, slope, weights, state):
         """Gauss-Newton (IRLS) normal matrix and gradient at ``psi``."""
-        geometry, depth = state
+        geometry, depth, _ = state
         jacobian = residuals.jacobian(psi, geometry)
         normal = (jacobian * weights[:, None]).T @ jacobian
         gradient = jacobian.T @ slope
@@ -313,19 +380,33 @@ class ChainMethod:
             gradient += sinking.T @ depth[depth > 0]
         return normal, gradient
 
-    def fit(self, psi, residuals, max_iter=None, stall=STALL):
+    def fit(self, psi, residuals, max_iter=None, stall=STALL, also=()):
         """
         Return the Levenberg–Marquardt :class:`Fit` from ``psi`` on a :class:`Residuals`.
 
         It stops after ``max_iter`` iterations (the chain's own by default), or when an
-        accepted step lowered the cost by at most ``stall`` of itself.
+        accepted step lowered the cost by at most ``stall`` of itself. The cost is the
+        judge's (one short range costs a fit at most about 10), comparable across fits:
+        :func:`judged_minimum`, with ``also`` (psi each) as its more starts. A screening
+        fit (``max_iter`` given) is only its first fit.
         """
-        result = levenberg_marquardt(
-            psi, lambda x: self._evaluate(x, residuals),
+        def minimise(start, judged):
+            return self._levenberg_marquardt(start, residuals, judged, max_iter, stall)
+
+        n = residuals.n_ranged
+        result = judged_minimum(minimise, self.losses(residuals),
+                                lambda result: result.state[2][2][:n],
+                                lambda x: self.cost(x, residuals), psi, also,
+                                refit=max_iter is None)
+        return Fit(result.x, result.cost, result.iterations, result.converged)
+
+    def _levenberg_marquardt(self, psi, residuals, judged, max_iter, stall):
+        """Return :func:`levenberg_marquardt`'s result under the fit's or the judge's loss."""
+        return levenberg_marquardt(
+            psi, lambda x: self._evaluate(x, residuals, judged),
             lambda x, parts: self._normal_equations(x, residuals, *parts),
             max_iter=self.max_iter if max_iter is None else max_iter, tol=self.tol,
             stall=stall)
-        return Fit(result.x, result.cost, result.iterations, result.converged)
 
     def residuals_of(self, measurements):
         """Return the frame's :class:`Residuals` under this chain's noise (with its own biases)."""
@@ -336,16 +417,18 @@ class ChainMethod:
                 np.hypot(noise.range_sigma, self.eta * distances), self.link_bias))
         return Residuals(self.model, measurements, noise)
 
-    def refine(self, joints, residuals, max_iter=None):
+    def refine(self, joints, residuals, max_iter=None, also=()):
         """
         Return the likeliest posture near ``joints`` (p, 3) and its :class:`Fit`.
 
         Levenberg–Marquardt from the posture's angles on a :class:`Residuals`: where another
         method's answer (CEPP's) or a hypothesis (a tag's ranges left out) settles under
-        this chain's loss. The posture (p, 3) is in canonical angles.
+        this chain's loss; ``also``: more postures (p, 3) for :meth:`fit`'s. The posture
+        (p, 3) is in canonical angles.
         """
         slew, pitches = angles_from_joints(self.model, joints)
-        fit = self.fit(np.r_[slew, pitches], residuals, max_iter)
+        fit = self.fit(np.r_[slew, pitches], residuals, max_iter,
+                       also=[np.r_[angles_from_joints(self.model, other)] for other in also])
         psi = canonical_angles(fit.psi, self.model.pivot_offset)
         return self.model.forward_kinematics(psi[0], psi[1:]), fit
 
@@ -379,7 +462,7 @@ class ChainMethod:
         start = np.tile(np.r_[slew, pitches], (len(masks), 1))
         return self.fit_links(start, ranges, sigma, masks, rounds)[0]
 
-    def fit_links(self, psi, ranges, sigma, masks, rounds):
+    def fit_links(self, psi, ranges, sigma, masks, rounds, judged=False):
         """
         Fit the frame's tag-anchor ranges from many starts at once, each on its own links.
 
@@ -398,6 +481,8 @@ class ChainMethod:
             The ranges each fit uses.
         rounds : int
             Trial steps per fit.
+        judged : bool
+            Under the judge's loss (``NlosMixture.judged``) instead of the fit's.
 
         Returns
         -------
@@ -410,7 +495,7 @@ class ChainMethod:
         model = self.model
         used = np.asarray(masks, dtype=bool) & np.isfinite(ranges)
         measured = np.where(used, ranges, 0.0)
-        link_loss = self.nlos.bind(sigma)
+        link_loss = (self.nlos.judged() if judged else self.nlos).bind(sigma)
 
         def evaluate(psi):
             joints = model.forward_kinematics(psi[:, 0], psi[:, 1:])               # (b, p, 3)
@@ -442,18 +527,18 @@ class ChainMethod:
         return model.forward_kinematics(psi[:, 0], psi[:, 1:]), cost
 
     def cost(self, psi, residuals):
-        """Return the fitted loss at angles ``psi`` (p + 1,) on a :class:`Residuals`."""
-        return self._evaluate(np.asarray(psi, dtype=float), residuals)[0]
+        """Return the loss at angles ``psi`` (p + 1,) on a :class:`Residuals`, as :meth:`fit`'s."""
+        return self._evaluate(np.asarray(psi, dtype=float), residuals, judged=True)[0]
 
     # -- starts ---------------------------------------------------------------------------
     def _beam_starts(self, slews, measurements, range_sigma, width=8):
         """Return :func:`grow_chains` for this chain's model, NLOS mixture and ground."""
-        return grow_chains(self.model, measurements, range_sigma, self.nlos, slews,
+        return grow_chains(self.model, measurements, range_sigma, self.nlos.judged(), slews,
                            self.lowest_joint, width)
 
     def _tag_loss(self, k, ends, measurements, range_sigma):
         """Approximate NLOS loss of tag ``k``'s measured ranges at candidate joints (..., 3)."""
-        return _tag_loss(self.model, self.nlos, k, ends, measurements, range_sigma)
+        return _tag_loss(self.model, self.nlos.judged(), k, ends, measurements, range_sigma)
 
     def _cold_starts(self, measurements, guess, range_sigma, extra=16):
         """Return start angles: the prior's, each slew's best chain, and the next best overall."""
@@ -520,6 +605,8 @@ class ChainMethod:
         """
         iterations = 0
         screened = []
+        coarse = Residuals(self.model, measurements, replace(
+            residuals.noise, range_sigma=self.SCREEN_SIGMA_FACTOR * residuals.noise.range_sigma))
         starts = self._cold_starts(measurements, guess, range_sigma)
         carried, resume = self._carry
         # Go on where the last search stopped: its best fits, then the starts it had not tried.
@@ -527,8 +614,8 @@ class ChainMethod:
         for done, start in enumerate(order):
             if iterations >= self.search_budget:
                 self._give_up(screened, resume + max(done - len(carried), 0))
-            psi, cost, used, _ = self.fit(start, residuals, max_iter=self.screen_iterations)
-            screened.append((cost, psi))
+            psi, used = self._screen(start, coarse)
+            screened.append((self.cost(psi, residuals), psi))
             iterations += used
         self._carry = ([], 0)
         finished = []
@@ -557,6 +644,19 @@ class ChainMethod:
             if not improved:
                 break
         return Fit(psi, cost, iterations, converged), tried
+
+    def _screen(self, start, coarse):
+        """
+        Return where a few iterations from a cold start go (psi), and how many were taken.
+
+        Under the judge's loss on ``coarse``, the frame's residuals at
+        ``SCREEN_SIGMA_FACTOR`` times their sigmas: the beam's starts are metres off, and
+        there only a range some 20 sigmas off is let go as an outlier. Under the NLOS
+        mixture alone, a range metres short would pull every start to the fold that
+        explains it before the judge's loss could weigh it.
+        """
+        result = self._levenberg_marquardt(start, coarse, True, self.screen_iterations, STALL)
+        return result.x, result.iterations
 
     def _give_up(self, screened, resume, keep=3):
         """Stop a search at its budget, keeping its best fits and where to go on from."""

@@ -217,16 +217,22 @@ class FieldCEPP(CEPP):
         the fit kept is finished at the likelihood's peak near it.
         """
         joints, info = self._searched(measurements, prior, warm)
-        return self._polished(measurements, joints, info)
+        return self._polished(measurements, joints, info, prior if warm else None)
 
-    def _polished(self, measurements, joints, info):
-        """Return the fit finished at the likelihood's peak near it (``polish``)."""
+    def _polished(self, measurements, joints, info, prior=None):
+        """
+        Return the fit finished at the likelihood's peak near it (``polish``).
+
+        Or near ``prior`` (the last posture), where the judge likes that better: CEPP's
+        weights let no range go, and one no noise explains can pull its fit to another fold.
+        """
         silent = ~np.isfinite(measurements.ranges).any(axis=1)
         if not self.polish or silent.any() or not np.all(np.isfinite(joints)):
             return joints, info
         ranged = Measurements(measurements.ranges, measurements.tag_ranges,
                               np.full(self.model.n_sections, np.nan), np.nan)
-        polished, fit = self._finish.refine(joints, self._finish.residuals_of(ranged))
+        polished, fit = self._finish.refine(joints, self._finish.residuals_of(ranged),
+                                            also=() if prior is None else (prior,))
         if not np.all(np.isfinite(polished)):
             return joints, info
         slew = canonical_angles(fit.psi, self.model.pivot_offset)[0]     # the polished's
@@ -251,6 +257,10 @@ class FieldCEPP(CEPP):
             # A fit near one already found is the same minimum: the prior's is kept.
             if all(np.abs(found - fit[1]).max() > self.ALTERNATIVE_DISTANCE for fit in fits):
                 fits.append((self._fit_cost(found, measurements.ranges), found, found_info))
+        if self.polish:         # the polish finishes what the coarse climb began
+            for climbed in self._climbed(measurements.ranges, beam, [fit[1] for fit in fits]):
+                fits.append((self._fit_cost(climbed, measurements.ranges), climbed,
+                             dict(fits[0][2], climbed=True)))
         _, joints, info = min(fits, key=lambda fit: fit[0])     # the first of equals
         info = dict(info, searched=True, **iterations)
         others = [other for _, other, _ in fits if other is not joints]
@@ -299,9 +309,9 @@ class FieldCEPP(CEPP):
         return joints, found_info
 
     def _tag_losses(self, points, ranges, sigma):
-        """Return the NLOS-mixture loss of q tags' ranges (q, m) at points (..., q, 3)."""
+        """Return the judge's loss of q tags' ranges (q, m) at points (..., q, 3)."""
         excess = range_excess(points, self.model.anchors, ranges, sigma)
-        return np.sum(self.nlos.loss(excess, sigma)[0], axis=-1)    # 0 at 0: the unheard
+        return np.sum(self.nlos.judged().loss(excess, sigma)[0], axis=-1)   # 0: the unheard
 
     def _fold_starts(self, joints, ranges):
         """
@@ -335,13 +345,13 @@ class FieldCEPP(CEPP):
         return starts
 
     def _fit_cost(self, joints, ranges):
-        """Return the NLOS-mixture loss of the measured ranges at ``joints``; inf below ground."""
+        """Return the judge's loss of the measured ranges at ``joints``; inf below ground."""
         if joints[:, 2].min() < self.lowest_joint or not np.all(np.isfinite(joints)):
             return np.inf
         measured = np.isfinite(ranges)
         sigma = self._range_sigma(ranges)[measured]
         excess = (ranges[measured] - self.model.ranges(joints)[measured]) / sigma
-        return float(np.sum(self.nlos.loss(excess, sigma)[0]))
+        return float(np.sum(self.nlos.judged().loss(excess, sigma)[0]))
 
     def _beam(self, ranges):
         """Return each slew of the beam search with its best chain: slews (s,), psi (s, p + 1)."""
@@ -358,6 +368,33 @@ class FieldCEPP(CEPP):
         """Return the best postures (k, p, 3) of the chain's beam search (cold-search starts)."""
         psi = (self._beam(ranges) if beam is None else beam)[:self.SEARCH_STARTS]
         return list(self.model.forward_kinematics(psi[:, 0], psi[:, 1:]))
+
+    def _climbed(self, ranges, beam, kept):
+        """
+        Return where the beam's chains climb under the judge's loss, coarse: cold fits too.
+
+        ``ChainMethod.fit_links`` at the ranges' sigmas times
+        ``ChainMethod.SCREEN_SIGMA_FACTOR``, as the chain screens its starts: CEPP's own
+        weights follow a range metres short to the fold that explains it, and this climb
+        lets it go. The ``SEARCH_STARTS`` likeliest (judge's loss at the true sigmas) that
+        are further than ``ALTERNATIVE_DISTANCE`` from ``kept`` and from each other.
+        """
+        if not len(beam):
+            return []
+        sigma = self._range_sigma(ranges) * self._finish.SCREEN_SIGMA_FACTOR
+        masks = np.ones((len(beam),) + ranges.shape, dtype=bool)
+        postures, _ = self._finish.fit_links(beam, ranges, sigma, masks, self.SCREEN_ROUNDS,
+                                             judged=True)
+        costs = [self._fit_cost(posture, ranges) for posture in postures]
+        found, climbed = list(kept), []
+        for k in np.argsort(costs):
+            if len(climbed) == self.SEARCH_STARTS or not np.isfinite(costs[k]):
+                break
+            if all(np.abs(postures[k] - other).max() > self.ALTERNATIVE_DISTANCE
+                   for other in found):
+                found.append(postures[k])
+                climbed.append(postures[k])
+        return climbed
 
     def _screened_peaks(self, ranges, beam, kept):
         """

@@ -38,7 +38,8 @@ A start, or a fit lost, goes back to the chain's global search (``core.chain``).
 """
 from dataclasses import dataclass
 
-from epp_ros.core.estimation.methods.chain import angles_from_joints, canonical_angles, ChainMethod
+from epp_ros.core.estimation.methods.chain import angles_from_joints, canonical_angles, \
+    ChainMethod, judged_minimum
 from epp_ros.core.model.measurements import wrap_angle
 from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt
 import numpy as np
@@ -309,13 +310,25 @@ class TrackMethod:
         the normalised size of the correction (chi-square with p + 1 degrees of freedom
         when the model holds).
         """
-        max_iter = self.chain.max_iter if max_iter is None else max_iter
         prior_information = _inverse(predicted.covariance)
-        fit = levenberg_marquardt(
-            predicted.state.copy(),
-            lambda x: self._evaluate(x, predicted, prior_information, residuals, delays),
-            lambda x, parts: self._normal_equations(x, predicted, prior_information, *parts),
-            max_iter=max_iter, tol=self.chain.tol)
+
+        def evaluate(x, judged=False):
+            return self._evaluate(x, predicted, prior_information, residuals, delays, judged)
+
+        def minimise(start, judged):
+            return levenberg_marquardt(
+                start, lambda x: evaluate(x, judged),
+                lambda x, parts: self._normal_equations(x, predicted, prior_information,
+                                                        *parts),
+                max_iter=self.chain.max_iter if max_iter is None else max_iter,
+                tol=self.chain.tol)
+
+        n = residuals.n_ranged
+        # Under the judge's loss, as the chain's fits: one short range is let go.
+        fit = judged_minimum(minimise, self.chain.losses(residuals),
+                             lambda result: result.state[2][3][:n],
+                             lambda x: evaluate(x, True)[0], predicted.state.copy(),
+                             refit=max_iter is None)
         state, cost, iterations, converged = fit.x, fit.cost, fit.iterations, fit.converged
         normal, _ = self._normal_equations(state, predicted, prior_information, *fit.state)
         covariance = _inverse(normal)
@@ -332,20 +345,20 @@ class TrackMethod:
         return (Hypothesis(state, covariance, log_weight, fitted_dof), iterations, converged,
                 surprise)
 
-    def _evaluate(self, state, predicted, prior_information, residuals, delays):
-        """Cost of a state: prediction term, robust frame loss, ground penalty."""
+    def _evaluate(self, state, predicted, prior_information, residuals, delays, judged=False):
+        """Cost of a state: prediction term, robust loss (``judged``: the judge's), ground."""
         n = self.model.n_sections + 1
         scaled, jacobian, joints = residuals.timed(state[:n], state[n:], delays)
-        cost, slope, weights, _ = self.chain.loss(scaled, residuals)
+        cost, slope, weights, _ = self.chain.loss(scaled, residuals, judged)
         difference = state - predicted.state
         difference[:n] = wrap_angle(difference[:n])
         cost += 0.5 * float(difference @ prior_information @ difference)
         depth = np.maximum(self.chain.lowest_joint - joints[:, 2], 0.0) / self.chain.GROUND_SIGMA
         cost += 0.5 * float(depth @ depth)
-        return cost, (slope, weights, (jacobian, difference, depth))
+        return cost, (slope, weights, (jacobian, difference, depth, scaled))
 
     def _normal_equations(self, state, predicted, prior_information, slope, weights, rows):
-        jacobian, difference, depth = rows
+        jacobian, difference, depth, _ = rows
         normal = prior_information + (jacobian * weights[:, None]).T @ jacobian
         gradient = prior_information @ difference + jacobian.T @ slope
         if depth.any():

@@ -211,5 +211,5 @@ def test_fits_side_by_side_on_some_links_are_the_one_loops_fits():
             residuals = Residuals(model, frame, noise)
             single, fit = method.refine(start, residuals, max_iter=200)
             batch_cost = method.cost(np.r_[angles_from_joints(model, fitted)], residuals)
-            assert batch_cost <= fit.cost + 1e-6
+            assert batch_cost <= fit.cost * (1 + 1e-6)      # the single loop's stall
             np.testing.assert_allclose(fitted, single, atol=0.05)

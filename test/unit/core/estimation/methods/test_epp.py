@@ -232,7 +232,9 @@ def test_noise_weights_lower_the_error_when_noise_grows_with_range():
         ranges = exact + rng.normal(0.0, 1.0, exact.shape) * (0.03 + 0.01 * exact)
         measurements = Measurements.clean(MODEL, ranges)[0]
         for weighted in squared:
-            method = FieldCEPP(MODEL, sigma=0.03, eta=0.01, noise_weights=weighted)
+            # CEPP's own answer: the polish takes both to the chain's peak near them.
+            method = FieldCEPP(MODEL, sigma=0.03, eta=0.01, noise_weights=weighted,
+                               polish=False)
             squared[weighted].append(rmse(method.solve(measurements, PRIOR, warm=True)[0]) ** 2)
     assert np.mean(squared[True]) < 0.6 * np.mean(squared[False])
 
@@ -377,6 +379,7 @@ def test_a_cold_search_hands_the_checks_the_other_peaks_its_chains_climb_to():
     assert not diagnostics.valid and diagnostics['status'] == 'ambiguous'
     blind = PostureEstimator(model, 'cepp', sigma=1.0, learn_noise=False)
     blind._solver._screened_peaks = lambda *args: []
+    blind._solver._climbed = lambda *args: []      # its cold fits under the judge's loss
     blind.update(ranges)
     assert blind.last_diagnostics.valid            # what the screen changes
 

