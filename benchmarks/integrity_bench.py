@@ -19,8 +19,9 @@ Streams on the simulated truck pump (a 10 Hz working cycle, range noise sigma = 
 5 % of the links missing, every estimator told sigma = 0.1 m) with frames broken on
 purpose: frames whose ranges are all, or one tag's, multiplied by independent U[0, 3)
 factors; bursts of 3 to 10 frames of uniform 0-80 m garbage; absurd frames (all 0 m, all
-0.1 m, all 20 m, random 0-80 m); frames with only two anchors, each from a cold start; and
-clean cycles on booms whose anchors are nearly collinear or nearly coincident. Per method:
+0.1 m, all 20 m, random 0-80 m); frames with only two anchors, each from a cold start;
+clean cycles on booms whose anchors are nearly collinear or nearly coincident; and frames
+with one range 0.5-3 m short (a real link's outlier), each from a cold start. Per method:
 
 - wrong and valid: frames reported valid while a joint of the returned posture is more
   than 1 m and more than 5 predicted standard deviations (``joint_std``) from the truth
@@ -60,13 +61,14 @@ GARBAGE_M = 80.0                    #: garbage ranges are uniform in [0, GARBAGE
 CORRUPTION = 3.0                    #: corrupted ranges are multiplied by U[0, CORRUPTION)
 ABSURD = (('all 0 m', 0.0), ('all 0.1 m', 0.1), ('all 20 m', 20.0),
           ('random 0-80 m', None))
-TWO_ANCHOR_RATE = 2.0               #: two-anchor frames per second of the cycle
+TWO_ANCHOR_RATE = 2.0               #: two-anchor (and one-short) frames per second of the cycle
+SHORT = (0.5, 3.0)                  #: m, how much one range of a one-short frame falls short
 DEGENERATE_SPREAD = 0.03            #: anchors within this many metres of a line or point
 DETAIL_LIMIT = 20                   #: frames listed per method and case
 
 #: The streams, in order; the broken ones score recovery, every one scores wrong-and-valid.
 CASES = ('clean', 'corrupt_all', 'corrupt_tip', 'corrupt_one', 'garbage_bursts', 'absurd',
-         'two_anchors', 'collinear', 'coincident')
+         'two_anchors', 'collinear', 'coincident', 'one_short')
 BROKEN_CASES = ('corrupt_all', 'corrupt_tip', 'corrupt_one', 'garbage_bursts', 'absurd')
 DESCRIPTIONS = {
     'clean': 'clean working cycle',
@@ -78,6 +80,8 @@ DESCRIPTIONS = {
     'two_anchors': 'two random anchors only, cold start each frame',
     'collinear': f'anchors within {DEGENERATE_SPREAD * 100:.0f} cm of a line, clean cycle',
     'coincident': f'anchors within {DEGENERATE_SPREAD * 100:.0f} cm of a point, clean cycle',
+    'one_short': f'one random range {SHORT[0]}-{SHORT[1]:.0f} m short (an outlier), '
+                 'cold start each frame',
 }
 
 
@@ -234,6 +238,26 @@ def two_anchor_stream(seconds, seed):
                   scored=np.zeros(len(joints), bool), cold=True)
 
 
+def one_short_stream(seconds, seed):
+    """
+    Frames of the cycle at :data:`TWO_ANCHOR_RATE`, one random range of each :data:`SHORT`, cold.
+
+    A real link's outlier (up to 3.3 m recorded, either sign); short, it is no NLOS
+    excess. No frame scored for rejections: without that range a joint may be ambiguous.
+    """
+    model = truck_pump()
+    trajectory = working_cycle(model, seconds, RATE, rng=np.random.default_rng(seed))
+    pick = slice(None, None, max(int(round(RATE / TWO_ANCHOR_RATE)), 1))
+    rng = case_rng(seed, 'one_short')
+    joints = trajectory.joints[pick]
+    ranges = noisy_ranges(model, joints, rng)
+    for frame in ranges:
+        frame[rng.integers(model.n_sections), rng.integers(model.n_anchors)] -= \
+            rng.uniform(*SHORT)
+    return Stream('one_short', model, ranges, trajectory.times[pick], joints,
+                  scored=np.zeros(len(joints), bool), cold=True)
+
+
 def degenerate_model(shape, rng, spread=DEGENERATE_SPREAD):
     """
     Build the truck pump's boom with its anchors nearly on a line or nearly at one point.
@@ -290,6 +314,7 @@ def build_streams(seconds, seed, cases=CASES):
         'two_anchors': lambda: two_anchor_stream(seconds, seed),
         'collinear': lambda: degenerate_stream(seconds, seed, 'collinear'),
         'coincident': lambda: degenerate_stream(seconds, seed, 'coincident'),
+        'one_short': lambda: one_short_stream(seconds, seed),
     }
     return [builders[case]() for case in cases]
 

@@ -225,7 +225,7 @@ def test_bench_integrity_reports_every_case_and_method(capsys):
         assert len(row['recoveries_s']) == row['events']
         assert row['events'] == 0 or row['case'] in integrity_bench.BROKEN_CASES
     frames = {row['case']: row['frames'] for row in cases}
-    assert frames['clean'] == 60 and frames['two_anchors'] == 12
+    assert frames['clean'] == 60 and frames['two_anchors'] == frames['one_short'] == 12
 
 
 def test_integrity_streams_break_what_they_say():
@@ -250,6 +250,14 @@ def test_integrity_streams_break_what_they_say():
     assert streams['absurd'].labels[:2] == ['all 0 m', 'all 0.1 m']
     two = streams['two_anchors']
     assert two.cold and (np.isfinite(two.ranges).any(axis=1).sum(axis=1) <= 2).all()
+    short = streams['one_short']
+    assert short.cold and not short.scored.any()
+    # Each frame's noise (within 5 sigma), and one range SHORT short.
+    excess = short.ranges - short.model.ranges(short.truths)
+    ordered = np.sort(np.nan_to_num(excess, nan=0.0).reshape(len(excess), -1), axis=1)
+    assert (ordered[:, 0] <= -ib.SHORT[0] + 5 * ib.SIGMA).all()
+    assert (ordered[:, 0] >= -ib.SHORT[1] - 5 * ib.SIGMA).all()
+    assert (ordered[:, 1] >= -5 * ib.SIGMA).all()
     for shape in ('collinear', 'coincident'):
         anchors = streams[shape].model.anchors
         centred = anchors - anchors.mean(axis=0)

@@ -43,7 +43,8 @@ Fits the searches found elsewhere are returned as ``alternatives`` for the integ
 """
 from numbers import Real
 
-from epp_ros.core.estimation.methods.chain import canonical_angles, ChainMethod, grow_chains
+from epp_ros.core.estimation.methods.chain import canonical_angles, ChainMethod, grow_chains, \
+    SearchExhausted
 from epp_ros.core.estimation.methods.epp import CEPP
 from epp_ros.core.model.folds import fold_alternatives, keep_folds, tip_circle, tip_minima
 from epp_ros.core.model.measurements import Measurements
@@ -229,14 +230,18 @@ class FieldCEPP(CEPP):
         silent = ~np.isfinite(measurements.ranges).any(axis=1)
         if not self.polish or silent.any() or not np.all(np.isfinite(joints)):
             return joints, info
-        ranged = Measurements(measurements.ranges, measurements.tag_ranges,
-                              np.full(self.model.n_sections, np.nan), np.nan)
-        polished, fit = self._finish.refine(joints, self._finish.residuals_of(ranged),
+        polished, fit = self._finish.refine(joints,
+                                            self._finish.residuals_of(self._ranged(measurements)),
                                             also=() if prior is None else (prior,))
         if not np.all(np.isfinite(polished)):
             return joints, info
         slew = canonical_angles(fit.psi, self.model.pivot_offset)[0]     # the polished's
         return polished, dict(info, slew=float(slew), polish_iterations=fit.iterations)
+
+    def _ranged(self, measurements):
+        """Return the frame's ranges alone (what CEPP uses), as ``Measurements``."""
+        return Measurements(measurements.ranges, measurements.tag_ranges,
+                            np.full(self.model.n_sections, np.nan), np.nan)
 
     def _searched(self, measurements, prior, warm):
         """Return :meth:`solve`'s fit before the polish."""
@@ -257,10 +262,11 @@ class FieldCEPP(CEPP):
             # A fit near one already found is the same minimum: the prior's is kept.
             if all(np.abs(found - fit[1]).max() > self.ALTERNATIVE_DISTANCE for fit in fits):
                 fits.append((self._fit_cost(found, measurements.ranges), found, found_info))
-        if self.polish:         # the polish finishes what the coarse climb began
-            for climbed in self._climbed(measurements.ranges, beam, [fit[1] for fit in fits]):
-                fits.append((self._fit_cost(climbed, measurements.ranges), climbed,
-                             dict(fits[0][2], climbed=True)))
+        searched = self._chain_searched(measurements) if self.polish else None
+        if searched is not None and all(np.abs(searched - fit[1]).max() >
+                                        self.ALTERNATIVE_DISTANCE for fit in fits):
+            fits.append((self._fit_cost(searched, measurements.ranges), searched,
+                         dict(fits[0][2], chain_search=True)))
         _, joints, info = min(fits, key=lambda fit: fit[0])     # the first of equals
         info = dict(info, searched=True, **iterations)
         others = [other for _, other, _ in fits if other is not joints]
@@ -369,32 +375,20 @@ class FieldCEPP(CEPP):
         psi = (self._beam(ranges) if beam is None else beam)[:self.SEARCH_STARTS]
         return list(self.model.forward_kinematics(psi[:, 0], psi[:, 1:]))
 
-    def _climbed(self, ranges, beam, kept):
+    def _chain_searched(self, measurements):
         """
-        Return where the beam's chains climb under the judge's loss, coarse: cold fits too.
+        Return the chain's global search's posture for the frame's ranges, or None.
 
-        ``ChainMethod.fit_links`` at the ranges' sigmas times
-        ``ChainMethod.SCREEN_SIGMA_FACTOR``, as the chain screens its starts: CEPP's own
-        weights follow a range metres short to the fold that explains it, and this climb
-        lets it go. The ``SEARCH_STARTS`` likeliest (judge's loss at the true sigmas) that
-        are further than ``ALTERNATIVE_DISTANCE`` from ``kept`` and from each other.
+        CEPP's own weights follow a range metres short to the fold that explains it; the
+        chain's search (``ChainMethod.solve``, cold) screens its starts under the judge's
+        loss, which lets that range go. None when it stopped at its budget (forgotten: the
+        next cold frame searches afresh).
         """
-        if not len(beam):
-            return []
-        sigma = self._range_sigma(ranges) * self._finish.SCREEN_SIGMA_FACTOR
-        masks = np.ones((len(beam),) + ranges.shape, dtype=bool)
-        postures, _ = self._finish.fit_links(beam, ranges, sigma, masks, self.SCREEN_ROUNDS,
-                                             judged=True)
-        costs = [self._fit_cost(posture, ranges) for posture in postures]
-        found, climbed = list(kept), []
-        for k in np.argsort(costs):
-            if len(climbed) == self.SEARCH_STARTS or not np.isfinite(costs[k]):
-                break
-            if all(np.abs(postures[k] - other).max() > self.ALTERNATIVE_DISTANCE
-                   for other in found):
-                found.append(postures[k])
-                climbed.append(postures[k])
-        return climbed
+        try:
+            return self._finish.solve(self._ranged(measurements), None, warm=False)[0]
+        except SearchExhausted:
+            self._finish.reset()
+            return None
 
     def _screened_peaks(self, ranges, beam, kept):
         """

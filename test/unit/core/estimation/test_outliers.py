@@ -86,6 +86,6 @@ def test_a_cold_start_is_never_confidently_wrong_for_one_short_range():
                 error = rmse(result.estimate, joints)
                 # More than 1 m off only where the predicted RMSE covers a third of it.
                 assert error < max(1.0, 3.0 * result.predicted_rmse), (method, result.message)
-    # The chain's search finds the truth on most; the tracker starts with it. CEPP's
-    # own weights follow the short range, and it refuses more.
-    assert published['chain'] >= 10 and published['track'] >= 10 and published['cepp'] >= 6
+    # Each finds the truth on most: the chain's search (the tracker starts with it, and
+    # CEPP's cold search takes it as a candidate) screens under the judge's loss.
+    assert min(published.values()) >= 10, published
