@@ -181,13 +181,15 @@ class NlosMixture:
         s = np.asarray(excess, dtype=float)
         sigma = np.asarray(sigma, dtype=float)
         cost = 0.5 * s ** 2
+        clear = 1.0 - self.fraction - self.outliers      # each prior relative to this one
         if self.outliers:
             ratio = _outlier_ratio(sigma, self.outlier_sigma)
-            cost = np.minimum(cost, 0.5 * (ratio * s) ** 2 - np.log(self.outliers * ratio))
+            cost = np.minimum(cost, 0.5 * (ratio * s) ** 2
+                              - np.log(self.outliers / clear * ratio))
         if self.fraction == 0.0:
             return cost
         inverse_g = sigma / self.gamma
-        offset = (np.log(self.fraction) + _HALF_LOG_2PI + np.log(inverse_g)
+        offset = (np.log(self.fraction / clear) + _HALF_LOG_2PI + np.log(inverse_g)
                   + 0.5 * inverse_g ** 2)
         return np.where(s > 0.0, np.minimum(cost, inverse_g * s - offset), cost)
 
