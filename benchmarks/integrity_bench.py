@@ -223,19 +223,30 @@ def absurd_stream(seconds, seed):
     return _break(stream, runs, labels)
 
 
-def two_anchor_stream(seconds, seed):
-    """Frames of the cycle at :data:`TWO_ANCHOR_RATE` keeping two random anchors, cold."""
+def cold_stream(seconds, seed, case, spoil):
+    """
+    Frames of the cycle at :data:`TWO_ANCHOR_RATE`, each spoilt and solved cold; none scored.
+
+    ``spoil(frame, model, rng)`` changes one frame's noisy ranges (p, m) in place.
+    """
     model = truck_pump()
     trajectory = working_cycle(model, seconds, RATE, rng=np.random.default_rng(seed))
     pick = slice(None, None, max(int(round(RATE / TWO_ANCHOR_RATE)), 1))
-    rng = case_rng(seed, 'two_anchors')
+    rng = case_rng(seed, case)
     joints = trajectory.joints[pick]
     ranges = noisy_ranges(model, joints, rng)
     for frame in ranges:
+        spoil(frame, model, rng)
+    return Stream(case, model, ranges, trajectory.times[pick], joints,
+                  scored=np.zeros(len(joints), bool), cold=True)
+
+
+def two_anchor_stream(seconds, seed):
+    """Frames of the cycle at :data:`TWO_ANCHOR_RATE` keeping two random anchors, cold."""
+    def keep_two(frame, model, rng):
         keep = rng.choice(model.n_anchors, 2, replace=False)
         frame[:, np.setdiff1d(np.arange(model.n_anchors), keep)] = np.nan
-    return Stream('two_anchors', model, ranges, trajectory.times[pick], joints,
-                  scored=np.zeros(len(joints), bool), cold=True)
+    return cold_stream(seconds, seed, 'two_anchors', keep_two)
 
 
 def one_short_stream(seconds, seed):
@@ -245,17 +256,10 @@ def one_short_stream(seconds, seed):
     A real link's outlier (up to 3.3 m recorded, either sign); short, it is no NLOS
     excess. No frame scored for rejections: without that range a joint may be ambiguous.
     """
-    model = truck_pump()
-    trajectory = working_cycle(model, seconds, RATE, rng=np.random.default_rng(seed))
-    pick = slice(None, None, max(int(round(RATE / TWO_ANCHOR_RATE)), 1))
-    rng = case_rng(seed, 'one_short')
-    joints = trajectory.joints[pick]
-    ranges = noisy_ranges(model, joints, rng)
-    for frame in ranges:
+    def one_short(frame, model, rng):
         frame[rng.integers(model.n_sections), rng.integers(model.n_anchors)] -= \
             rng.uniform(*SHORT)
-    return Stream('one_short', model, ranges, trajectory.times[pick], joints,
-                  scored=np.zeros(len(joints), bool), cold=True)
+    return cold_stream(seconds, seed, 'one_short', one_short)
 
 
 def degenerate_model(shape, rng, spread=DEGENERATE_SPREAD):
