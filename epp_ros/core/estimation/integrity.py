@@ -36,6 +36,7 @@ Levels follow ``diagnostic_msgs``: a frame at ERROR is never published.
 """
 from dataclasses import dataclass, field, fields
 import math
+from typing import NamedTuple, Optional
 
 from epp_ros.core.estimation.bias_learning import bias_design
 from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMethod
@@ -243,6 +244,8 @@ class Integrity:
 
     #: Levenberg–Marquardt trial steps of each separation fit (:meth:`separated`).
     SEPARATION_ROUNDS = 8
+    #: Assessments kept for a second judgement of the same estimate (:meth:`_assessed`).
+    ASSESSMENTS_KEPT = 2
 
     def __init__(self, model, noise, nlos, eta=0.0, lowest_joint=-0.5,
                  limits=IntegrityLimits(), thresholds=Thresholds(), bias=RangeBiasPrior()):
@@ -266,6 +269,7 @@ class Integrity:
         # The likelihood's peaks for the separation fits: the chain's loss, this mixture.
         self._peaks = ChainMethod(model, nlos_fraction=nlos.fraction, nlos_gamma=nlos.gamma,
                                   lowest_joint=lowest_joint)
+        self._assessments = []          # (_AssessmentKey, _Assessment), the latest first
 
     # -- the pieces -----------------------------------------------------------------------
     def link_sigma(self, measurements):
@@ -731,8 +735,43 @@ class Integrity:
         Verdict
 
         """
-        checks = []                 # (level, status, message), worst kept
-        values = {}
+        assessed = self._assessed(joints, measurements, reference, elapsed, reference_std,
+                                  chain, timed_joints)
+        checks, values = list(assessed.checks), dict(assessed.values)
+        alternatives = list(alternatives) + assessed.separated
+        found, joint_std, seen, reach = (assessed.found, assessed.joint_std, assessed.seen,
+                                         assessed.reach)
+        angles, shift = assessed.angles, assessed.seen - joints
+        ambiguous = set(found)
+        ambiguous |= self.ambiguous_postures(seen, measurements, joint_std, angles[0], reach,
+                                             [np.asarray(a) + shift for a in alternatives])
+        for rival in rivals:
+            far = _norm(np.asarray(rival, dtype=float) - joints) > self.limits.ambiguity_distance
+            ambiguous |= set(np.flatnonzero(far).tolist())
+        values['ambiguous_joints'] = sorted(k + 1 for k in ambiguous)
+        if ambiguous:
+            checks.append((ERROR, 'ambiguous', 'joint(s) ' + ', '.join(
+                str(k + 1) for k in sorted(ambiguous)) + ' could be elsewhere: another '
+                'posture fits about as well'))
+        verdict = _verdict(checks, values)
+        verdict.angles, verdict.los_rows = angles, assessed.los_rows
+        return verdict
+
+    def _assessed(self, joints, measurements, reference, elapsed, reference_std, chain,
+                  timed_joints):
+        """
+        Return :meth:`judge`'s :class:`_Assessment` of an estimate, all but its alternatives.
+
+        A frame in doubt is judged again with the other fit as an alternative
+        (``PostureEstimator``'s second opinion), the same estimate on the same frame: the
+        last few assessments are kept and reused, not computed again.
+        """
+        key = _AssessmentKey.of(joints, measurements, reference, elapsed, reference_std,
+                                chain, timed_joints, self.common_covariance)
+        for known, assessment in self._assessments:
+            if known == key:
+                return assessment
+        checks, values = [], {}             # (level, status, message), worst kept
         reach = None if reference is None else (
             reference, self.reach(reference, elapsed, reference_std))
         angles = angles_from_joints(self.model, joints)
@@ -747,30 +786,20 @@ class Integrity:
             joint_std = self.point_bound(joints, measurements, kept)
             total_std = self.point_bound(joints, measurements, kept, biased=True)
         # Postures are weighed where each tag was when it ranged (a moving boom, TDMA).
-        shift = 0.0 if timed_joints is None else np.asarray(timed_joints) - joints
-        seen = joints + shift
+        seen = joints if timed_joints is None else np.asarray(timed_joints, dtype=float)
         values['noise_rmse'] = float(np.sqrt(np.mean(joint_std ** 2)))
         self._observability(total_std, checks, values)
         if reference is not None:
             self._turns(joints, total_std, reference, reference_std, elapsed, checks, values)
+        separated = []
         if chain and all(level < ERROR for level, _, _ in checks):
-            alternatives = list(alternatives) + self.separated(joints, measurements, kept)
+            separated = self.separated(joints, measurements, kept)
         spread, found = self._joint_rivals(seen, measurements, joint_std, angles[0], reach)
         values['reach_std'] = np.maximum(joint_std, spread)
-        ambiguous = set(found)
-        ambiguous |= self.ambiguous_postures(seen, measurements, joint_std, angles[0], reach,
-                                             [np.asarray(a) + shift for a in alternatives])
-        for rival in rivals:
-            far = _norm(np.asarray(rival, dtype=float) - joints) > self.limits.ambiguity_distance
-            ambiguous |= set(np.flatnonzero(far).tolist())
-        values['ambiguous_joints'] = sorted(k + 1 for k in ambiguous)
-        if ambiguous:
-            checks.append((ERROR, 'ambiguous', 'joint(s) ' + ', '.join(
-                str(k + 1) for k in sorted(ambiguous)) + ' could be elsewhere: another '
-                'posture fits about as well'))
-        verdict = _verdict(checks, values)
-        verdict.angles, verdict.los_rows = angles, los_rows
-        return verdict
+        assessment = _Assessment(tuple(checks), values, angles, los_rows, joint_std, seen,
+                                 reach, separated, found)
+        self._assessments = [(key, assessment)] + self._assessments[:self.ASSESSMENTS_KEPT - 1]
+        return assessment
 
     def _consistency(self, joints, measurements, checks, values):
         """Append the residual checks to ``checks``; return the links judged clear."""
@@ -864,6 +893,44 @@ class Integrity:
         if over.size:
             checks.append((ERROR, 'implausible', f'section {over[0] + 1} turned '
                            f'{turned[over[0]]:.2f} rad in {elapsed:.2f} s'))
+
+
+class _Assessment(NamedTuple):
+    """What :meth:`Integrity.judge` finds of an estimate before its alternatives are weighed."""
+
+    checks: tuple               #: (level, status, message) each
+    values: dict
+    angles: tuple               #: (slew, pitches (p,)), radians
+    los_rows: Optional[np.ndarray]
+    joint_std: np.ndarray       #: (p,) metres, without the common bias
+    seen: np.ndarray            #: (p, 3) each joint where its tag ranged, metres
+    reach: Optional[tuple]      #: (reference, distances (p,)) or None
+    separated: list             #: the solution separation's postures, (p, 3) each
+    found: dict                 #: joint -> a position about as likely, elsewhere
+
+
+class _AssessmentKey:
+    """What an assessment depends on: the frame (the object itself) and the arrays' bytes."""
+
+    def __init__(self, measurements, *parts):
+        self.measurements = measurements
+        self.parts = tuple(part.tobytes() if isinstance(part, np.ndarray) else part
+                           for part in parts)
+
+    @classmethod
+    def of(cls, joints, measurements, reference, elapsed, reference_std, chain, timed_joints,
+           common_covariance):
+        """Return the key of :meth:`Integrity._assessed`'s arguments."""
+        def exact(values):
+            return None if values is None else np.asarray(values, dtype=float)
+        return cls(measurements, exact(joints), exact(reference), elapsed,
+                   exact(reference_std), bool(chain), exact(timed_joints),
+                   exact(common_covariance))
+
+    def __eq__(self, other):
+        return self.measurements is other.measurements and self.parts == other.parts
+
+    __hash__ = None
 
 
 def _mirror_planes(model):

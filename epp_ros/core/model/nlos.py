@@ -36,6 +36,7 @@ without which one short range is a Gaussian impossibility that moves every joint
 explain it.
 """
 from dataclasses import dataclass, replace
+from functools import lru_cache
 
 import numpy as np
 from scipy.special import log_ndtr
@@ -56,6 +57,8 @@ OUTLIER_SIGMA = 2.0
 
 #: An outlier's spread in the range's own sigmas, at least.
 OUTLIER_SPREAD = 10.0
+#: Links of at most this many ranges have their bound losses kept (:meth:`NlosMixture.bind`).
+BOUND_SIZE = 256
 
 
 def _outlier_ratio(sigma, outlier_sigma):
@@ -166,8 +169,12 @@ class NlosMixture:
 
         ``prior``: each range's own prior NLOS probability, shaped like ``sigma``, instead of
         ``fraction`` (a link's neighbours in time, ``core.blockage``); ignored when
-        ``fraction`` is 0.
+        ``fraction`` is 0. Without a prior, a frame's few dozen sigmas are bound once:
+        fits and checks bind the same ones many times.
         """
+        sigma = np.asarray(sigma, dtype=float)
+        if prior is None and sigma.size <= BOUND_SIZE:
+            return _bound(self, sigma.shape, sigma.tobytes())
         return LinkLoss(self, sigma, prior)
 
     def approximate_loss(self, excess, sigma):
@@ -192,6 +199,12 @@ class NlosMixture:
         offset = (np.log(self.fraction / clear) + _HALF_LOG_2PI + np.log(inverse_g)
                   + 0.5 * inverse_g ** 2)
         return np.where(s > 0.0, np.minimum(cost, inverse_g * s - offset), cost)
+
+
+@lru_cache(maxsize=64)
+def _bound(mixture, shape, sigma_bytes):
+    """Return ``LinkLoss(mixture, sigma)`` of the sigmas ``sigma_bytes`` of ``shape``, kept."""
+    return LinkLoss(mixture, np.frombuffer(sigma_bytes).reshape(shape))
 
 
 class LinkLoss:

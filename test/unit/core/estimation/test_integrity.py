@@ -264,6 +264,46 @@ def test_a_fit_that_took_blocked_links_for_clear_ones_is_refused_as_ambiguous():
     assert blind.judge(estimate, frame).valid
 
 
+def test_judging_an_estimate_again_weighs_only_its_new_alternatives():
+    """
+    A frame in doubt is judged again with the other fit as an alternative.
+
+    The checks of the estimate itself are not made twice, the alternative is weighed,
+    and the verdict is a fresh judge's; another frame or a bias learned since is judged
+    anew. The recorded frame of the test above, with the separation fits left out so
+    that the rival comes as an alternative.
+    """
+    data = yaml.safe_load((DATA / 'absorbed_nlos_frame.yaml').read_text())
+    estimate, ranges = np.array(data['estimate']), np.array(data['ranges'])
+    frame = Measurements.clean(MODEL, ranges)[0]
+    told = {'sigma': 0.14, 'eta': 0.012, 'nlos_fraction': 0.13, 'nlos_gamma': 1.3}
+    full = PostureEstimator(MODEL, 'cepp', **told).integrity
+    rival = full.separated(estimate, frame, full.consistency(estimate, frame)[2])[0]
+
+    def blind():
+        integrity = PostureEstimator(MODEL, 'cepp', **told).integrity
+        calls = []
+        integrity.separated = lambda *args: calls.append(args) or []
+        integrity.assessed = calls
+        return integrity
+
+    integrity = blind()
+    assert integrity.judge(estimate, frame).valid
+    again = integrity.judge(estimate, frame, alternatives=[rival])
+    assert len(integrity.assessed) == 1
+    fresh = blind().judge(estimate, frame, alternatives=[rival])
+    assert again.status == fresh.status == 'ambiguous'
+    assert again.values['ambiguous_joints'] == fresh.values['ambiguous_joints']
+    for name in ('joint_std', 'reach_std', 'predicted_rmse', 'chi_square'):
+        np.testing.assert_array_equal(again.values[name], fresh.values[name])
+    assert integrity.judge(estimate, frame).valid          # the alternative is not kept
+    integrity.judge(estimate, Measurements.clean(MODEL, ranges)[0])
+    assert len(integrity.assessed) == 2
+    integrity.common_covariance = integrity.common_covariance + np.diag([0.05, 0.01]) ** 2
+    integrity.judge(estimate, frame)
+    assert len(integrity.assessed) == 3
+
+
 def test_separation_fits_are_made_only_when_links_were_set_aside():
     """With every link clear the likelihood peaks once: no fits, and the verdict stands."""
     joints = MODEL.forward_kinematics(0.4, np.radians([50.0, 25.0, 5.0, -20.0, -45.0]))

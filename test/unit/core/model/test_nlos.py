@@ -16,8 +16,8 @@
 from epp_ros.core import PostureEstimator
 from epp_ros.core.estimation.methods.chain import ChainMethod
 from epp_ros.core.model.measurements import Measurements, Residuals
-from epp_ros.core.model.nlos import (NlosMixture, OUTLIER_FRACTION, OUTLIER_SIGMA,
-                                     OUTLIER_SPREAD, range_excess)
+from epp_ros.core.model.nlos import (BOUND_SIZE, LinkLoss, NlosMixture, OUTLIER_FRACTION,
+                                     OUTLIER_SIGMA, OUTLIER_SPREAD, range_excess)
 from epp_ros.core.simulation.simulate import observe, random_posture, RangeNoise, truck_pump
 import numpy as np
 import pytest
@@ -118,6 +118,23 @@ def test_approximate_loss_stays_within_log_three_of_the_loss(sigma):
              - np.log(np.sqrt(2 * np.pi) * sigma) + np.log1p(-model.fraction - model.outliers))
     gap = exact - model.approximate_loss(excess, sigma)
     assert np.all(gap <= 1e-9) and np.all(gap >= -np.log(3.0) - 1e-9)
+
+
+def test_a_frames_sigmas_are_bound_once_and_the_kept_loss_is_a_fresh_ones():
+    """Fits and checks bind the same few dozen sigmas many times: one bound loss serves."""
+    mixture = NlosMixture(0.1, 1.0).judged()
+    sigma = np.hypot(0.1, 0.01 * np.arange(30.0)).reshape(5, 6)
+    bound = mixture.bind(sigma)
+    assert mixture.bind(sigma.copy()) is bound
+    assert mixture.bind(sigma + 1e-9) is not bound
+    assert NlosMixture(0.1, 1.0).bind(sigma) is not bound
+    excess = np.random.default_rng(4).normal(0.0, 3.0, sigma.shape)
+    for kept, fresh in zip(bound(excess), LinkLoss(mixture, sigma)(excess)):
+        np.testing.assert_array_equal(kept, fresh)
+    prior = np.full(sigma.shape, 0.3)           # a link's own prior: bound each time
+    assert mixture.bind(sigma, prior) is not mixture.bind(sigma, prior)
+    large = np.full(BOUND_SIZE + 1, 0.1)        # a calibration's frames: not kept
+    assert mixture.bind(large) is not mixture.bind(large)
 
 
 def test_range_excess_is_in_sigmas_per_tag_and_zero_where_unheard():
