@@ -140,6 +140,7 @@ def _noise_values(diagnostics):
         values['range sigma per metre'] = f'{noise.eta:.5f}'
         values['NLOS fraction'] = f'{noise.nlos_fraction:.3f}'
         values['NLOS mean excess [m]'] = f'{noise.nlos_gamma:.3f}'
+        values['outlier share'] = f'{noise.outliers:.4f}'
         values['noise learned from links'] = str(noise.links)
     if diagnostics.range_bias is not None:  # the common bias taken off the ranges
         offset, slope = diagnostics.range_bias

@@ -126,7 +126,7 @@ def test_track_applies_each_tags_ranges_at_its_own_time(listener, processes):
     # The noise the estimator uses is reported: learnt from these exact ranges, below the
     # configured range_sigma (0.1 m).
     for name in ('range sigma [m]', 'range sigma per metre', 'NLOS fraction',
-                 'NLOS mean excess [m]', 'noise learned from links'):
+                 'NLOS mean excess [m]', 'outlier share', 'noise learned from links'):
         assert name in report, name
     assert 0.0 < float(report['range sigma [m]']) <= 0.1
     # The boom at each stamp, within 5 mm, once the tracker has learnt the rates.

@@ -42,7 +42,7 @@ from epp_ros.core.estimation.posture_method import FrameResult
 from epp_ros.core.estimation.reacquisition import Reacquisition
 from epp_ros.core.model.bounds import RangeBiasPrior
 from epp_ros.core.model.measurements import Measurements, plausible_limits, Residuals, SensorNoise
-from epp_ros.core.model.nlos import NlosMixture
+from epp_ros.core.model.nlos import NlosMixture, OUTLIER_FRACTION
 from epp_ros.core.model.noise import DEFAULT_NOISE, link_bias_stds, NoiseModel
 from epp_ros.core.solvers.multilateration import cold_start_guess
 import numpy as np
@@ -89,7 +89,8 @@ def _integrity(model, told, limits, thresholds, moving=()):
     """Return the :class:`Integrity` of the noise the estimator is told (``moving``: anchors)."""
     noise = SensorNoise(float(told['sigma']), float(told['tag_sigma']),
                         float(told['pitch_sigma']), float(told['slew_sigma']))
-    nlos = NlosMixture(float(told['nlos_fraction']), float(told['nlos_gamma'])).judged()
+    nlos = NlosMixture(float(told['nlos_fraction']), float(told['nlos_gamma'])).judged(
+        told.get('outlier_fraction', OUTLIER_FRACTION))
     links = (model.n_sections, model.n_anchors)
     bias = RangeBiasPrior(link_bias_stds(told['link_bias_std'], links),
                           float(told['common_bias_std']),

@@ -18,16 +18,22 @@ The range noise of the field, learned from the estimator's own residuals while i
 Nobody knows the range noise of a pump on site: it changes with distance, weather, the
 boom's own shadow and the firmware. :class:`NoiseLearner` fits the model the estimators use
 (``core.nlos``: a range is ``d + s(d) N + X``, ``s(d) = sqrt(sigma^2 + (eta d)^2)``, ``X``
-an exponential excess of mean ``nlos_gamma`` on a fraction ``nlos_fraction`` of the links)
-to the residuals of the last frames by expectation-maximisation:
+an exponential excess of mean ``nlos_gamma`` on a fraction ``nlos_fraction`` of the links,
+and a share ``outliers`` no noise explains, of either sign: a broad Gaussian) to the
+residuals of the last frames by expectation-maximisation:
 
 - each estimate starts from a scale no blocked link can inflate: blocked ranges are too long,
   so the too-short residuals are line of sight, and their median is 0.674 s;
-- E-step: each link's probability of being blocked under the current mixture;
+- E-step: each link's probability of being blocked, and of being an outlier, under the
+  current mixture;
 - M-step: ``sigma^2`` and ``eta^2`` by weighted least squares of the squared line-of-sight
-  residuals on ``(1, d^2)``; the fraction and mean excess from the blocked weights, each
-  pulled toward the configured value by a few pseudo-links so that a window without a
-  blocked link does not drive them to zero.
+  residuals on ``(1, d^2)``; the fraction and mean excess from the blocked weights, and the
+  outliers' share from theirs, each pulled toward the configured value by a few
+  pseudo-links so that a window without a blocked link does not drive them to zero.
+  The outliers' share is never learned below the configured one (the judge's prior,
+  ``NlosMixture.judged``): a site may have more than the recorded rate, never trust less.
+  Without the outliers' term, a site where a fifth of the ranges are outliers of metres
+  would have its sigma learned at a metre, and every frame refused as unobservable.
 
 Residuals of a fit are smaller than the errors: the fit absorbs ``dof`` of them per frame,
 which the variance is corrected for. The configured values are the start, and stay the
@@ -36,7 +42,7 @@ estimate until enough links have been seen.
 from collections import deque
 from dataclasses import dataclass
 
-from epp_ros.core.model.nlos import NlosMixture
+from epp_ros.core.model.nlos import NlosMixture, OUTLIER_FRACTION
 import numpy as np
 
 __all__ = ['RangeNoiseEstimate', 'NoiseLearner', 'frame_scale']
@@ -50,6 +56,8 @@ SIGMA_RANGE = (1e-3, 20.0)
 SIGMA_FLOOR_FACTOR = 20.0
 ETA_RANGE = (0.0, 0.2)
 FRACTION_RANGE = (0.01, 0.5)
+#: The most of the ranges learned to be outliers.
+OUTLIERS_MAX = 0.3
 #: Blocked-link pseudo-counts toward the configured fraction and mean excess.
 PRIOR_LINKS = 20.0
 
@@ -63,6 +71,7 @@ class RangeNoiseEstimate:
     nlos_fraction: float        #: probability that a link is blocked
     nlos_gamma: float           #: m, mean excess of a blocked link
     links: int = 0              #: residuals it rests on (0: the configured values)
+    outliers: float = OUTLIER_FRACTION     #: share of ranges no noise explains (the judge's)
 
     def link_sigma(self, distances):
         """Return the standard deviation (m) of ranges of the given lengths (m, any shape)."""
@@ -74,9 +83,9 @@ class RangeNoiseEstimate:
         return float(max(mine, theirs) / min(mine, theirs))
 
     def as_options(self):
-        """Return the estimator options (``sigma``, ``eta``, ``nlos_*``) of this estimate."""
+        """Return the methods' noise (``sigma``, ``eta``, ``nlos_*``, ``outlier_fraction``)."""
         return {'sigma': self.sigma, 'eta': self.eta, 'nlos_fraction': self.nlos_fraction,
-                'nlos_gamma': self.nlos_gamma}
+                'nlos_gamma': self.nlos_gamma, 'outlier_fraction': self.outliers}
 
 
 def frame_scale(excess, link_sigma, dof, too_short_only=True):
@@ -208,16 +217,17 @@ class NoiseLearner:
         sigma = self._sigma(estimate.sigma * factor)
         return RangeNoiseEstimate(sigma, float(np.clip(estimate.eta * factor, *ETA_RANGE)),
                                   estimate.nlos_fraction, max(estimate.nlos_gamma, 2.0 * sigma),
-                                  links)
+                                  links, estimate.outliers)
 
     def _em_round(self, current, excess, distances, dof):
         """One E and M step from ``current``."""
         sigma_links = current.link_sigma(distances)
         scaled = excess / sigma_links
-        mixture = NlosMixture(*_clip_nlos(current.nlos_fraction, current.nlos_gamma))
-        _, _, blocked = mixture.loss(scaled, sigma_links)
+        mixture = NlosMixture(*_clip_nlos(current.nlos_fraction, current.nlos_gamma),
+                              outliers=current.outliers)
+        blocked, outlying = mixture.bind(sigma_links).posteriors(scaled)
         # A residual far too short is no range the model explains: not evidence of sigma.
-        line_of_sight = (1.0 - blocked) * (scaled > -8.0)
+        line_of_sight = np.maximum(1.0 - blocked - outlying, 0.0) * (scaled > -8.0)
         used = line_of_sight.sum()
         correction = used / max(used - dof, 1.0)
         sigma_sq, eta_sq = _variance_fit(correction * excess ** 2, distances ** 2,
@@ -227,10 +237,13 @@ class NoiseLearner:
                     / (excess.size + PRIOR_LINKS))
         gamma = ((np.sum(blocked * np.maximum(excess, 0.0))
                   + PRIOR_LINKS * self.configured.nlos_gamma) / (blocked_total + PRIOR_LINKS))
+        prior = self.configured.outliers
+        outliers = float(np.clip((outlying.sum() + PRIOR_LINKS * prior)
+                                 / (excess.size + PRIOR_LINKS), prior, OUTLIERS_MAX))
         sigma = self._sigma(np.sqrt(sigma_sq))
         eta = float(np.clip(np.sqrt(eta_sq), *ETA_RANGE))
         fraction, gamma = _clip_nlos(fraction, max(gamma, 2.0 * sigma))
-        return RangeNoiseEstimate(sigma, eta, fraction, gamma, excess.size)
+        return RangeNoiseEstimate(sigma, eta, fraction, gamma, excess.size, outliers)
 
 
 def _clip_nlos(fraction, gamma):

@@ -48,8 +48,9 @@ class PostureMethod(Protocol):
         their uncertainty).
 
     Methods that can take the noise learned while running also have
-    ``tune(*, sigma, eta, nlos_fraction, nlos_gamma)``; methods with a state of their own
-    (a motion model) have ``accept()``, called when the last solve fitted its frame.
+    ``tune(*, sigma, eta, nlos_fraction, nlos_gamma, outlier_fraction)`` (the last the judge's
+    share of outliers); methods with a state of their own (a motion model) have
+    ``accept()``, called when the last solve fitted its frame.
 
     """
 

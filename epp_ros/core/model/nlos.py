@@ -127,11 +127,17 @@ class NlosMixture:
         if not self.outlier_sigma > 0.0:
             raise ValueError(f'outlier_sigma must be > 0 m, got {self.outlier_sigma}')
 
-    def judged(self):
-        """Return this mixture with :data:`OUTLIER_FRACTION` as its outliers, unless Gaussian."""
+    def judged(self, share=OUTLIER_FRACTION):
+        """
+        Return this mixture with ``share`` of the ranges outliers, unless Gaussian.
+
+        :data:`OUTLIER_FRACTION` by default; the share learned on site
+        (``NoiseLearner``) where there are more. A mixture with outliers of its own is
+        returned as it is.
+        """
         if self.gaussian or self.outliers:
             return self
-        return replace(self, outliers=OUTLIER_FRACTION)
+        return replace(self, outliers=float(share))
 
     @property
     def gaussian(self):

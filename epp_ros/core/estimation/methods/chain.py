@@ -40,7 +40,7 @@ from typing import NamedTuple
 
 from epp_ros.core.model.folds import folded_angles, tip_circle, tip_minima
 from epp_ros.core.model.measurements import Residuals, SensorNoise, wrap_angle
-from epp_ros.core.model.nlos import NlosMixture, range_excess
+from epp_ros.core.model.nlos import NlosMixture, OUTLIER_FRACTION, range_excess
 from epp_ros.core.model.noise import DEFAULT_NOISE, fitted_link_bias
 from epp_ros.core.model.plane import fit_slew, to_plane
 from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt, \
@@ -158,9 +158,11 @@ def judged_minimum(minimise, losses, scaled_of, judged_cost, start, also=(), ref
 
     First under the fit's NLOS mixture alone, whose pull never fades: a start metres off
     still finds its way, where the judge's loss would stop with the ranges not reached
-    yet taken for outliers. Then under the judge's: from that fit where a range there
-    looks like an outlier, and from ``start`` and each of ``also`` where the judge likes
-    it better than the first fit (that fit ran from a range no noise explains).
+    yet taken for outliers. Then under the judge's: where a range looks like an outlier at
+    that fit, from the fit and from ``start`` and each of ``also`` (the outliers may have
+    pulled the first fit off: a site where a fifth of the ranges are outliers puts one
+    tag's two on a wrong fold); else from those starts the judge likes better than the
+    first fit (that fit ran from a range no noise explains).
 
     Parameters
     ----------
@@ -199,9 +201,12 @@ def judged_minimum(minimise, losses, scaled_of, judged_cost, start, also=(), ref
     start_cost = judged_cost(start)
     if not refit:
         return replace(first, x=start, cost=start_cost) if start_cost < first.cost else first
-    starts = [first.x] if np.any(judging.posteriors(-scaled)[1] > 0.5) else []
+    # Ranges that look like outliers at the first fit may have pulled it off: the judge's
+    # descent starts there and from every start given.
+    outlying = bool(np.any(judging.posteriors(-scaled)[1] > 0.5))
+    starts = [first.x] if outlying else []
     starts += [x for x, cost in zip((start, *also), (start_cost, *map(judged_cost, also)))
-               if cost < first.cost]
+               if outlying or cost < first.cost]
     results = [first] + [minimise(x, True) for x in starts]
     best = min(results, key=lambda result: result.cost)
     return replace(best, iterations=sum(result.iterations for result in results))
@@ -282,6 +287,8 @@ class ChainMethod:
         self.noise = SensorNoise(float(sigma), float(sigma if tag_sigma is None else tag_sigma),
                                  float(pitch_sigma), float(slew_sigma))
         self.nlos = NlosMixture(float(nlos_fraction), float(nlos_gamma))
+        #: The judge's share of outliers (``NlosMixture.judged``): learned, or the prior.
+        self.outlier_fraction = OUTLIER_FRACTION
         self.tol = float(tol)
         self.max_iter = int(max_iter)
         self.slew_starts = int(slew_starts)
@@ -295,18 +302,22 @@ class ChainMethod:
         # (Residuals, its ranges' bound losses: the fit's and the judge's)
         self._link_loss = (None, None, None)
 
-    def tune(self, *, sigma, eta, nlos_fraction, nlos_gamma, tag_sigma=None):
+    def tune(self, *, sigma, eta, nlos_fraction, nlos_gamma, tag_sigma=None,
+             outlier_fraction=OUTLIER_FRACTION):
         """
         Take new range noise values (learned while running) from the next frame on.
 
-        ``tag_sigma`` None keeps the tag-tag ranges' sigma.
+        ``tag_sigma`` None keeps the tag-tag ranges' sigma; ``outlier_fraction`` is the
+        judge's share of outliers.
         """
         mixture = NlosMixture(float(nlos_fraction), float(nlos_gamma))
+        mixture.judged(outlier_fraction)            # a share that does not fit raises
         noise = SensorNoise(float(sigma), self.noise.tag_sigma if tag_sigma is None
                             else float(tag_sigma), self.noise.pitch_sigma, self.noise.slew_sigma)
         if not (np.isfinite(eta) and eta >= 0):
             raise ValueError(f'eta: must be a finite number >= 0, got {eta!r}')
         self.noise, self.nlos, self.eta = noise, mixture, float(eta)
+        self.outlier_fraction = float(outlier_fraction)
         self._link_loss = (None, None, None)
 
     def enough_information(self, measurements):
@@ -325,12 +336,17 @@ class ChainMethod:
         """Forget an unfinished search (the warm start is the prior the chain is given)."""
         self._carry = ([], 0)
 
+    @property
+    def judged_nlos(self):
+        """Return the judge's range model: the NLOS mixture with the outliers' share."""
+        return self.nlos.judged(self.outlier_fraction)
+
     # -- the least-squares problem --------------------------------------------------------
     def losses(self, residuals):
         """Return the frame's ranges' bound losses: the fit's mixture, the judge's (outliers)."""
         if self._link_loss[0] is not residuals:
             sigma = residuals.sigma[:residuals.n_ranged]
-            fitting, judging = self.nlos, self.nlos.judged()
+            fitting, judging = self.nlos, self.judged_nlos
             bound = fitting.bind(sigma)
             self._link_loss = (residuals, bound,
                                bound if judging is fitting else judging.bind(sigma))
@@ -495,7 +511,7 @@ class ChainMethod:
         model = self.model
         used = np.asarray(masks, dtype=bool) & np.isfinite(ranges)
         measured = np.where(used, ranges, 0.0)
-        link_loss = (self.nlos.judged() if judged else self.nlos).bind(sigma)
+        link_loss = (self.judged_nlos if judged else self.nlos).bind(sigma)
 
         def evaluate(psi):
             joints = model.forward_kinematics(psi[:, 0], psi[:, 1:])               # (b, p, 3)
@@ -533,12 +549,12 @@ class ChainMethod:
     # -- starts ---------------------------------------------------------------------------
     def _beam_starts(self, slews, measurements, range_sigma, width=8):
         """Return :func:`grow_chains` for this chain's model, NLOS mixture and ground."""
-        return grow_chains(self.model, measurements, range_sigma, self.nlos.judged(), slews,
+        return grow_chains(self.model, measurements, range_sigma, self.judged_nlos, slews,
                            self.lowest_joint, width)
 
     def _tag_loss(self, k, ends, measurements, range_sigma):
         """Approximate NLOS loss of tag ``k``'s measured ranges at candidate joints (..., 3)."""
-        return _tag_loss(self.model, self.nlos.judged(), k, ends, measurements, range_sigma)
+        return _tag_loss(self.model, self.judged_nlos, k, ends, measurements, range_sigma)
 
     def _cold_starts(self, measurements, guess, range_sigma, extra=16):
         """Return start angles: the prior's, each slew's best chain, and the next best overall."""

@@ -31,7 +31,7 @@ frame is solved again. Our field variant of CEPP, with that and more on by defau
 """
 from numbers import Integral
 
-from epp_ros.core.model.nlos import NlosMixture
+from epp_ros.core.model.nlos import NlosMixture, OUTLIER_FRACTION
 from epp_ros.core.model.noise import DEFAULT_NOISE, NoiseModel
 from epp_ros.core.model.plane import (fit_plane_to_ranges, fit_slew, from_plane, project_ranges,
                                       slew_step, to_plane)
@@ -124,12 +124,15 @@ class _EDMMethod:
                              f'{stress_refinement!r}')
         self.stress_refinement = bool(stress_refinement)
         self.sigma, self.eta, self.nlos = _checked_noise(sigma, eta, nlos_fraction, nlos_gamma)
+        #: The judge's share of outliers (``NlosMixture.judged``): learned, or the prior.
+        self.outlier_fraction = OUTLIER_FRACTION
         base_anchor = model.base_anchor()
         self._base_anchor = base_anchor
         self._other_anchors = np.array([j for j in range(model.n_anchors) if j != base_anchor],
                                        dtype=int)
 
-    def tune(self, *, sigma=None, eta=None, nlos_fraction=None, nlos_gamma=None):
+    def tune(self, *, sigma=None, eta=None, nlos_fraction=None, nlos_gamma=None,
+             outlier_fraction=None):
         """
         Change the range noise the links are reweighted by, from the next frame on.
 
@@ -143,6 +146,8 @@ class _EDMMethod:
             Prior probability that a link is NLOS, in [0, 1).
         nlos_gamma : float, optional
             Mean NLOS excess, metres.
+        outlier_fraction : float, optional
+            The judge's share of outliers (``NlosMixture.judged``).
 
         Those not given keep their values. Raises ValueError naming the argument, leaving
         the noise as it was, when a value is invalid.
@@ -154,7 +159,11 @@ class _EDMMethod:
                    'nlos_gamma': self.nlos.gamma}
         noise = {name: current[name] if value is None else value
                  for name, value in given.items()}
-        self.sigma, self.eta, self.nlos = _checked_noise(**noise)
+        sigma, eta, nlos = _checked_noise(**noise)
+        if outlier_fraction is not None:
+            nlos.judged(outlier_fraction)           # a share that does not fit raises
+            self.outlier_fraction = float(outlier_fraction)
+        self.sigma, self.eta, self.nlos = sigma, eta, nlos
 
     def enough_information(self, measurements):
         """Whether the frame's tag-anchor links can determine the posture."""

@@ -147,7 +147,7 @@ class FieldCEPP(CEPP):
         """Change the range noise (see the base's ``tune``); the polish follows it."""
         super().tune(**noise)
         self._finish.tune(sigma=self.sigma, eta=self.eta, nlos_fraction=self.nlos.fraction,
-                          nlos_gamma=self.nlos.gamma)
+                          nlos_gamma=self.nlos.gamma, outlier_fraction=self.outlier_fraction)
 
     def _kept_folds(self, coords, prior_2d, pivot, ranges):
         """Return ``coords`` (p, 2) with each silent joint at the prior's fold, and how many."""
@@ -317,7 +317,8 @@ class FieldCEPP(CEPP):
     def _tag_losses(self, points, ranges, sigma):
         """Return the judge's loss of q tags' ranges (q, m) at points (..., q, 3)."""
         excess = range_excess(points, self.model.anchors, ranges, sigma)
-        return np.sum(self.nlos.judged().loss(excess, sigma)[0], axis=-1)   # 0: the unheard
+        return np.sum(self.nlos.judged(self.outlier_fraction).loss(excess, sigma)[0],
+                      axis=-1)      # 0: the unheard
 
     def _fold_starts(self, joints, ranges):
         """
@@ -357,7 +358,7 @@ class FieldCEPP(CEPP):
         measured = np.isfinite(ranges)
         sigma = self._range_sigma(ranges)[measured]
         excess = (ranges[measured] - self.model.ranges(joints)[measured]) / sigma
-        return float(np.sum(self.nlos.judged().loss(excess, sigma)[0]))
+        return float(np.sum(self.nlos.judged(self.outlier_fraction).loss(excess, sigma)[0]))
 
     def _beam(self, ranges):
         """Return each slew of the beam search with its best chain: slews (s,), psi (s, p + 1)."""

@@ -17,6 +17,7 @@ from epp_ros.app.health import report
 from epp_ros.core import PostureEstimator
 from epp_ros.core.estimation.noise_learning import frame_scale, NoiseLearner, RangeNoiseEstimate
 from epp_ros.core.model.bounds import crlb
+from epp_ros.core.model.nlos import OUTLIER_FRACTION
 from epp_ros.core.simulation.simulate import truck_pump, xie3dim
 import numpy as np
 import pytest
@@ -25,7 +26,8 @@ CONFIGURED = RangeNoiseEstimate(0.1, 0.0, 0.1, 1.0)
 LINKS_PER_FRAME = 30
 
 
-def learn(sigma, eta=0.0, fraction=0.0, gamma=1.0, frames=200, seed=0, configured=CONFIGURED):
+def learn(sigma, eta=0.0, fraction=0.0, gamma=1.0, frames=200, seed=0, configured=CONFIGURED,
+          outliers=0.0, outlier_size=3.0):
     """Feed a learner ``frames`` frames of exact-model residuals; return it and the count."""
     rng = np.random.default_rng(seed)
     learner = NoiseLearner(configured)
@@ -34,6 +36,8 @@ def learn(sigma, eta=0.0, fraction=0.0, gamma=1.0, frames=200, seed=0, configure
         excess = np.hypot(sigma, eta * distances) * rng.standard_normal(LINKS_PER_FRAME)
         blocked = rng.random(LINKS_PER_FRAME) < fraction
         excess = excess + blocked * rng.exponential(gamma, LINKS_PER_FRAME)
+        outlying = rng.random(LINKS_PER_FRAME) < outliers
+        excess = np.where(outlying, rng.normal(0.0, outlier_size, LINKS_PER_FRAME), excess)
         learner.observe(excess, distances, 0)
     return learner, learner.window * LINKS_PER_FRAME
 
@@ -58,6 +62,25 @@ def test_nlos_fraction_and_excess_are_learned():
         fraction, abs=5 * np.sqrt(fraction * (1 - fraction) / links) + 0.01)
     # The mean of n exponential draws has relative standard error 1 / sqrt(n).
     assert estimate.nlos_gamma == pytest.approx(gamma, rel=5 / np.sqrt(blocked) + 0.05)
+
+
+@pytest.mark.parametrize('outliers', [0.0, 0.05, 0.25])
+def test_the_outliers_share_is_learned_and_leaves_sigma_alone(outliers):
+    """
+    Outliers of metres, of either sign, are a share of their own, not a larger sigma.
+
+    A fifth of the ranges outliers made sigma a metre without their term. The share is
+    never learned below the judge's prior (``OUTLIER_FRACTION``).
+    """
+    learner, links = learn(0.1, fraction=0.1, outliers=outliers)
+    estimate = learner.estimate
+    clear = (1.0 - outliers) * links
+    assert estimate.sigma == pytest.approx(0.1, rel=10 / np.sqrt(2 * clear))
+    # A binomial share, five standard errors; outliers within a few sigmas pass as clear.
+    tolerance = 5 * np.sqrt(max(outliers, OUTLIER_FRACTION) / links) + 0.01
+    assert estimate.outliers == pytest.approx(max(outliers, OUTLIER_FRACTION), abs=tolerance)
+    assert estimate.outliers >= OUTLIER_FRACTION
+    assert estimate.as_options()['outlier_fraction'] == estimate.outliers
 
 
 def test_sigma_growing_with_distance_is_learned():
