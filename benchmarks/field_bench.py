@@ -89,6 +89,8 @@ def _real_uwb_family():
         'slow noise': (replace(real, **slow), 'working'),
         'outliers x10, 3 m': (replace(real, outlier_rate=10.0 * real.outlier_rate,
                                       outlier_size=3.0), 'working'),
+        'outliers x100, 3 m': (replace(real, outlier_rate=100.0 * real.outlier_rate,
+                                       outlier_size=3.0), 'working'),
         'devices 0.15 m': (replace(real, tag_offset=0.15, anchor_offset=0.15, range_bias=0.0),
                            'working'),
         'all x2': (replace(real, sigma=0.1, link_offset=2.0 * real.link_offset,
@@ -103,8 +105,9 @@ def _real_uwb_family():
 
 
 #: name: (effects, motion): the real links' preset varied as sites, devices and mountings
-#: vary it (each real-link figure doubled; outliers ten times as often and 3 m; device
-#: offsets of 0.15 m), and with the other field effects and the joystick.
+#: vary it (each real-link figure doubled; outliers ten and a hundred times as often (a
+#: fifth of the ranges) and 3 m; device offsets of 0.15 m), and with the other field
+#: effects and the joystick.
 FAMILY = _real_uwb_family()
 #: The process noise of the ``cv`` case, rad^2/s^3.
 CV_PROCESS_NOISE = 1e-4
