@@ -56,9 +56,9 @@ SIGMA_RANGE = (1e-3, 20.0)
 SIGMA_FLOOR_FACTOR = 20.0
 ETA_RANGE = (0.0, 0.2)
 FRACTION_RANGE = (0.01, 0.5)
-#: The most of the ranges learned to be outliers.
+#: The largest share of the ranges learned to be outliers.
 OUTLIERS_MAX = 0.3
-#: Blocked-link pseudo-counts toward the configured fraction and mean excess.
+#: Pseudo-links toward the configured NLOS fraction and mean excess, and outliers' share.
 PRIOR_LINKS = 20.0
 
 
