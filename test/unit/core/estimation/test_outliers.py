@@ -21,8 +21,10 @@ excess, and a Gaussian fit bends the boom to explain it: until the outlier share
 the tracker publish postures 4-13 m off at a predicted RMSE under 1 m.
 """
 from epp_ros.core import PostureEstimator
-from epp_ros.core.model.nlos import OUTLIER_FRACTION
+from epp_ros.core.estimation.methods.chain import judged_minimum
+from epp_ros.core.model.nlos import NlosMixture, OUTLIER_FRACTION
 from epp_ros.core.simulation.simulate import random_posture, truck_pump, working_cycle
+from epp_ros.core.solvers.levenberg_marquardt import LevenbergMarquardtResult
 import numpy as np
 import pytest
 
@@ -129,3 +131,45 @@ def test_the_judge_never_expects_fewer_outliers_than_its_prior():
     for joints in working_cycle(MODEL, 20.0, 10.0, rng=rng).joints:
         estimator.update(MODEL.ranges(joints) + rng.normal(0.0, SIGMA, shape))
     assert estimator.noise.links > 0 and estimator.noise.outliers == OUTLIER_FRACTION
+
+
+def test_where_ranges_look_like_outliers_the_judges_descent_also_runs_from_the_start():
+    """
+    ``chain.judged_minimum``: a first fit pulled off by an outlier is not the only start.
+
+    A toy frame of three ranges and one parameter. From the start (0, the last posture: a
+    frame behind, so the judge's cost there is high), the fit's loss, which has no
+    outliers, descends to 5, where the third range is 30 sigmas short; the judge's loss
+    descends from 0 to 0.1 instead, and is lowest there. Where a range looks like an
+    outlier at the first fit, the judge's descent runs from that fit and from the start,
+    and the lowest judged cost wins; where none does, the first fit stands.
+    """
+    mixture, sigma = NlosMixture(0.1, 1.0), np.full(3, 0.1)
+    fitting, judging = mixture.bind(sigma), mixture.judged().bind(sigma)
+
+    def run(short):
+        other = {0.0: 30.0, 0.1: 1.0, 5.0: 2.0}         # the cost of all but the ranges
+        scaled = {0.0: np.zeros(3), 0.1: np.zeros(3), 5.0: np.array([0.0, 0.0, short])}
+
+        def cost(x, loss):
+            return other[x] + float(np.sum(loss(-scaled[x])[0]))
+
+        descents = []
+
+        def minimise(x, judged):
+            descents.append((float(x[0]), judged))
+            end = (0.1 if x[0] == 0.0 else float(x[0])) if judged else 5.0
+            return LevenbergMarquardtResult(np.array([end]), cost(end, judging if judged
+                                                                  else fitting),
+                                            scaled[end], 4, True)
+
+        result = judged_minimum(minimise, (fitting, judging), lambda result: result.state,
+                                lambda x: cost(float(x[0]), judging), np.array([0.0]))
+        return result, descents
+
+    result, descents = run(short=30.0)
+    assert descents == [(0.0, False), (5.0, True), (0.0, True)]
+    assert result.x[0] == 0.1 and result.cost == pytest.approx(1.0)
+    assert result.iterations == 12
+    result, descents = run(short=0.0)
+    assert descents == [(0.0, False)] and result.x[0] == 5.0
