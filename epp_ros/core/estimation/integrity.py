@@ -224,7 +224,8 @@ class Integrity:
     noise : SensorNoise
         What the estimator is told about the measurement noise.
     nlos : NlosMixture
-        Prior fraction of blocked links and their mean excess.
+        The judge's range model: the prior fraction of blocked links, their mean excess,
+        and the share of outliers (``NlosMixture.judged``, learned or the prior).
     eta : float
         Multiplicative range noise: a range r has sigma ``sqrt(sigma^2 + (eta r)^2)``.
     lowest_joint : float
@@ -760,11 +761,14 @@ class Integrity:
     def _assessed(self, joints, measurements, reference, elapsed, reference_std, chain,
                   timed_joints):
         """
-        Return :meth:`judge`'s :class:`_Assessment` of an estimate, all but its alternatives.
+        Return :meth:`judge`'s :class:`_Assessment` of an estimate.
 
-        A frame in doubt is judged again with the other fit as an alternative
-        (``PostureEstimator``'s second opinion), the same estimate on the same frame: the
-        last few assessments are kept and reused, not computed again.
+        All but its alternatives and rivals. A frame in doubt is judged again with the
+        other fit as an alternative (``PostureEstimator``'s second opinion), the same
+        estimate on the same frame: the last few assessments are kept and reused, not
+        computed again. Besides the arguments, only ``common_covariance`` changes between
+        judgements (the estimator's bias learner sets it) and is part of the key; the rest
+        of this object is fixed once built.
         """
         key = _AssessmentKey.of(joints, measurements, reference, elapsed, reference_std,
                                 chain, timed_joints, self.common_covariance)
@@ -786,7 +790,7 @@ class Integrity:
             joint_std = self.point_bound(joints, measurements, kept)
             total_std = self.point_bound(joints, measurements, kept, biased=True)
         # Postures are weighed where each tag was when it ranged (a moving boom, TDMA).
-        seen = joints if timed_joints is None else np.asarray(timed_joints, dtype=float)
+        seen = np.array(joints if timed_joints is None else timed_joints, dtype=float)
         values['noise_rmse'] = float(np.sqrt(np.mean(joint_std ** 2)))
         self._observability(total_std, checks, values)
         if reference is not None:
@@ -899,9 +903,9 @@ class _Assessment(NamedTuple):
     """What :meth:`Integrity.judge` finds of an estimate before its alternatives are weighed."""
 
     checks: tuple               #: (level, status, message) each
-    values: dict
+    values: dict                #: the statistics so far (:attr:`Verdict.values`)
     angles: tuple               #: (slew, pitches (p,)), radians
-    los_rows: Optional[np.ndarray]
+    los_rows: Optional[np.ndarray]      #: (n, p + 1), see :attr:`Verdict.los_rows`
     joint_std: np.ndarray       #: (p,) metres, without the common bias
     seen: np.ndarray            #: (p, 3) each joint where its tag ranged, metres
     reach: Optional[tuple]      #: (reference, distances (p,)) or None
@@ -928,6 +932,8 @@ class _AssessmentKey:
                    exact(common_covariance))
 
     def __eq__(self, other):
+        if not isinstance(other, _AssessmentKey):
+            return NotImplemented
         return self.measurements is other.measurements and self.parts == other.parts
 
     __hash__ = None

@@ -237,7 +237,7 @@ class NoiseLearner:
                     / (excess.size + PRIOR_LINKS))
         gamma = ((np.sum(blocked * np.maximum(excess, 0.0))
                   + PRIOR_LINKS * self.configured.nlos_gamma) / (blocked_total + PRIOR_LINKS))
-        prior = self.configured.outliers
+        prior = min(self.configured.outliers, OUTLIERS_MAX)
         outliers = float(np.clip((outlying.sum() + PRIOR_LINKS * prior)
                                  / (excess.size + PRIOR_LINKS), prior, OUTLIERS_MAX))
         sigma = self._sigma(np.sqrt(sigma_sq))

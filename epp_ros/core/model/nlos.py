@@ -129,12 +129,29 @@ class NlosMixture:
 
     def judged(self, share=OUTLIER_FRACTION):
         """
-        Return this mixture with ``share`` of the ranges outliers, unless Gaussian.
+        Return the judge's mixture: this one with a share of the ranges outliers.
 
-        :data:`OUTLIER_FRACTION` by default; the share learned on site
-        (``NoiseLearner``) where there are more. A mixture with outliers of its own is
-        returned as it is.
+        Parameters
+        ----------
+        share : float
+            The outliers' share, in [0, 1 - fraction): :data:`OUTLIER_FRACTION` by default,
+            the share learned on site (``NoiseLearner``) where there are more.
+
+        Returns
+        -------
+        NlosMixture
+            This mixture itself when Gaussian (plain least squares stays so) or when it has
+            outliers of its own.
+
+        Raises
+        ------
+        ValueError
+            Naming ``outlier_fraction``, when ``share`` is outside its range.
+
         """
+        if not 0.0 <= share < 1.0 - self.fraction:
+            raise ValueError(f'outlier_fraction: must be in [0, 1 - nlos_fraction), got '
+                             f'{share!r}')
         if self.gaussian or self.outliers:
             return self
         return replace(self, outliers=float(share))
@@ -175,8 +192,9 @@ class NlosMixture:
 
         ``prior``: each range's own prior NLOS probability, shaped like ``sigma``, instead of
         ``fraction`` (a link's neighbours in time, ``core.blockage``); ignored when
-        ``fraction`` is 0. Without a prior, a frame's few dozen sigmas are bound once:
-        fits and checks bind the same ones many times.
+        ``fraction`` is 0. Without a prior, a frame's few dozen sigmas are bound once and
+        the loss is shared (its arrays read-only): fits and checks bind the same ones many
+        times.
         """
         sigma = np.asarray(sigma, dtype=float)
         if prior is None and sigma.size <= BOUND_SIZE:
@@ -210,7 +228,11 @@ class NlosMixture:
 @lru_cache(maxsize=64)
 def _bound(mixture, shape, sigma_bytes):
     """Return ``LinkLoss(mixture, sigma)`` of the sigmas ``sigma_bytes`` of ``shape``, kept."""
-    return LinkLoss(mixture, np.frombuffer(sigma_bytes).reshape(shape))
+    loss = LinkLoss(mixture, np.frombuffer(sigma_bytes).reshape(shape))
+    for value in vars(loss).values():
+        if isinstance(value, np.ndarray):
+            value.setflags(write=False)
+    return loss
 
 
 class LinkLoss:

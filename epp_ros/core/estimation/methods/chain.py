@@ -203,10 +203,11 @@ def judged_minimum(minimise, losses, scaled_of, judged_cost, start, also=(), ref
         return replace(first, x=start, cost=start_cost) if start_cost < first.cost else first
     # Ranges that look like outliers at the first fit may have pulled it off: the judge's
     # descent starts there and from every start given.
-    outlying = bool(np.any(judging.posteriors(-scaled)[1] > 0.5))
-    starts = [first.x] if outlying else []
-    starts += [x for x, cost in zip((start, *also), (start_cost, *map(judged_cost, also)))
-               if outlying or cost < first.cost]
+    if np.any(judging.posteriors(-scaled)[1] > 0.5):
+        starts = [first.x, start, *also]
+    else:
+        starts = [x for x, cost in zip((start, *also), (start_cost, *map(judged_cost, also)))
+                  if cost < first.cost]
     results = [first] + [minimise(x, True) for x in starts]
     best = min(results, key=lambda result: result.cost)
     return replace(best, iterations=sum(result.iterations for result in results))
@@ -303,14 +304,16 @@ class ChainMethod:
         self._link_loss = (None, None, None)
 
     def tune(self, *, sigma, eta, nlos_fraction, nlos_gamma, tag_sigma=None,
-             outlier_fraction=OUTLIER_FRACTION):
+             outlier_fraction=None):
         """
         Take new range noise values (learned while running) from the next frame on.
 
-        ``tag_sigma`` None keeps the tag-tag ranges' sigma; ``outlier_fraction`` is the
-        judge's share of outliers.
+        ``tag_sigma`` None keeps the tag-tag ranges' sigma; ``outlier_fraction``, the
+        judge's share of outliers, None keeps it.
         """
         mixture = NlosMixture(float(nlos_fraction), float(nlos_gamma))
+        if outlier_fraction is None:
+            outlier_fraction = self.outlier_fraction
         mixture.judged(outlier_fraction)            # a share that does not fit raises
         noise = SensorNoise(float(sigma), self.noise.tag_sigma if tag_sigma is None
                             else float(tag_sigma), self.noise.pitch_sigma, self.noise.slew_sigma)

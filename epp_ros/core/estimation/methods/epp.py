@@ -160,10 +160,9 @@ class _EDMMethod:
         noise = {name: current[name] if value is None else value
                  for name, value in given.items()}
         sigma, eta, nlos = _checked_noise(**noise)
-        if outlier_fraction is not None:
-            nlos.judged(outlier_fraction)           # a share that does not fit raises
-            self.outlier_fraction = float(outlier_fraction)
-        self.sigma, self.eta, self.nlos = sigma, eta, nlos
+        share = self.outlier_fraction if outlier_fraction is None else float(outlier_fraction)
+        nlos.judged(share)                          # a share that does not fit raises
+        self.sigma, self.eta, self.nlos, self.outlier_fraction = sigma, eta, nlos, share
 
     def enough_information(self, measurements):
         """Whether the frame's tag-anchor links can determine the posture."""

@@ -280,28 +280,29 @@ def test_judging_an_estimate_again_weighs_only_its_new_alternatives():
     full = PostureEstimator(MODEL, 'cepp', **told).integrity
     rival = full.separated(estimate, frame, full.consistency(estimate, frame)[2])[0]
 
+    separations = []             # one per assessment: (joints, frame, kept)
+
     def blind():
         integrity = PostureEstimator(MODEL, 'cepp', **told).integrity
-        calls = []
-        integrity.separated = lambda *args: calls.append(args) or []
-        integrity.assessed = calls
+        integrity.separated = lambda *args: separations.append(args) or []
         return integrity
 
     integrity = blind()
     assert integrity.judge(estimate, frame).valid
     again = integrity.judge(estimate, frame, alternatives=[rival])
-    assert len(integrity.assessed) == 1
+    assert len(separations) == 1
     fresh = blind().judge(estimate, frame, alternatives=[rival])
+    del separations[1:]
     assert again.status == fresh.status == 'ambiguous'
     assert again.values['ambiguous_joints'] == fresh.values['ambiguous_joints']
     for name in ('joint_std', 'reach_std', 'predicted_rmse', 'chi_square'):
         np.testing.assert_array_equal(again.values[name], fresh.values[name])
     assert integrity.judge(estimate, frame).valid          # the alternative is not kept
     integrity.judge(estimate, Measurements.clean(MODEL, ranges)[0])
-    assert len(integrity.assessed) == 2
+    assert len(separations) == 2
     integrity.common_covariance = integrity.common_covariance + np.diag([0.05, 0.01]) ** 2
     integrity.judge(estimate, frame)
-    assert len(integrity.assessed) == 3
+    assert len(separations) == 3
 
 
 def test_separation_fits_are_made_only_when_links_were_set_aside():

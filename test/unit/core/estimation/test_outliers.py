@@ -121,6 +121,7 @@ def test_a_site_with_a_fifth_of_its_ranges_outliers_learns_their_share(method):
             assert error < max(1.0, 3.0 * result.predicted_rmse), result.message
     noise = estimator.noise
     assert noise.sigma < 2.0 * SIGMA and 0.1 < noise.outliers < 0.3, noise
+    assert estimator.integrity.nlos.outliers == noise.outliers      # the judge's share
     assert published > 0.5 * len(motion.joints), published
 
 
@@ -131,6 +132,20 @@ def test_the_judge_never_expects_fewer_outliers_than_its_prior():
     for joints in working_cycle(MODEL, 20.0, 10.0, rng=rng).joints:
         estimator.update(MODEL.ranges(joints) + rng.normal(0.0, SIGMA, shape))
     assert estimator.noise.links > 0 and estimator.noise.outliers == OUTLIER_FRACTION
+    assert estimator.integrity.nlos.outliers == OUTLIER_FRACTION
+
+
+@pytest.mark.parametrize('method', ['chain', 'cepp', 'track'])
+def test_a_share_that_does_not_fit_is_refused_by_name_and_none_keeps_it(method):
+    solver = PostureEstimator(MODEL, method)._solver
+    noise = {'sigma': 0.1, 'eta': 0.0, 'nlos_fraction': 0.1, 'nlos_gamma': 1.0}
+    solver.tune(**noise, outlier_fraction=0.2)
+    for share in (-0.1, 0.9, 1.5):
+        with pytest.raises(ValueError, match='outlier_fraction'):
+            solver.tune(**noise, outlier_fraction=share)
+    solver.tune(**noise)
+    chain = getattr(solver, 'chain', getattr(solver, '_finish', solver))
+    assert chain.judged_nlos.outliers == 0.2
 
 
 def test_where_ranges_look_like_outliers_the_judges_descent_also_runs_from_the_start():
