@@ -106,7 +106,9 @@ _EPOCH = time.time()
 
 def _feed(feeder, frames, rate, count, each_frame=None):
     """
-    Publish ``count`` frames at ``rate``, then wait for the answers; return lost count.
+    Publish ``count`` frames at ``rate``, then wait for the answers; return how many had none.
+
+    A frame the node refuses publishes no posture: it counts here as a lost one does.
 
     ``each_frame(i)``, if given, is called after frame ``i`` is published.
     """
@@ -198,10 +200,12 @@ def parameter_response(method, frames, seconds, every=5):
     """
     Response times (s) of ``set_parameters`` calls made while frames flow at 10 Hz.
 
-    One call every ``every`` frames, cycling through :data:`LIVE_CHANGES` (valid values
-    that leave the frames valid, so that every frame is answered; ``bench speed`` has the
-    cost of refused ones). Returns the response times, the frames' latencies, frames lost
-    and calls unanswered or refused.
+    One call every ``every`` frames, cycling through :data:`LIVE_CHANGES` (valid values;
+    ``bench speed`` has the cost of refused frames). A told ``range_sigma`` or
+    ``nlos_fraction`` starts the noise's learning over, and for a few frames a joint may be
+    ambiguous at the told noise: those frames are refused, and counted unanswered. Returns
+    the response times, the frames' latencies, frames unanswered (refused or lost) and
+    calls unanswered or refused.
     """
     def work(feeder):
         client = feeder.create_client(SetParameters, '/posture_estimator/set_parameters')

@@ -164,19 +164,21 @@ def latency_markdown(report):
     """Format a :class:`~benchmarks.experiments.LatencyReport`."""
     lines = [f'### posture_estimator over DDS, uwb/ranges publish -> arm_posture receive '
              f'({report.seconds:g} s per rate)', '',
-             '| method | 10 Hz p50 [ms] | p99 | lost | 100 Hz p50 [ms] | p99 | lost | '
-             'sustained: none lost, all < 100 ms [frames/s] |',
+             '| method | 10 Hz p50 [ms] | p99 | unanswered | 100 Hz p50 [ms] | p99 | '
+             'unanswered | sustained: all answered, < 100 ms [frames/s] |',
              '|---|---|---|---|---|---|---|---|']
     lines += [f'| {row.method} | {row.p50_ms_10hz:.1f} | {row.p99_ms_10hz:.1f} | '
               f'{row.lost_10hz} | {row.p50_ms_100hz:.1f} | {row.p99_ms_100hz:.1f} | '
               f'{row.lost_100hz} | {row.sustained_hz:g} |' for row in report.rows]
     lines += ['', 'set_parameters twice a second (valid values, node_bench.LIVE_CHANGES) '
               'while frames flow at 10 Hz:', '',
-              '| method | response p99 [ms] | max | frames p99 [ms] | frames and calls lost |',
+              '| method | response p99 [ms] | max | frames p99 [ms] | frames unanswered + '
+              'calls lost |',
               '|---|---|---|---|---|']
     lines += [f'| {row.method} | {row.parameter_p99_ms:.1f} | {row.parameter_max_ms:.1f} | '
               f'{row.parameter_frames_p99_ms:.1f} | {row.parameter_lost} |'
               for row in report.rows]
+    lines += ['', 'Unanswered: no arm_posture for the frame, refused (not published) or lost.']
     return '\n'.join(lines)
 
 
