@@ -198,16 +198,15 @@ def judged_minimum(minimise, losses, scaled_of, judged_cost, start, also=(), ref
     scaled = scaled_of(first)
     first = replace(first, cost=first.cost
                     + float(np.sum(judging(-scaled)[0] - fitting(-scaled)[0])))
-    start_cost = judged_cost(start)
     if not refit:
+        start_cost = judged_cost(start)
         return replace(first, x=start, cost=start_cost) if start_cost < first.cost else first
     # Ranges that look like outliers at the first fit may have pulled it off: the judge's
     # descent starts there and from every start given.
     if np.any(judging.posteriors(-scaled)[1] > 0.5):
         starts = [first.x, start, *also]
     else:
-        starts = [x for x, cost in zip((start, *also), (start_cost, *map(judged_cost, also)))
-                  if cost < first.cost]
+        starts = [x for x in (start, *also) if judged_cost(x) < first.cost]
     results = [first] + [minimise(x, True) for x in starts]
     best = min(results, key=lambda result: result.cost)
     return replace(best, iterations=sum(result.iterations for result in results))

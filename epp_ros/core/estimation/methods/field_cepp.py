@@ -317,8 +317,7 @@ class FieldCEPP(CEPP):
     def _tag_losses(self, points, ranges, sigma):
         """Return the judge's loss of q tags' ranges (q, m) at points (..., q, 3)."""
         excess = range_excess(points, self.model.anchors, ranges, sigma)
-        return np.sum(self.nlos.judged(self.outlier_fraction).loss(excess, sigma)[0],
-                      axis=-1)      # 0: the unheard
+        return np.sum(self._finish.judged_nlos.loss(excess, sigma)[0], axis=-1)   # 0: unheard
 
     def _fold_starts(self, joints, ranges):
         """
@@ -358,7 +357,7 @@ class FieldCEPP(CEPP):
         measured = np.isfinite(ranges)
         sigma = self._range_sigma(ranges)[measured]
         excess = (ranges[measured] - self.model.ranges(joints)[measured]) / sigma
-        return float(np.sum(self.nlos.judged(self.outlier_fraction).loss(excess, sigma)[0]))
+        return float(np.sum(self._finish.judged_nlos.loss(excess, sigma)[0]))
 
     def _beam(self, ranges):
         """Return each slew of the beam search with its best chain: slews (s,), psi (s, p + 1)."""
