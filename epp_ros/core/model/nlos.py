@@ -245,6 +245,7 @@ class LinkLoss:
 
     def __init__(self, mixture, sigma, prior=None):
         self.gaussian = mixture.gaussian
+        self.off_line = 0.0         # the prior share of links blocked or outliers, mean
         if self.gaussian:
             return
         sigma = np.asarray(sigma, dtype=float)
@@ -255,6 +256,7 @@ class LinkLoss:
             prior = np.clip(np.asarray(prior, dtype=float), PRIOR_LIMIT,
                             1.0 - mixture.outliers - PRIOR_LIMIT)
         self.los_offset = np.log1p(-prior - mixture.outliers)
+        self.off_line = float(np.mean(prior)) + mixture.outliers
         self.evidence_offset = (_HALF_LOG_2PI + np.log(self.inverse_g)
                                 + 0.5 * self.inverse_g ** 2)
         with np.errstate(divide='ignore'):      # no NLOS: its term is -inf

@@ -46,13 +46,14 @@ from epp_ros.core.model.plane import fit_slew, to_plane
 from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt, \
     levenberg_marquardt_batch, STALL
 import numpy as np
+from scipy.special import bdtrc
 
 __all__ = ['ChainMethod', 'Fit', 'SearchExhausted', 'angles_from_joints', 'canonical_angles',
            'grow_chains']
 
-#: A screening fit leaning on more of its ranges than this share (blocked or outliers
-#: by the judge) has a sigma told too small, not a fold pulled off (``_screened``).
-LEANING_SHARE = 0.25
+#: A screening fit leaning on more of its ranges (blocked or outliers by the judge) than
+#: the judge's shares give this chance has a sigma told too small (``_screened``).
+LEANING_TAIL = 1e-3
 
 
 def angles_from_joints(model, joints):
@@ -224,14 +225,15 @@ def _screened(minimise, judging, scaled, judged_cost, start, first):
     judge's descent runs from ``start`` too: a fold tried next to a range metres short
     is pulled back by it under the NLOS mixture alone (whose short side is Gaussian) and
     explains three other ranges as blocked instead, a fit the judge finds 14 nats less
-    likely than the fold's own. Not where more than ``LEANING_SHARE`` of them look so:
-    that is a sigma told too small (the estimator then rescales it), and at that sigma
-    the judge would let go of ranges that are only noisy. Else ``start`` itself, where
-    the judge likes it better.
+    likely than the fold's own. Not where more look so than the judge's shares of blocked
+    links and outliers make likely (a binomial tail under ``LEANING_TAIL``): that is a
+    sigma told too small (the estimator then rescales it), and at that sigma the judge
+    would let go of ranges that are only noisy. Else ``start`` itself, where the judge
+    likes it better.
     """
     blocked, outlying = judging.posteriors(-scaled)
     leaning = np.count_nonzero(np.maximum(blocked, outlying) > 0.5)
-    if 0 < leaning <= LEANING_SHARE * scaled.size:
+    if leaning and bdtrc(leaning - 1, scaled.size, judging.off_line) >= LEANING_TAIL:
         second = minimise(start, True)
         best = second if second.cost < first.cost else first
         return replace(best, iterations=first.iterations + second.iterations)

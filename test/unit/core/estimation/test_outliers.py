@@ -21,7 +21,7 @@ excess, and a Gaussian fit bends the boom to explain it: until the outlier share
 the tracker publish postures 4-13 m off at a predicted RMSE under 1 m.
 """
 from epp_ros.core import PostureEstimator
-from epp_ros.core.estimation.methods.chain import judged_minimum, LEANING_SHARE
+from epp_ros.core.estimation.methods.chain import judged_minimum, LEANING_TAIL
 from epp_ros.core.model.nlos import NlosMixture, OUTLIER_FRACTION
 from epp_ros.core.simulation.simulate import random_posture, truck_pump, working_cycle
 from epp_ros.core.solvers.levenberg_marquardt import LevenbergMarquardtResult
@@ -159,7 +159,7 @@ def toy_frame(short, refit=True, count=1):
     """
     mixture, sigma = NlosMixture(0.1, 1.0), np.full(4, 0.1)
     fitting, judging = mixture.bind(sigma), mixture.judged().bind(sigma)
-    other = {0.0: 30.0, 0.1: 1.0, 5.0: 2.0}         # the cost of all but the ranges
+    other = {0.0: 60.0, 0.1: 1.0, 5.0: 2.0}         # the cost of all but the ranges
     scaled = {0.0: np.zeros(4), 0.1: np.zeros(4),
               5.0: np.where(np.arange(4) >= 4 - count, short, 0.0)}
 
@@ -203,15 +203,17 @@ def test_a_screening_fit_that_leans_on_an_outlier_is_screened_by_the_judge_too()
 
     Where that descent ends leaning on a range the judge calls an outlier, the judge's own
     descent runs from the start as well, and the lower judged cost wins (:func:`toy_frame`);
-    where none, or more than ``LEANING_SHARE`` of the ranges (a sigma told too small, not
-    a fold pulled off), the start stands only if the judge likes it better, unmoved.
+    where none, or more than the judge's shares make likely (all four: a sigma told too
+    small, not a fold pulled off), the start stands only if the judge likes it better,
+    unmoved.
     """
-    result, descents = toy_frame(short=30.0, refit=False)
-    assert descents == [(0.0, False), (0.0, True)]
-    assert result.x[0] == 0.1 and result.cost == pytest.approx(1.0)
-    assert result.iterations == 8
-    assert LEANING_SHARE * 4 < 2                   # two of the four lean: too many
-    for short, count in ((0.0, 1), (30.0, 2)):
+    for count in (1, 3):        # of 4 at 10.5 % each: chances 0.36 and 0.0043
+        result, descents = toy_frame(short=30.0, refit=False, count=count)
+        assert descents == [(0.0, False), (0.0, True)]
+        assert result.x[0] == 0.1 and result.cost == pytest.approx(1.0)
+        assert result.iterations == 8
+    assert 0.105 ** 4 < LEANING_TAIL
+    for short, count in ((0.0, 1), (30.0, 4)):
         result, descents = toy_frame(short=short, refit=False, count=count)
         assert descents == [(0.0, False)] and result.x[0] == 5.0 and result.iterations == 4
 
