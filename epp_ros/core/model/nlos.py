@@ -241,11 +241,13 @@ class LinkLoss:
 
     Per-link constants (and the loss's value and slope at zero) are computed once, which
     matters inside an iterative fit where the same links are evaluated many times.
+    ``off_line`` is the mean prior share of the links blocked or outliers (0 for a
+    Gaussian loss): how many a fit may set aside by chance.
     """
 
     def __init__(self, mixture, sigma, prior=None):
         self.gaussian = mixture.gaussian
-        self.off_line = 0.0         # the prior share of links blocked or outliers, mean
+        self.off_line = 0.0
         if self.gaussian:
             return
         sigma = np.asarray(sigma, dtype=float)

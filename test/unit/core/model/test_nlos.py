@@ -67,6 +67,16 @@ def test_posterior_is_bayes_rule_and_the_pull_of_a_blocked_link_is_bounded():
     assert 0 < slope[-1] < 2 * SIGMA / GAMMA       # a least-squares link would pull by 50
 
 
+def test_the_share_off_the_line_of_sight_is_the_priors_mean_plus_the_outliers():
+    """``LinkLoss.off_line``: how many links a fit may set aside by chance."""
+    sigma = np.full(4, SIGMA)
+    judged = NlosMixture(FRACTION, GAMMA).judged(0.02)
+    assert judged.bind(sigma).off_line == pytest.approx(FRACTION + 0.02)
+    prior = np.array([0.05, 0.1, 0.2, 0.25])
+    assert LinkLoss(judged, sigma, prior).off_line == pytest.approx(0.15 + 0.02)
+    assert NlosMixture(0.0, GAMMA).bind(sigma).off_line == 0.0       # least squares
+
+
 def test_a_short_range_far_outside_the_noise_is_an_outlier_of_bounded_pull():
     """Real links have outliers of either sign: a range 3 m short moves a fit little."""
     model = NlosMixture(FRACTION, GAMMA).judged()
