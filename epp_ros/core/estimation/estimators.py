@@ -592,27 +592,47 @@ class PostureEstimator:
         Solve the frame from scratch too, or from the rival in doubt; keep the fit it likes better.
 
         The other stays as an alternative: when it is about as likely and elsewhere, the
-        frame is ambiguous. Returns (joints, info), verdict, and whether the other fit won.
+        frame is ambiguous. A doubt does not end on the rival followed alone: where the
+        two fits leave the frame valid, a search is made too and weighed with them (at
+        a site with a third of its ranges outliers, the likelier of a warm fit and a
+        followed rival was published 7 m off, where a search found the truth's fold).
+        Returns (joints, info), verdict, and whether the other fit won.
         """
         rival = self._reacquisition.rival_start(stamp)
         fresh = self._solve(measurements, warm=rival is not None, prior=rival)
         if isinstance(fresh, str):
             self._reacquisition.searched(stamp)
             return solved, verdict, False
-        costs = self.integrity.posture_cost(np.array([solved[0], fresh[0]]), measurements)
-        # Not to a posture the boom cannot be in (beyond its reach since the last one).
-        moved = bool(costs[1] < costs[0]) and \
-            self._judge(fresh, measurements, stamp).status != 'implausible'
-        best, other = (fresh, solved) if moved else (solved, fresh)
-        best[1]['alternatives'] = (list(best[1].get('alternatives', [])) + [other[0]]
-                                   + list(other[1].get('alternatives', [])))
-        verdict = self._judge(best, measurements, stamp)
+        best, other, verdict = self._weighed(solved, fresh, measurements, stamp)
+        moved = best is fresh
+        if rival is not None and verdict.valid:
+            found = self._solve(measurements, warm=False)
+            rival = None
+            if not isinstance(found, str):
+                best, loser, verdict = self._weighed(best, found, measurements, stamp)
+                if best is found:       # else the rival stays the one followed
+                    moved, other = True, loser
         ambiguous = verdict.status == 'ambiguous'
         if rival is None:
             self._reacquisition.searched(stamp, ambiguous, other[0])
         else:
             self._reacquisition.followed(ambiguous, other[0])
         return best, verdict, moved
+
+    def _weighed(self, solved, fresh, measurements, stamp):
+        """
+        Return the likelier of two fits of a frame, the other, and the likelier's verdict.
+
+        The other joins the likelier's alternatives, with its own. Not to a posture the boom
+        cannot be in (beyond its reach since the last one).
+        """
+        costs = self.integrity.posture_cost(np.array([solved[0], fresh[0]]), measurements)
+        moved = bool(costs[1] < costs[0]) and \
+            self._judge(fresh, measurements, stamp).status != 'implausible'
+        best, other = (fresh, solved) if moved else (solved, fresh)
+        best[1]['alternatives'] = (list(best[1].get('alternatives', [])) + [other[0]]
+                                   + list(other[1].get('alternatives', [])))
+        return best, other, self._judge(best, measurements, stamp)
 
     def _solve(self, measurements, warm, prior=None):
         """
