@@ -604,16 +604,15 @@ class PostureEstimator:
             self._reacquisition.searched(stamp)
             return solved, verdict, False
         best, other, verdict = self._weighed(solved, fresh, measurements, stamp)
-        moved = best is fresh
-        if rival is not None and verdict.valid:
-            found = self._solve(measurements, warm=False)
-            rival = None
+        moved, searched = best is fresh, rival is None
+        if not searched and verdict.valid:
+            searched, found = True, self._solve(measurements, warm=False)
             if not isinstance(found, str):
                 best, loser, verdict = self._weighed(best, found, measurements, stamp)
                 if best is found:       # else the rival stays the one followed
                     moved, other = True, loser
         ambiguous = verdict.status == 'ambiguous'
-        if rival is None:
+        if searched:
             self._reacquisition.searched(stamp, ambiguous, other[0])
         else:
             self._reacquisition.followed(ambiguous, other[0])
