@@ -209,7 +209,7 @@ class PostureEstimator:
                         reset_after_failures=reset_after_failures, learn_noise=learn_noise,
                         learn_anchors=learn_anchors, options=options)
         self._limits = plausible_limits(model)
-        self._previous = None           # (joints, stamp, joint_std) last accepted
+        self._previous = None           # (joints, stamp, stds) last accepted
         self._warm = None               # the last estimate that fitted its frame
         self._provisional = False       # _warm is a refused frame's fit (after a drop)
         self._stamp = None
@@ -476,7 +476,8 @@ class PostureEstimator:
         if not verdict.valid:
             return self._reject(verdict.status, diagnostics, measurements, start, joints)
         # A fold about as likely widens what later frames allow (Integrity.fold_spread).
-        self._previous = (joints.copy(), stamp, verdict.values['reach_std'])
+        self._previous = (joints.copy(), stamp, verdict.values['reach_std'],
+                          verdict.values['reach_turn_std'])
         self._reacquisition.succeeded()
         return self._finish(joints, 'ok', diagnostics, measurements, start)
 
@@ -547,9 +548,9 @@ class PostureEstimator:
                  'timed_joints': info.get('timed_joints'), 'rivals': info.get('rivals', ())}
         if self._previous is None:
             return self.integrity.judge(joints, measurements, **known)
-        reference, then, reference_std = self._previous
+        reference, then, reference_std, turn_std = self._previous
         return self.integrity.judge(joints, measurements, reference, max(stamp - then, 0.0),
-                                    reference_std, **known)
+                                    reference_std, reference_turn_std=turn_std, **known)
 
     def _reconsider(self, solved, verdict, measurements, stamp, diagnostics):
         """

@@ -699,7 +699,8 @@ class Integrity:
 
     # -- the verdict ----------------------------------------------------------------------
     def judge(self, joints, measurements, reference=None, elapsed=None, reference_std=None,
-              alternatives=(), chain=True, timed_joints=None, rivals=()):
+              alternatives=(), chain=True, timed_joints=None, rivals=(),
+              reference_turn_std=None):
         """
         Return the :class:`Verdict` on an estimate of one frame.
 
@@ -730,6 +731,9 @@ class Integrity:
             Postures the method itself holds about as likely, all frames considered (a
             tracker's fold hypotheses): a joint further than ``ambiguity_distance`` from
             one is ambiguous, whatever its own uncertainty.
+        reference_turn_std : ndarray, shape (p,), optional
+            Standard deviation of each of ``reference``'s sections' direction, radians
+            (its verdict's ``reach_turn_std``); by default bounded by ``reference_std``.
 
         Returns
         -------
@@ -737,7 +741,7 @@ class Integrity:
 
         """
         assessed = self._assessed(joints, measurements, reference, elapsed, reference_std,
-                                  chain, timed_joints)
+                                  chain, timed_joints, reference_turn_std)
         checks, values = list(assessed.checks), dict(assessed.values)
         alternatives = list(alternatives) + assessed.separated
         found, joint_std, seen, reach = (assessed.found, assessed.joint_std, assessed.seen,
@@ -759,7 +763,7 @@ class Integrity:
         return verdict
 
     def _assessed(self, joints, measurements, reference, elapsed, reference_std, chain,
-                  timed_joints):
+                  timed_joints, reference_turn_std):
         """
         Return :meth:`judge`'s :class:`_Assessment` of an estimate.
 
@@ -771,7 +775,8 @@ class Integrity:
         of this object is fixed once built.
         """
         key = _AssessmentKey.of(joints, measurements, reference, elapsed, reference_std,
-                                chain, timed_joints, self.common_covariance)
+                                chain, timed_joints, self.common_covariance,
+                                reference_turn_std)
         for known, assessment in self._assessments:
             if known == key:
                 return assessment
@@ -786,20 +791,26 @@ class Integrity:
         if chain:
             random, total, los_rows = self._bounds(joints, measurements, kept, angles)
             joint_std, total_std = random.joint_std, total.joint_std
+            turn_std = total.direction_std(angles[1])
         else:
             joint_std = self.point_bound(joints, measurements, kept)
             total_std = self.point_bound(joints, measurements, kept, biased=True)
+            turn_std = self._direction_std(total_std)
         # Postures are weighed where each tag was when it ranged (a moving boom, TDMA).
         seen = np.array(joints if timed_joints is None else timed_joints, dtype=float)
         values['noise_rmse'] = float(np.sqrt(np.mean(joint_std ** 2)))
         self._observability(total_std, checks, values)
         if reference is not None:
-            self._turns(joints, total_std, reference, reference_std, elapsed, checks, values)
+            if reference_turn_std is None:
+                reference_turn_std = self._direction_std(reference_std)
+            self._turns(joints, turn_std, reference, reference_turn_std, elapsed, checks,
+                        values)
         separated = []
         if chain and all(level < ERROR for level, _, _ in checks):
             separated = self.separated(joints, measurements, kept)
         spread, found = self._joint_rivals(seen, measurements, joint_std, angles[0], reach)
         values['reach_std'] = np.maximum(joint_std, spread)
+        values['reach_turn_std'] = np.maximum(turn_std, self._direction_std(spread))
         assessment = _Assessment(tuple(checks), values, angles, los_rows, joint_std, seen,
                                  reach, separated, found)
         self._assessments = [(key, assessment)] + self._assessments[:self.ASSESSMENTS_KEPT - 1]
@@ -875,23 +886,32 @@ class Integrity:
         now, then = steps(joints), steps(reference)
         return np.arctan2(_norm(np.cross(now, then)), np.einsum('ki,ki->k', now, then))
 
-    def _turns(self, joints, joint_std, reference, reference_std, elapsed, checks, values):
+    def _direction_std(self, joint_std):
+        """
+        Bound each section's direction std (p,), radians, by its end joints' stds (p,), metres.
+
+        Their sum across the section's length: the most two joints' errors can turn it,
+        however correlated (a method not held to the chain, or a joint's other fold).
+        """
+        ends = np.r_[0.0, np.asarray(joint_std, dtype=float)]
+        return (ends[:-1] + ends[1:]) / self.model.arm_lengths
+
+    def _turns(self, joints, turn_std, reference, reference_turn_std, elapsed, checks,
+               values):
         """
         Append a section that turned further than the boom can since ``reference``.
 
         Slew and pitch at ``max_angular_rate`` each turn a section by at most twice the
-        rate times ``elapsed``; what either posture's joints are unsure of (stds (p,),
-        metres, across the section's length) widens it by three standard deviations. This
-        is the rate's own limit, where :meth:`reach` is a bound on each joint's distance that
-        every angle at once allows: a tip turned over between frames, within that distance,
-        stays out.
+        rate times ``elapsed``; what either posture's directions are unsure of (stds (p,),
+        radians) widens it by three standard deviations. This is the rate's own limit,
+        where :meth:`reach` is a bound on each joint's distance that every angle at once
+        allows: a tip turned over between frames, within that distance, stays out, and so
+        does a joint whose tag's ranges are all outliers, moved metres in a frame to where
+        two of them agree.
         """
-        def direction_std(std):
-            ends = np.r_[0.0, np.asarray(std, dtype=float)]
-            return (ends[:-1] + ends[1:]) / self.model.arm_lengths
         turned = self.section_turns(joints, reference)
         allowed = (2.0 * self.limits.max_angular_rate * elapsed
-                   + 3.0 * np.hypot(direction_std(joint_std), direction_std(reference_std)))
+                   + 3.0 * np.hypot(turn_std, reference_turn_std))
         values['turned'] = float(np.max(turned))
         over = np.flatnonzero(turned > allowed)
         if over.size:
@@ -923,13 +943,13 @@ class _AssessmentKey:
 
     @classmethod
     def of(cls, joints, measurements, reference, elapsed, reference_std, chain, timed_joints,
-           common_covariance):
+           common_covariance, reference_turn_std):
         """Return the key of :meth:`Integrity._assessed`'s arguments."""
         def exact(values):
             return None if values is None else np.asarray(values, dtype=float)
         return cls(measurements, exact(joints), exact(reference), elapsed,
                    exact(reference_std), bool(chain), exact(timed_joints),
-                   exact(common_covariance))
+                   exact(common_covariance), exact(reference_turn_std))
 
     def __eq__(self, other):
         if not isinstance(other, _AssessmentKey):

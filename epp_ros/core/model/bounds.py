@@ -191,6 +191,18 @@ class Bound:
         """Root of each joint's covariance trace, metres, shape (p,)."""
         return np.sqrt(np.trace(self.joint_covariance, axis1=-2, axis2=-1))
 
+    def direction_std(self, pitches):
+        """
+        Return the standard deviation of each section's direction, radians, shape (p,).
+
+        A section turns with its pitch and, at right angles, with the slew times the cosine
+        of its ``pitches`` (p,) (radians): the root of the two variances' sum. Infinite
+        where the bound is.
+        """
+        covariance = self.parameter_covariance
+        variance = np.diagonal(covariance)[1:] + np.cos(pitches) ** 2 * covariance[0, 0]
+        return np.sqrt(np.where(np.isnan(variance), np.inf, variance))
+
 
 def crlb(model, slew, pitches, sigma, measured=None):
     """

@@ -185,6 +185,38 @@ def test_a_section_turned_faster_than_the_boom_turns_is_implausible_within_its_r
                                np.r_[np.zeros(4), np.radians(80.0)], atol=1e-9)
 
 
+def test_a_section_is_allowed_the_turn_its_angles_are_unsure_of_not_its_joints():
+    """
+    A joint folded 3 m in 0.1 s is refused though its joints' stds would allow the turn.
+
+    At sigma 0.3 m the joints' stds grow along the chain to 1 m, but they are one error
+    carried outward: section 4's direction is known to 0.04 rad. Its ends' stds summed
+    across its length (0.19 rad) let the fold through; a joint whose tag's ranges were all
+    outliers was published so, 3.4 m off, where two of them agreed.
+    """
+    slew, pitches = 0.3, np.radians([50.0, 20.0, 0.0, -20.0, -40.0])
+    reference = MODEL.forward_kinematics(slew, pitches)
+    integrity = Integrity(MODEL, SensorNoise(0.3), NlosMixture(0.0, 1.0))
+    seen = integrity.judge(reference, Measurements.ranges_only(MODEL.ranges(reference)))
+    folded = reference.copy()
+    folded[3] = fold_alternatives(MODEL, reference)[3]
+    measurements = Measurements.ranges_only(MODEL.ranges(folded))
+    reach_std, turn_std = seen.values['reach_std'], seen.values['reach_turn_std']
+    reach = integrity.reach(reference, 0.1, reach_std)
+    assert np.linalg.norm(folded[3] - reference[3]) < reach[3]
+    assert turn_std[3] < 0.05 < reach_std[3] / MODEL.arm_lengths[3]
+    verdict = integrity.judge(folded, measurements, reference, 0.1, reach_std,
+                              reference_turn_std=turn_std)
+    assert verdict.status == 'implausible' and 'section 4 turned' in verdict.message
+    # Without the angles' stds, the joints' bound the turn, as for a method not held to
+    # the chain: the fold passes.
+    assert integrity.judge(folded, measurements, reference, 0.1, reach_std).valid
+    # A turn at the boom's rate passes.
+    turned = MODEL.forward_kinematics(slew + 0.03, pitches + 0.03)
+    assert integrity.judge(turned, Measurements.ranges_only(MODEL.ranges(turned)), reference,
+                           0.1, reach_std, reference_turn_std=turn_std).valid
+
+
 def test_fold_alternatives_keep_the_section_lengths():
     rng = np.random.default_rng(6)
     joints = random_posture(MODEL, rng)[2]

@@ -300,3 +300,28 @@ def test_range_bias_prior_validates():
     per_link = RangeBiasPrior(link_std=[[0.0, 0.1], [0.2, 0.0]])
     assert per_link and not per_link.link_std.flags.writeable
     assert not RangeBiasPrior(link_std=np.zeros((2, 2)))
+
+
+def section_directions(slew, pitches):
+    """Return unit vectors (..., p, 3) along each section at slews (...), pitches (..., p)."""
+    slew = np.asarray(slew)[..., None]
+    return np.stack([np.cos(pitches) * np.cos(slew), np.cos(pitches) * np.sin(slew),
+                     np.sin(pitches)], axis=-1)
+
+
+def test_a_sections_direction_std_is_the_rms_turn_of_postures_drawn_from_the_bound():
+    model = truck_pump()
+    slew, pitches = 0.4, np.radians([60.0, 30.0, 0.0, -30.0, -80.0])
+    bound = crlb(model, slew, pitches, 0.3)
+    trials = 4000
+    drawn = np.random.default_rng(7).multivariate_normal(
+        np.r_[slew, pitches], bound.parameter_covariance, trials)
+    now = section_directions(drawn[:, 0], drawn[:, 1:])
+    then = section_directions(slew, pitches)
+    turned = np.arctan2(np.linalg.norm(np.cross(now, then), axis=-1), np.sum(now * then, -1))
+    # A mean of squares of 4000 draws: relative standard error at most sqrt(2 / 4000).
+    np.testing.assert_allclose(np.sqrt(np.mean(turned ** 2, axis=0)),
+                               bound.direction_std(pitches), rtol=5 * np.sqrt(2 / trials) / 2)
+    unmeasured = crlb(model, slew, np.radians([90.0, 0, 0, 0, 0]), 0.3,
+                      np.zeros((model.n_sections, model.n_anchors), dtype=bool))
+    assert np.all(unmeasured.direction_std(np.radians([90.0, 0, 0, 0, 0])) == np.inf)
