@@ -131,7 +131,7 @@ def test_a_joint_whose_ranges_are_all_outliers_does_not_jump_to_where_two_agree(
 
     The fit from the last posture moved joint 4 3.4 m to where two of them agree, likelier
     than the truth by 6 nats, and section 4 turned 0.37 rad in 0.1 s: within what its ends'
-    stds (0.4-0.5 m) allowed, not what its direction's did. It was published 1.5 m RMS off
+    stds (0.3-0.5 m) allowed, not what its direction's did. It was published 1.5 m RMS off
     at a predicted 0.36 m; now it is refused as implausible.
     """
     rng = np.random.default_rng(9)
