@@ -569,8 +569,7 @@ class PostureEstimator:
                 fresh = self._solve(measurements, warm=False)
                 if not isinstance(fresh, str):
                     if verdict.status != 'implausible':
-                        fresh[1]['alternatives'] = [*fresh[1].get('alternatives', ()),
-                                                    solved[0]]
+                        _add_alternatives(fresh, [solved[0]])
                     fresh_verdict = self._judge(fresh, measurements, stamp)
                     if fresh_verdict.valid:
                         diagnostics['reacquired'] = True
@@ -637,8 +636,7 @@ class PostureEstimator:
         moved = bool(costs[1] < costs[0]) and \
             self._judge(fresh, measurements, stamp).status != 'implausible'
         best, other = (fresh, solved) if moved else (solved, fresh)
-        best[1]['alternatives'] = (list(best[1].get('alternatives', [])) + [other[0]]
-                                   + list(other[1].get('alternatives', [])))
+        _add_alternatives(best, [other[0], *other[1].get('alternatives', [])])
         return best, other, self._judge(best, measurements, stamp)
 
     def _solve(self, measurements, warm, prior=None):
@@ -695,3 +693,9 @@ class PostureEstimator:
         diagnostics.setdefault('message', 'tracking')
         self.last_diagnostics = FrameResult.from_values(diagnostics)
         return joints
+
+
+def _add_alternatives(solved, postures):
+    """Add ``postures`` (p, 3) each to a (joints, info) fit's alternatives for its judge."""
+    info = solved[1]
+    info['alternatives'] = [*info.get('alternatives', ()), *postures]

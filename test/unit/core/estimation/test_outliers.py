@@ -94,6 +94,30 @@ def test_a_cold_start_is_never_confidently_wrong_for_one_short_range():
     assert min(published.values()) >= 10, published
 
 
+def outlier_site(estimator, seed, share, seconds):
+    """
+    Feed ``estimator`` a site where each range is an outlier with probability ``share``.
+
+    The working cycle at 10 Hz, noise SIGMA, an outlier N(0, 3 m) added (then the range's
+    magnitude). Asserts that no frame is published more than 1 m off unless its predicted
+    RMSE covers a third of the error; returns every frame's status.
+    """
+    rng = np.random.default_rng(seed)
+    statuses = []
+    for joints in working_cycle(MODEL, seconds, 10.0, rng=rng).joints:
+        ranges = MODEL.ranges(joints) + rng.normal(0.0, SIGMA, (MODEL.n_sections,
+                                                                MODEL.n_anchors))
+        outlying = rng.random(ranges.shape) < share
+        ranges[outlying] += rng.normal(0.0, 3.0, outlying.sum())
+        estimator.update(np.abs(ranges))
+        result = estimator.last_diagnostics
+        statuses.append(result.status)
+        if result.valid:
+            error = rmse(result.estimate, joints)
+            assert error < max(1.0, 3.0 * result.predicted_rmse), (len(statuses), error)
+    return statuses
+
+
 @pytest.mark.parametrize('method', ['chain', 'cepp'])
 def test_a_site_with_a_fifth_of_its_ranges_outliers_learns_their_share(method):
     """
@@ -104,25 +128,13 @@ def test_a_site_with_a_fifth_of_its_ranges_outliers_learns_their_share(method):
     outliers as there are, and most frames are published, none of them more than 1 m off
     unless the predicted RMSE covers a third of it.
     """
-    rng = np.random.default_rng(5)
-    motion = working_cycle(MODEL, 30.0, 10.0, rng=rng)
     estimator = PostureEstimator(MODEL, method)
-    published = 0
-    for joints in motion.joints:
-        shape = (MODEL.n_sections, MODEL.n_anchors)
-        ranges = MODEL.ranges(joints) + rng.normal(0.0, SIGMA, shape)
-        outlying = rng.random(ranges.shape) < 0.2
-        ranges[outlying] += rng.normal(0.0, 3.0, outlying.sum())
-        estimator.update(np.abs(ranges))
-        result = estimator.last_diagnostics
-        if result.valid:
-            published += 1
-            error = rmse(result.estimate, joints)
-            assert error < max(1.0, 3.0 * result.predicted_rmse), result.message
+    statuses = outlier_site(estimator, seed=5, share=0.2, seconds=30.0)
     noise = estimator.noise
     assert noise.sigma < 2.0 * SIGMA and 0.1 < noise.outliers < 0.3, noise
     assert estimator.integrity.nlos.outliers == noise.outliers      # the judge's share
-    assert published > 0.5 * len(motion.joints), published
+    published = statuses.count('ok')
+    assert published > 0.5 * len(statuses), published
 
 
 def test_a_joint_whose_ranges_are_all_outliers_does_not_jump_to_where_two_agree():
@@ -134,21 +146,8 @@ def test_a_joint_whose_ranges_are_all_outliers_does_not_jump_to_where_two_agree(
     stds (0.3-0.5 m) allowed, not what its direction's did. It was published 1.5 m RMS off
     at a predicted 0.36 m; now it is refused as implausible.
     """
-    rng = np.random.default_rng(9)
-    motion = working_cycle(MODEL, 6.0, 10.0, rng=rng)
-    estimator = PostureEstimator(MODEL, 'chain')
-    statuses = []
-    for joints in motion.joints:
-        shape = (MODEL.n_sections, MODEL.n_anchors)
-        ranges = MODEL.ranges(joints) + rng.normal(0.0, SIGMA, shape)
-        outlying = rng.random(ranges.shape) < 0.3
-        ranges[outlying] += rng.normal(0.0, 3.0, outlying.sum())
-        estimator.update(np.abs(ranges))
-        result = estimator.last_diagnostics
-        statuses.append(result.status)
-        if result.valid:
-            error = rmse(result.estimate, joints)
-            assert error < max(1.0, 3.0 * result.predicted_rmse), (len(statuses), error)
+    statuses = outlier_site(PostureEstimator(MODEL, 'chain'), seed=9, share=0.3,
+                            seconds=6.0)
     assert statuses[57] == 'implausible'
     assert statuses.count('ok') > 0.75 * len(statuses), statuses
 
@@ -163,21 +162,8 @@ def test_a_search_replacing_a_fit_called_inconsistent_must_be_likelier_than_it()
     The lost fit now stays the search's alternative, which makes the search's posture
     ambiguous: the frame is refused as the warm fit was.
     """
-    rng = np.random.default_rng(6)
-    motion = working_cycle(MODEL, 3.0, 10.0, rng=rng)
-    estimator = PostureEstimator(MODEL, 'cepp')
-    statuses = []
-    for joints in motion.joints:
-        shape = (MODEL.n_sections, MODEL.n_anchors)
-        ranges = MODEL.ranges(joints) + rng.normal(0.0, SIGMA, shape)
-        outlying = rng.random(ranges.shape) < 0.3
-        ranges[outlying] += rng.normal(0.0, 3.0, outlying.sum())
-        estimator.update(np.abs(ranges))
-        result = estimator.last_diagnostics
-        statuses.append(result.status)
-        if result.valid:
-            error = rmse(result.estimate, joints)
-            assert error < max(1.0, 3.0 * result.predicted_rmse), (len(statuses), error)
+    statuses = outlier_site(PostureEstimator(MODEL, 'cepp'), seed=6, share=0.3,
+                            seconds=3.0)
     assert statuses[2] == 'inconsistent'
     assert statuses.count('ok') > 0.5 * len(statuses), statuses
 
