@@ -468,7 +468,7 @@ class PostureEstimator:
         self._learn_bias(joints, info, measurements, verdict)
         diagnostics.update(info, noise=self.noise)       # as learned from this frame
         if not verdict.lost and hasattr(self._solver, 'accept'):
-            self._solver.accept()           # a motion model takes the fit as its state
+            self._solver.accept(info)       # a motion model takes the fit as its state
         diagnostics.update(verdict.values, estimate=joints)
         diagnostics.update(level=verdict.level, message=verdict.message)
         if not verdict.lost:            # it fits the frame: the next frame's start
@@ -554,30 +554,50 @@ class PostureEstimator:
 
     def _reconsider(self, solved, verdict, measurements, stamp, diagnostics):
         """
-        Solve a warm-started frame from scratch too, when its fit is lost or suspicious.
+        Solve a warm-started frame from scratch too, when its fit is lost, outweighed or doubted.
 
         Not when the method searched from scratch for this frame already. Returns the
         (joints, info) kept and its verdict; ``diagnostics["reacquired"]`` says whether
-        the fresh fit won. A lost fit the boom can be in stays the fresh one's alternative:
+        the fresh fit won. Outweighed: a joint's rival position is likelier than the fit's
+        (``Verdict.outweighed``); at a site with a third of its ranges outliers the tracker
+        held a wrong fold 4-10 nats less likely than the other, every frame refused.
+        Doubted: :meth:`_suspicious`.
+        """
+        if verdict.lost:
+            if self._reacquisition.due_for_search():
+                return self._searched_instead(solved, verdict, measurements, stamp,
+                                              diagnostics)
+            return solved, verdict
+        if verdict.outweighed and self._reacquisition.due_for_rival_search():
+            solved, verdict = self._searched_instead(solved, verdict, measurements, stamp,
+                                                     diagnostics)
+            if diagnostics['reacquired']:
+                return solved, verdict
+        if self._suspicious(verdict, measurements, stamp):
+            solved, verdict, diagnostics['reacquired'] = self._second_opinion(
+                solved, measurements, stamp, verdict)
+        return solved, verdict
+
+    def _searched_instead(self, solved, verdict, measurements, stamp, diagnostics):
+        """
+        Return a search's fit and verdict where it passes, else ``solved`` and ``verdict``.
+
+        The fit replaced stays the search's alternative unless the boom cannot be there:
         residuals the noise does not explain do not make it less likely, and at a site with
         a third of its ranges outliers, before their share was learned, a search replaced
         the truth's fit (called inconsistent) with a posture 10 nats less likely, published
         with two joints 12 m off at a predicted RMSE of 1.4 m.
         """
-        if verdict.lost:
-            if self._reacquisition.due_for_search():
-                fresh = self._solve(measurements, warm=False)
-                if not isinstance(fresh, str):
-                    if verdict.status != 'implausible':
-                        _add_alternatives(fresh, [solved[0]])
-                    fresh_verdict = self._judge(fresh, measurements, stamp)
-                    if fresh_verdict.valid:
-                        diagnostics['reacquired'] = True
-                        return fresh, fresh_verdict
-        elif self._suspicious(verdict, measurements, stamp):
-            solved, verdict, diagnostics['reacquired'] = self._second_opinion(
-                solved, measurements, stamp, verdict)
-        return solved, verdict
+        fresh = self._solve(measurements, warm=False)
+        if isinstance(fresh, str):
+            return solved, verdict
+        if verdict.status != 'implausible':
+            _add_alternatives(fresh, [solved[0]])
+        fresh_verdict = self._judge(fresh, measurements, stamp)
+        if not fresh_verdict.valid:
+            return solved, verdict
+        diagnostics['reacquired'] = True
+        return fresh, fresh_verdict
 
     def _suspicious(self, verdict, measurements, stamp):
         """

@@ -213,6 +213,15 @@ class Verdict:
         """Whether a fresh (cold) solve of the frame could do better than this estimate."""
         return self.status in ('inconsistent', 'implausible')
 
+    @property
+    def outweighed(self):
+        """
+        Whether the frame is ambiguous with a joint's rival position likelier than its own.
+
+        A fit in the wrong basin: a search may find the likelier one and decide the frame.
+        """
+        return self.status == 'ambiguous' and self.values.get('rival_margin', np.inf) < 0.0
+
 
 class Integrity:
     """
@@ -574,10 +583,12 @@ class Integrity:
 
     def _joint_rivals(self, joints, measurements, joint_std, slew, reach):
         """
-        Return :meth:`fold_spread` and :meth:`ambiguous_joints` from one cost evaluation.
+        Return :meth:`fold_spread`, :meth:`ambiguous_joints` and the likeliest rival's margin.
 
         The folds :meth:`fold_spread` weighs are the first of :meth:`ambiguous_joints`'
-        candidates; each joint's cost is then computed once, not twice.
+        candidates; each joint's cost is then computed once, not twice. The margin is how
+        much less likely, in nats, the likeliest position :meth:`ambiguous_joints` counts
+        is than the estimate's (negative: likelier; inf without one).
         """
         p = self.model.n_sections
         positions, which, keep = self._candidates(joints, joint_std, slew, reach)
@@ -585,8 +596,9 @@ class Integrity:
         margin = self._margins(joints, measurements, slew, positions[scored], which[scored])
         spread = self._spread(joints, positions[:p - 1], margin[:p - 1])
         counted = keep[scored]
-        return spread, self._found(positions[scored][counted], which[scored][counted],
-                                   margin[counted])
+        found = self._found(positions[scored][counted], which[scored][counted],
+                            margin[counted])
+        return spread, found, float(margin[counted].min()) if counted.any() else np.inf
 
     def _candidates(self, joints, joint_std, slew, reach):
         """
@@ -808,7 +820,8 @@ class Integrity:
         separated = []
         if chain and all(level < ERROR for level, _, _ in checks):
             separated = self.separated(joints, measurements, kept)
-        spread, found = self._joint_rivals(seen, measurements, joint_std, angles[0], reach)
+        spread, found, values['rival_margin'] = self._joint_rivals(
+            seen, measurements, joint_std, angles[0], reach)
         values['reach_std'] = np.maximum(joint_std, spread)
         values['reach_turn_std'] = np.maximum(turn_std, self._direction_std(spread))
         assessment = _Assessment(tuple(checks), values, angles, los_rows, joint_std, seen,

@@ -19,7 +19,8 @@ A warm start follows the boom from frame to frame, and can follow it into the wr
 The policy says when a frame is also solved from scratch (a rejected frame, the first few
 in a run and then every tenth, so that garbage does not cost a search per frame; a fit
 that calls half a tag's links blocked, at most once a period; while the last search left
-the frame ambiguous, every frame from the rival it found) and when the warm start is dropped (after
+the frame ambiguous, every frame from the rival it found; a fit a rival outweighs, spaced as
+rejected frames are) and when the warm start is dropped (after
 ``reset_after_failures`` failures in a row; then the last fit is only a provisional start,
 and what it leads to stands only if a search finds it too). ``PostureEstimator`` does the solving.
 """
@@ -45,6 +46,7 @@ class Reacquisition:
     def __init__(self, reset_after_failures=10):
         self.reset_after_failures = reset_after_failures
         self.failures = 0
+        self.outweighed_frames = 0      # in a row: fits a joint's rival outweighed
         self._dropped = False           # the warm start was dropped in this run of failures
         self.in_doubt = False           # the last search found another fit about as likely
         self.rival = None               # that fit, (p, 3), followed from frame to frame
@@ -57,8 +59,19 @@ class Reacquisition:
         The first few in a run do, then every tenth, so that a stream of garbage does not
         cost a search per frame.
         """
-        failures = self.failures + 1
-        return failures & (failures - 1) == 0 or failures % 10 == 0
+        return _spaced(self.failures + 1)
+
+    def due_for_rival_search(self):
+        """
+        Count a fit whose frame a joint's rival position outweighs; True when it gets a search.
+
+        The frame is ambiguous, so it is no failure, and a method with a state of its own
+        is not searched for its blocked links (``PostureEstimator._suspicious``): a tracker
+        that held a wrong fold stayed on it, every frame refused. Spaced as
+        :meth:`due_for_search`'s.
+        """
+        self.outweighed_frames += 1
+        return _spaced(self.outweighed_frames)
 
     def suspicious(self, nlos_links, ranges, stamp):
         """
@@ -121,4 +134,9 @@ class Reacquisition:
 
     def succeeded(self):
         """Start the count of failures in a row over (a frame accepted, or a new seed)."""
-        self.failures, self._dropped = 0, False
+        self.failures, self.outweighed_frames, self._dropped = 0, 0, False
+
+
+def _spaced(count):
+    """Whether the ``count``-th frame in a row gets a search: 1, 2, 4, 8, then every tenth."""
+    return count & (count - 1) == 0 or count % 10 == 0

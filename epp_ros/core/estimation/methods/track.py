@@ -131,6 +131,8 @@ class TrackMethod:
     #: cost decides its place in the bank (against log ambiguity_odds), later frames its
     #: angles; on a frame nothing explains, settling further cost most of a start.
     FOLD_STALL = 1e-4
+    #: Solves of one frame whose state :meth:`accept` can still commit.
+    SOLVES_KEPT = 8
 
     def __init__(self, model, process_noise=1e-4, adapt_process_noise=True, max_rate=0.35,
                  max_hypotheses=4, ambiguity_odds=1000.0, manoeuvre_false_alarm=1e-3,
@@ -149,7 +151,7 @@ class TrackMethod:
                                                    manoeuvre_false_alarm), n)
         self._bank = []                 # committed hypotheses, best first
         self._stamp = None              # of the committed state
-        self._pending = None
+        self._pending = []              # (info, state) of the solves since the last accept
 
     def tune(self, **noise):
         """Take new range noise values (see :meth:`ChainMethod.tune`)."""
@@ -158,7 +160,7 @@ class TrackMethod:
     def reset(self, joints=None):
         """Forget the state; with ``joints`` (p, 3), start from that posture at rest."""
         self.chain.reset()
-        self._bank, self._stamp, self._pending = [], None, None
+        self._bank, self._stamp, self._pending = [], None, []
         self.process_noise = self.initial_process_noise.copy()
         self._corrections = None
         if joints is not None:
@@ -213,15 +215,23 @@ class TrackMethod:
                     fitted_dof=best.fitted_dof,
                     timed_joints=timed[np.arange(n - 1), np.arange(n - 1)])
         adaptation = info.pop('adaptation', (self.process_noise, self._corrections))
-        self._pending = (bank, stamp, adaptation)
+        # A frame can be solved more than once (a search beside the warm fit): each kept.
+        self._pending = [*self._pending[-(self.SOLVES_KEPT - 1):], (info, (bank, stamp,
+                                                                           adaptation))]
         return joints, info
 
-    def accept(self):
-        """Commit the last :meth:`solve` as the state (its frame was judged to fit)."""
-        if self._pending is not None:
-            self._bank, stamp, (self.process_noise, self._corrections) = self._pending
-            self._stamp = stamp if np.isfinite(stamp) else None
-            self._pending = None
+    def accept(self, info):
+        """
+        Commit the :meth:`solve` that returned ``info`` as the state (its fit was kept).
+
+        Of the frame's solves, the one whose fit the frame was judged by; the rest are
+        forgotten.
+        """
+        for solved, pending in self._pending:
+            if solved is info:
+                self._bank, stamp, (self.process_noise, self._corrections) = pending
+                self._stamp = stamp if np.isfinite(stamp) else None
+        self._pending = []
 
     def _start(self, measurements, prior, warm):
         """

@@ -33,6 +33,15 @@ def test_rejected_frames_are_searched_first_often_then_every_tenth():
     assert dropped == [10]
 
 
+def test_fits_a_rival_outweighs_are_searched_as_rejected_frames_are_until_one_passes():
+    policy = Reacquisition()
+    searched = [frame for frame in range(1, 25) if policy.due_for_rival_search()]
+    assert searched == [1, 2, 4, 8, 10, 16, 20]
+    assert policy.failures == 0                     # ambiguous: no failure
+    policy.succeeded()
+    assert policy.due_for_rival_search()            # a new run of them: searched at once
+
+
 def test_the_warm_start_goes_after_so_many_failures_and_not_for_an_undetermined_fit():
     policy = Reacquisition(reset_after_failures=3)
     assert [policy.failed('inconsistent') for _ in range(5)] == [False, False, True,

@@ -16,6 +16,7 @@
 from epp_ros.core import PostureEstimator
 from epp_ros.core.estimation.methods.chain import ChainMethod
 from epp_ros.core.estimation.methods.track import constant_velocity, TrackMethod
+from epp_ros.core.model.measurements import Measurements
 from epp_ros.core.simulation.simulate import (field_effects, FieldEffects, JoystickMotion,
                                               simulate_field, truck_pump, WorkingMotion)
 from epp_ros.core.solvers.levenberg_marquardt import STALL
@@ -90,6 +91,27 @@ def test_a_silent_tag_is_predicted_through_with_growing_uncertainty():
     assert np.all(np.diff(stds) > 0)
     # Within four reported standard deviations, and never a fold away.
     assert np.all(np.array(errors) < 4 * np.array(stds) + 0.05)
+
+
+def test_the_solve_whose_fit_the_frame_kept_becomes_the_state_not_the_last():
+    """A frame solved twice (warm, then a search beside it): ``accept`` takes the one named."""
+    def frame(joints, stamp):
+        return Measurements.clean(MODEL, MODEL.ranges(joints), stamp=stamp)[0]
+
+    here = MODEL.forward_kinematics(*constant_rates(0.0))
+    there = MODEL.forward_kinematics(-2.0, constant_rates(0.0)[1])      # slewed away
+    for kept, other in ((here, there), (there, here)):
+        method = TrackMethod(MODEL, sigma=0.05)
+        method.accept(method.solve(frame(kept, 0.0), kept)[1])
+        warm = method.solve(frame(kept, 0.1), kept, warm=True)
+        searched = method.solve(frame(other, 0.1), None)
+        np.testing.assert_allclose(searched[0], other, atol=0.1)
+        method.accept(warm[1])
+        # Tracked on from the kept fit's state: at rest where it was, its rates nought.
+        joints, info = method.solve(frame(kept, 0.2), None, warm=True)
+        assert not info['searched']
+        np.testing.assert_allclose(joints, kept, atol=0.1)
+        np.testing.assert_allclose(info['rates'], 0.0, atol=0.05)
 
 
 def test_both_folds_are_kept_until_the_data_decides():
