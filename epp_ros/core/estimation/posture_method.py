@@ -50,7 +50,8 @@ class PostureMethod(Protocol):
     Methods that can take the noise learned while running also have
     ``tune(*, sigma, eta, nlos_fraction, nlos_gamma, outlier_fraction)`` (the last the judge's
     share of outliers); methods with a state of their own (a motion model) have
-    ``accept(info)``, called with the details of the solve whose fit the frame kept.
+    ``accept(info=None)``, called with the details of the solve whose fit the frame kept
+    (None: the last solve's).
 
     """
 

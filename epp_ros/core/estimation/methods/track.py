@@ -220,15 +220,15 @@ class TrackMethod:
                                                                            adaptation))]
         return joints, info
 
-    def accept(self, info):
+    def accept(self, info=None):
         """
         Commit the :meth:`solve` that returned ``info`` as the state (its fit was kept).
 
-        Of the frame's solves, the one whose fit the frame was judged by; the rest are
-        forgotten.
+        Of the frame's solves, the one whose fit the frame was judged by (None: the last);
+        the rest are forgotten.
         """
-        for solved, pending in self._pending:
-            if solved is info:
+        for solved, pending in self._pending[-1:] if info is None else self._pending:
+            if info is None or solved is info:
                 self._bank, stamp, (self.process_noise, self._corrections) = pending
                 self._stamp = stamp if np.isfinite(stamp) else None
         self._pending = []

@@ -112,6 +112,11 @@ def test_the_solve_whose_fit_the_frame_kept_becomes_the_state_not_the_last():
         assert not info['searched']
         np.testing.assert_allclose(joints, kept, atol=0.1)
         np.testing.assert_allclose(info['rates'], 0.0, atol=0.05)
+    method.solve(frame(here, 0.3), None)            # from scratch, after ``there``
+    method.accept()                                 # no solve named: the last one's
+    joints, info = method.solve(frame(here, 0.4), None, warm=True)
+    np.testing.assert_allclose(joints, here, atol=0.1)
+    np.testing.assert_allclose(info['rates'], 0.0, atol=0.05)
 
 
 def test_both_folds_are_kept_until_the_data_decides():
