@@ -467,7 +467,7 @@ class PostureEstimator:
         self._learn(joints, info, measurements, verdict)
         self._learn_bias(joints, info, measurements, verdict)
         diagnostics.update(info, noise=self.noise)       # as learned from this frame
-        if not verdict.lost and hasattr(self._solver, 'accept'):
+        if not verdict.lost and self._has_state:
             self._solver.accept(info)       # a motion model takes the fit as its state
         diagnostics.update(verdict.values, estimate=joints)
         diagnostics.update(level=verdict.level, message=verdict.message)
@@ -559,8 +559,11 @@ class PostureEstimator:
         Not when the method searched from scratch for this frame already. Returns the
         (joints, info) kept and its verdict; ``diagnostics["reacquired"]`` says whether
         the fresh fit won. Outweighed: a joint's rival position is likelier than the fit's
-        (``Verdict.outweighed``); at a site with a third of its ranges outliers the tracker
-        held a wrong fold 4-10 nats less likely than the other, every frame refused.
+        (``Verdict.outweighed``), for a method with a state of its own, which gets no
+        second opinion: at a site with a third of its ranges outliers the tracker held a
+        wrong fold 4-10 nats less likely than the other, every frame refused. (Not for the
+        others: their second opinions weigh such folds, and where a persistently blocked
+        tip made its flipped fold the likelier, this search published it 16 m off.)
         Doubted: :meth:`_suspicious`.
         """
         if verdict.lost:
@@ -568,7 +571,8 @@ class PostureEstimator:
                 return self._searched_instead(solved, verdict, measurements, stamp,
                                               diagnostics)
             return solved, verdict
-        if verdict.outweighed and self._reacquisition.due_for_rival_search():
+        if verdict.outweighed and self._has_state and \
+                self._reacquisition.due_for_rival_search():
             solved, verdict = self._searched_instead(solved, verdict, measurements, stamp,
                                                      diagnostics)
             if diagnostics['reacquired']:
@@ -599,6 +603,11 @@ class PostureEstimator:
         diagnostics['reacquired'] = True
         return fresh, fresh_verdict
 
+    @property
+    def _has_state(self):
+        """Whether the method has a state of its own (a motion model's), kept by ``accept``."""
+        return hasattr(self._solver, 'accept')
+
     def _suspicious(self, verdict, measurements, stamp):
         """
         Judge whether a fit sets too many of a tag's links aside (``Reacquisition``).
@@ -607,7 +616,7 @@ class PostureEstimator:
         frame's search would replace what many frames built.
         """
         blocked = verdict.values.get('nlos_links')
-        if blocked is None or hasattr(self._solver, 'accept'):
+        if blocked is None or self._has_state:
             return False
         outlying = verdict.values.get('outlier_links')
         if outlying is not None:
