@@ -32,6 +32,7 @@ positions (p, 3), keeping the previous estimate as the warm start. Methods:
 from dataclasses import asdict, fields
 import numbers
 import time
+from typing import NamedTuple
 
 from epp_ros.core.estimation.integrity import ERROR, Integrity, IntegrityLimits, OK, Thresholds
 from epp_ros.core.estimation.learned_errors import LearnedErrors, told_noise
@@ -97,6 +98,15 @@ def _integrity(model, told, limits, thresholds, moving=()):
                           float(told['bias_slope_std']), float(told['anchor_std']), moving)
     return Integrity(model, noise, nlos, told['eta'], told['lowest_joint'], limits, thresholds,
                      bias)
+
+
+class _Accepted(NamedTuple):
+    """The last posture published: what the next frames' jumps and rivals are judged by."""
+
+    joints: np.ndarray          #: (p, 3), metres
+    stamp: float                #: its frame's time, seconds
+    joint_std: np.ndarray       #: (p,) m: its verdict's ``reach_std``
+    turn_std: np.ndarray        #: (p,) rad: each section's direction, ``reach_turn_std``
 
 
 class PostureEstimator:
@@ -209,7 +219,7 @@ class PostureEstimator:
                         reset_after_failures=reset_after_failures, learn_noise=learn_noise,
                         learn_anchors=learn_anchors, options=options)
         self._limits = plausible_limits(model)
-        self._previous = None           # (joints, stamp, stds) last accepted
+        self._previous = None           # _Accepted: the last valid posture
         self._warm = None               # the last estimate that fitted its frame
         self._provisional = False       # _warm is a refused frame's fit (after a drop)
         self._stamp = None
@@ -384,11 +394,11 @@ class PostureEstimator:
     @property
     def previous(self):
         """Return the last valid estimate (p, 3), or None."""
-        return None if self._previous is None else self._previous[0].copy()
+        return None if self._previous is None else self._previous.joints.copy()
 
     def _fallback(self):
         if self._previous is not None:
-            return self._previous[0].copy()
+            return self._previous.joints.copy()
         # Nothing known yet: a straight horizontal boom along +x, flagged invalid.
         return self.model.forward_kinematics(0.0, np.zeros(self.model.n_sections))
 
@@ -476,8 +486,8 @@ class PostureEstimator:
         if not verdict.valid:
             return self._reject(verdict.status, diagnostics, measurements, start, joints)
         # A fold about as likely widens what later frames allow (Integrity.fold_spread).
-        self._previous = (joints.copy(), stamp, verdict.values['reach_std'],
-                          verdict.values['reach_turn_std'])
+        self._previous = _Accepted(joints.copy(), stamp, verdict.values['reach_std'],
+                                   verdict.values['reach_turn_std'])
         self._reacquisition.succeeded()
         return self._finish(joints, 'ok', diagnostics, measurements, start)
 
@@ -548,9 +558,10 @@ class PostureEstimator:
                  'timed_joints': info.get('timed_joints'), 'rivals': info.get('rivals', ())}
         if self._previous is None:
             return self.integrity.judge(joints, measurements, **known)
-        reference, then, reference_std, turn_std = self._previous
-        return self.integrity.judge(joints, measurements, reference, max(stamp - then, 0.0),
-                                    reference_std, reference_turn_std=turn_std, **known)
+        last = self._previous
+        return self.integrity.judge(joints, measurements, last.joints,
+                                    max(stamp - last.stamp, 0.0), last.joint_std,
+                                    reference_turn_std=last.turn_std, **known)
 
     def _reconsider(self, solved, verdict, measurements, stamp, diagnostics):
         """
