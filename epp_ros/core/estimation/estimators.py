@@ -196,10 +196,11 @@ class PostureEstimator:
         those dropped as longer than the geometry allows), ``iterations``, ``solve_time``
         (s), the integrity's statistics (``chi_square``, ``chi_square_limit``,
         ``nlos_links`` and ``outlier_links`` (p, m), ``predicted_rmse`` (m), ``joint_std`` (p,),
-        ``ambiguous_joints``), the method's ``estimate`` (p, 3) whether valid or not,
-        ``noise`` (the range noise in use, :class:`RangeNoiseEstimate`), and solver
-        details (``converged``, ...; track: ``rates`` (p + 1,), ``hypotheses``,
-        ``manoeuvre``).
+        ``ambiguous_joints``, ``rival_margin``: nats by which the likeliest other position
+        of a joint is less likely than the estimate's), the method's ``estimate`` (p, 3)
+        whether valid or not, ``noise`` (the range noise in use,
+        :class:`RangeNoiseEstimate`), and solver details (``converged``, ...; track:
+        ``rates`` (p + 1,), ``hypotheses``, ``manoeuvre``).
 
     """
 
@@ -515,7 +516,8 @@ class PostureEstimator:
         A told sigma ten times too small makes every link look blocked, which can send a
         cold start to a wrong fit: the frame is solved again with its own scale, at most
         ``attempts`` times. A smaller scale waits for the window: trusting one frame's
-        would make the estimator claim an accuracy it does not have.
+        would make the estimator claim an accuracy it does not have. A fit a search made
+        is solved again by a search: a warm start is what it replaced.
         """
         threshold = 2.0
         for _ in range(attempts):
@@ -528,7 +530,8 @@ class PostureEstimator:
             threshold = 1.25                # once far off, settle it closely
             self._learned.rescale(factor)
             self._use_noise(self._learned.noise)
-            again = self._solve(measurements, warm=self._warm is not None)
+            again = self._solve(measurements, warm=self._warm is not None
+                                and not solved[1].get('searched'))
             if isinstance(again, str):
                 break
             solved, verdict = again, self._judge(again, measurements, stamp)
@@ -575,19 +578,18 @@ class PostureEstimator:
         wrong fold 4-10 nats less likely than the other, every frame refused. (Not for the
         others: their second opinions weigh such folds, and where a persistently blocked
         tip made its flipped fold the likelier, this search published it 16 m off.)
-        Doubted: :meth:`_suspicious`.
+        Doubted (a method without a state of its own): :meth:`_suspicious`.
         """
         if verdict.lost:
             if self._reacquisition.due_for_search():
                 return self._searched_instead(solved, verdict, measurements, stamp,
                                               diagnostics)
             return solved, verdict
-        if verdict.outweighed and self._has_state and \
-                self._reacquisition.due_for_rival_search():
-            solved, verdict = self._searched_instead(solved, verdict, measurements, stamp,
-                                                     diagnostics)
-            if diagnostics['reacquired']:
-                return solved, verdict
+        if self._has_state:     # no second opinion: one would replace what many frames built
+            if verdict.outweighed and self._reacquisition.due_for_rival_search():
+                return self._searched_instead(solved, verdict, measurements, stamp,
+                                              diagnostics)
+            return solved, verdict
         if self._suspicious(verdict, measurements, stamp):
             solved, verdict, diagnostics['reacquired'] = self._second_opinion(
                 solved, measurements, stamp, verdict)
@@ -597,10 +599,11 @@ class PostureEstimator:
         """
         Return a search's fit and verdict where it passes, else ``solved`` and ``verdict``.
 
-        The fit replaced stays the search's alternative unless the boom cannot be there:
-        residuals the noise does not explain do not make it less likely, and at a site with
-        a third of its ranges outliers, before their share was learned, a search replaced
-        the truth's fit (called inconsistent) with a posture 10 nats less likely, published
+        ``diagnostics["reacquired"]`` is set when the search's fit is returned. The fit
+        replaced stays the search's alternative unless the boom cannot be there: residuals
+        the noise does not explain do not make it less likely, and at a site with a third
+        of its ranges outliers, before their share was learned, a search replaced the
+        truth's fit (called inconsistent) with a posture 10 nats less likely, published
         with two joints 12 m off at a predicted RMSE of 1.4 m.
         """
         fresh = self._solve(measurements, warm=False)
@@ -623,11 +626,10 @@ class PostureEstimator:
         """
         Judge whether a fit sets too many of a tag's links aside (``Reacquisition``).
 
-        Blocked or outliers. Not for a method with a state of its own (a motion model): one
-        frame's search would replace what many frames built.
+        Blocked or outliers.
         """
         blocked = verdict.values.get('nlos_links')
-        if blocked is None or self._has_state:
+        if blocked is None:
             return False
         outlying = verdict.values.get('outlier_links')
         if outlying is not None:

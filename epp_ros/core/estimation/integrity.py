@@ -587,8 +587,8 @@ class Integrity:
 
         The folds :meth:`fold_spread` weighs are the first of :meth:`ambiguous_joints`'
         candidates; each joint's cost is then computed once, not twice. The margin is how
-        much less likely, in nats, the likeliest position :meth:`ambiguous_joints` counts
-        is than the estimate's (negative: likelier; inf without one).
+        much less likely, in nats, the likeliest of the candidates far enough and within
+        reach is than the estimate's joint (negative: likelier; inf without one).
         """
         p = self.model.n_sections
         positions, which, keep = self._candidates(joints, joint_std, slew, reach)

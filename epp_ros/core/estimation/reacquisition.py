@@ -19,8 +19,9 @@ A warm start follows the boom from frame to frame, and can follow it into the wr
 The policy says when a frame is also solved from scratch (a rejected frame, the first few
 in a run and then every tenth, so that garbage does not cost a search per frame; a fit
 that calls half a tag's links blocked, at most once a period; while the last search left
-the frame ambiguous, every frame from the rival it found; a fit a rival outweighs, spaced as
-rejected frames are) and when the warm start is dropped (after
+the frame ambiguous, every frame from the rival it found; for a method with a state of its
+own, which gets no such second opinion, a fit a rival outweighs, spaced as rejected frames
+are) and when the warm start is dropped (after
 ``reset_after_failures`` failures in a row; then the last fit is only a provisional start,
 and what it leads to stands only if a search finds it too). ``PostureEstimator`` does the solving.
 """
@@ -46,7 +47,7 @@ class Reacquisition:
     def __init__(self, reset_after_failures=10):
         self.reset_after_failures = reset_after_failures
         self.failures = 0
-        self.outweighed_frames = 0      # in a row: fits a joint's rival outweighed
+        self.outweighed_frames = 0      # since the last valid frame: fits a rival outweighed
         self._dropped = False           # the warm start was dropped in this run of failures
         self.in_doubt = False           # the last search found another fit about as likely
         self.rival = None               # that fit, (p, 3), followed from frame to frame
@@ -66,9 +67,10 @@ class Reacquisition:
         Count a fit whose frame a joint's rival position outweighs; True when it gets a search.
 
         The frame is ambiguous, so it is no failure, and a method with a state of its own
-        is not searched for its blocked links (``PostureEstimator._suspicious``): a tracker
-        that held a wrong fold stayed on it, every frame refused. Spaced as
-        :meth:`due_for_search`'s.
+        gets no second opinion (``PostureEstimator._reconsider``): a tracker that held a
+        wrong fold stayed on it, every frame refused. Spaced as :meth:`due_for_search`'s,
+        counted since the last valid frame (so that a stretch of refused frames costs a
+        search in ten at most).
         """
         self.outweighed_frames += 1
         return _spaced(self.outweighed_frames)
@@ -133,7 +135,7 @@ class Reacquisition:
         return drop
 
     def succeeded(self):
-        """Start the count of failures in a row over (a frame accepted, or a new seed)."""
+        """Start the counts of failures and outweighed fits over (a frame accepted, a new seed)."""
         self.failures, self.outweighed_frames, self._dropped = 0, 0, False
 
 

@@ -216,21 +216,22 @@ class TrackMethod:
                     timed_joints=timed[np.arange(n - 1), np.arange(n - 1)])
         adaptation = info.pop('adaptation', (self.process_noise, self._corrections))
         # A frame can be solved more than once (a search beside the warm fit): each kept.
-        self._pending = [*self._pending[-(self.SOLVES_KEPT - 1):], (info, (bank, stamp,
-                                                                           adaptation))]
+        state = (bank, stamp, adaptation)
+        self._pending = (self._pending + [(info, state)])[-self.SOLVES_KEPT:]
         return joints, info
 
     def accept(self, info=None):
         """
         Commit the :meth:`solve` that returned ``info`` as the state (its fit was kept).
 
-        Of the frame's solves, the one whose fit the frame was judged by (None: the last);
-        the rest are forgotten.
+        Of the solves since the last accept (``SOLVES_KEPT`` at most), the one whose fit
+        the frame kept (None: the last); the rest are forgotten. An ``info`` no kept solve
+        returned commits nothing.
         """
-        for solved, pending in self._pending[-1:] if info is None else self._pending:
-            if info is None or solved is info:
-                self._bank, stamp, (self.process_noise, self._corrections) = pending
-                self._stamp = stamp if np.isfinite(stamp) else None
+        kept = [state for returned, state in self._pending if info is None or returned is info]
+        for bank, stamp, (self.process_noise, self._corrections) in kept[-1:]:
+            self._bank = bank
+            self._stamp = stamp if np.isfinite(stamp) else None
         self._pending = []
 
     def _start(self, measurements, prior, warm):
