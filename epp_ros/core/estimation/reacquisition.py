@@ -140,5 +140,5 @@ class Reacquisition:
 
 
 def _spaced(count):
-    """Whether the ``count``-th frame in a row gets a search: 1, 2, 4, 8, then every tenth."""
+    """Whether the ``count``-th frame of a run gets a search: 1, 2, 4, 8, then every tenth."""
     return count & (count - 1) == 0 or count % 10 == 0

@@ -131,7 +131,7 @@ class TrackMethod:
     #: cost decides its place in the bank (against log ambiguity_odds), later frames its
     #: angles; on a frame nothing explains, settling further cost most of a start.
     FOLD_STALL = 1e-4
-    #: Solves of one frame whose state :meth:`accept` can still commit.
+    #: Solves since the last :meth:`accept` whose state it can still commit.
     SOLVES_KEPT = 8
 
     def __init__(self, model, process_noise=1e-4, adapt_process_noise=True, max_rate=0.35,
