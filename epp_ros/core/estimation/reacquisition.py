@@ -21,9 +21,9 @@ in a run and then every tenth, so that garbage does not cost a search per frame;
 that calls half a tag's links blocked, at most once a period; while the last search left
 the frame ambiguous, every frame from the rival it found; for a method with a state of its
 own, which gets no such second opinion, a fit a rival outweighs, spaced as rejected frames
-are) and when the warm start is dropped (after
-``reset_after_failures`` failures in a row; then the last fit is only a provisional start,
-and what it leads to stands only if a search finds it too). ``PostureEstimator`` does the solving.
+are) and when the warm start is dropped (after ``reset_after_failures`` failures in a row;
+then the last fit is only a provisional start, and what it leads to stands only if a search
+finds it too). ``PostureEstimator`` does the solving.
 """
 import numpy as np
 

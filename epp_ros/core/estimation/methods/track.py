@@ -229,8 +229,8 @@ class TrackMethod:
         returned commits nothing.
         """
         kept = [state for returned, state in self._pending if info is None or returned is info]
-        for bank, stamp, (self.process_noise, self._corrections) in kept[-1:]:
-            self._bank = bank
+        if kept:
+            self._bank, stamp, (self.process_noise, self._corrections) = kept[-1]
             self._stamp = stamp if np.isfinite(stamp) else None
         self._pending = []
 

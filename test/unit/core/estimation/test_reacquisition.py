@@ -16,6 +16,7 @@
 from dataclasses import replace
 
 from epp_ros.core import PostureEstimator
+from epp_ros.core.estimation.metrics import COVERED_FRACTION, frame_rmse, WRONG_M
 from epp_ros.core.estimation.reacquisition import Reacquisition
 from epp_ros.core.model.folds import fold_alternatives
 from epp_ros.core.simulation.simulate import field_effects, random_posture, simulate_field, \
@@ -141,6 +142,7 @@ def test_a_method_without_a_state_leaves_a_fold_its_rival_outweighs_to_its_secon
         result = estimator.last_diagnostics
         outweighed += result.status == 'ambiguous' and result['rival_margin'] < 0.0
         if result.valid:
-            error = np.sqrt(np.mean(np.sum((result.estimate - frame.joints) ** 2, axis=1)))
-            assert error < max(1.0, 3.0 * result.predicted_rmse), (frame.stamp, error)
+            error = frame_rmse(result.estimate, frame.joints)
+            assert error < max(WRONG_M, result.predicted_rmse / COVERED_FRACTION), \
+                (frame.stamp, error)
     assert outweighed > 0                           # the frames this is about
