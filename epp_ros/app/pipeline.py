@@ -123,7 +123,7 @@ class RangePipeline:
         # that the joint angles and the positions agree exactly (a method that does not
         # hold the lengths, epp1 and epp2, moves by the errors its diagnostics report).
         model = self.estimator.model
-        slew, pitches = angles_from_joints(model, joints)
+        slew, pitches = diagnostics.angles or angles_from_joints(model, joints)
         return Step(model.forward_kinematics(slew, pitches), diagnostics, (slew, pitches))
 
     def _count_numbers(self, number):

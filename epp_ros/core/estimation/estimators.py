@@ -480,7 +480,8 @@ class PostureEstimator:
         diagnostics.update(info, noise=self.noise)       # as learned from this frame
         if not verdict.lost and self._has_state:
             self._solver.accept(info)       # a motion model takes the fit as its state
-        diagnostics.update(verdict.values, estimate=joints)
+        slew, pitches = verdict.angles
+        diagnostics.update(verdict.values, estimate=joints, angles=(slew, pitches.copy()))
         diagnostics.update(level=verdict.level, message=verdict.message)
         if not verdict.lost:            # it fits the frame: the next frame's start
             self._warm, self._provisional = joints.copy(), False

@@ -280,17 +280,25 @@ class Integrity:
         self._peaks = ChainMethod(model, nlos_fraction=nlos.fraction, nlos_gamma=nlos.gamma,
                                   lowest_joint=lowest_joint)
         self._assessments = []          # (_AssessmentKey, _Assessment), the latest first
+        self._link_sigma = (None, None)     # (Measurements, their link_sigma)
 
     # -- the pieces -----------------------------------------------------------------------
     def link_sigma(self, measurements):
-        """Return the standard deviation of each tag-anchor range (p, m), metres."""
-        sigma = np.broadcast_to(np.asarray(self.noise.range_sigma, dtype=float),
-                                measurements.ranges.shape)
-        if self.eta:
-            sigma = np.hypot(sigma, self.eta * np.nan_to_num(measurements.ranges))
-        if np.any(self.bias.link_std):
-            sigma = np.hypot(sigma, self.bias.link_std)
-        return sigma
+        """
+        Return the standard deviation of each tag-anchor range (p, m), metres (read-only).
+
+        A frame's checks ask for it several times: the last frame's is kept.
+        """
+        if self._link_sigma[0] is not measurements:
+            sigma = np.broadcast_to(np.asarray(self.noise.range_sigma, dtype=float),
+                                    measurements.ranges.shape)
+            if self.eta:
+                sigma = np.hypot(sigma, self.eta * np.nan_to_num(measurements.ranges))
+            if np.any(self.bias.link_std):
+                sigma = np.hypot(sigma, self.bias.link_std)
+            sigma.flags.writeable = False
+            self._link_sigma = (measurements, sigma)
+        return self._link_sigma[1]
 
     def _excess(self, joints, measurements):
         """Range excesses in sigmas: tag-anchor (p, m) and tag-tag (p, p), NaN unmeasured."""

@@ -92,6 +92,8 @@ class FrameResult(Mapping):
     reacquired: bool            #: a fresh solve replaced a lost warm one
     noise: RangeNoiseEstimate   #: the range noise in use (learned or told)
     estimate: Optional[np.ndarray] = None   #: (p, 3) the method's answer, valid or not
+    #: (slew, pitches (p,)) radians: the chain nearest ``estimate``, as judged
+    angles: Optional[tuple] = None
     converged: Optional[bool] = None        #: the solver met its tolerances
     iterations: Optional[int] = None        #: the solver's iterations
     solve_time: Optional[float] = None      #: seconds the frame took

@@ -36,7 +36,7 @@ without which one short range is a Gaussian impossibility that moves every joint
 explain it.
 """
 from dataclasses import dataclass, replace
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 from scipy.special import log_ndtr
@@ -266,8 +266,6 @@ class LinkLoss:
             # A broad Gaussian, in units of sigma and scaled like the others.
             self.outlier_ratio = _outlier_ratio(sigma, mixture.outlier_sigma)
             self.outlier_offset = np.log(mixture.outliers * self.outlier_ratio)
-        self.zero_cost, self.zero_slope = 0.0, 0.0
-        self.zero_cost, self.zero_slope, _ = self(np.zeros_like(self.inverse_g))
 
     def log_likelihood_ratio(self, excess):
         """
@@ -309,11 +307,21 @@ class LinkLoss:
         s = np.asarray(excess, dtype=float)
         if self.gaussian:
             return 0.5 * s ** 2, s, np.zeros_like(s)
+        return self._less(s, *self._at_zero)
+
+    @cached_property
+    def _at_zero(self):
+        """Return the value and slope at zero excess, which the loss takes off (once needed)."""
+        cost, slope, _ = self._less(np.zeros_like(self.inverse_g), 0.0, 0.0)
+        return cost, slope
+
+    def _less(self, s, zero_cost, zero_slope):
+        """:meth:`__call__` with ``zero_cost`` and ``zero_slope`` taken off."""
         los, blocked, outlier, z, log_cdf = self._terms(s)
         total = np.logaddexp(np.logaddexp(los, blocked), outlier)
         nlos, outlying = np.exp(blocked - total), np.exp(outlier - total)
         mills = np.exp(-0.5 * z ** 2 - _HALF_LOG_2PI - log_cdf)         # pdf(z) / cdf(z)
         slope = ((1.0 - nlos - outlying) * s + nlos * (self.inverse_g - mills)
-                 + outlying * self.outlier_ratio ** 2 * s - self.zero_slope)
-        cost = -total - self.zero_cost - self.zero_slope * s
+                 + outlying * self.outlier_ratio ** 2 * s - zero_slope)
+        cost = -total - zero_cost - zero_slope * s
         return cost, slope, nlos

@@ -47,21 +47,26 @@ def boom_frames(base, joints):
     """
     base = np.asarray(base, dtype=float)
     joints = np.asarray(joints, dtype=float)
-    up = np.array([0.0, 0.0, 1.0])
     reach = np.linalg.norm(joints[:, :2] - base[:2], axis=1)
     slew = fit_slew(joints, base) if reach.max() > 1e-9 else 0.0   # straight up: +x
-    slew_x = np.array([np.cos(slew), np.sin(slew), 0.0])
-    slew_y = np.cross(up, slew_x)
+    rotations = np.zeros((len(joints) + 1, 3, 3))
+    # The base: x along the slew, y = z_world x x, z up.
+    rotations[0, :2, 0] = np.cos(slew), np.sin(slew)
+    rotations[0, :2, 1] = -rotations[0, 1, 0], rotations[0, 0, 0]
+    rotations[0, 2, 2] = 1.0
     sections = np.diff(np.vstack([base, joints]), axis=0)
     x_axes = sections / np.linalg.norm(sections, axis=1, keepdims=True)
-    y_axes = np.cross(up, x_axes)
+    # z_world x x = (-x_y, x_x, 0), its length the section's horizontal share.
+    y_axes = np.zeros_like(x_axes)
+    y_axes[:, 0], y_axes[:, 1] = -x_axes[:, 1], x_axes[:, 0]
     norms = np.linalg.norm(y_axes, axis=1, keepdims=True)
-    y_axes = np.where(norms > 1e-9, y_axes / np.maximum(norms, 1e-12), slew_y)
-    z_axes = np.cross(x_axes, y_axes)
-    x_axes = np.vstack([slew_x, x_axes])
-    y_axes = np.vstack([slew_y, y_axes])
-    z_axes = np.vstack([up, z_axes])
-    return np.stack([x_axes, y_axes, z_axes], axis=-1)
+    y_axes = np.where(norms > 1e-9, y_axes / np.maximum(norms, 1e-12), rotations[0, :, 1])
+    rotations[1:, :, 0], rotations[1:, :, 1] = x_axes, y_axes
+    # x cross y, y horizontal: (-x_z y_y, x_z y_x, x_x y_y - x_y y_x).
+    rotations[1:, 0, 2] = -(x_axes[:, 2] * y_axes[:, 1])
+    rotations[1:, 1, 2] = x_axes[:, 2] * y_axes[:, 0]
+    rotations[1:, 2, 2] = x_axes[:, 0] * y_axes[:, 1] - x_axes[:, 1] * y_axes[:, 0]
+    return rotations
 
 
 def rotation_to_quaternion(rotations):

@@ -17,6 +17,7 @@ from epp_ros.app.config import load_pump_config
 from epp_ros.app.contract import FRAME_NUMBER, frame_number, FrameNumbers
 from epp_ros.app.pipeline import RangePipeline
 from epp_ros.core import PostureEstimator
+from epp_ros.core.estimation.methods import angles_from_joints
 from epp_ros.core.simulation.simulate import random_posture
 import numpy as np
 
@@ -108,3 +109,18 @@ def test_frame_numbers_are_read_only_where_the_contract_puts_them():
     for number in (1, 2, None, 5, 5):
         counted.add(number)
     assert (counted.lost, counted.before_first, counted.restarts) == (2, 4, 1)
+
+
+def test_what_is_published_is_the_boom_at_the_angles_the_frame_was_judged_at():
+    """The frame's result carries them; a method not held to the lengths is moved onto them."""
+    joints = random_posture(MODEL, np.random.default_rng(5))[2]
+    names, exact = message_of(MODEL.ranges(joints))
+    for method in ('chain', 'epp2'):
+        step = RangePipeline(CONFIG, PostureEstimator(MODEL, method)).step(30.0, names, exact)
+        estimate = step.diagnostics['estimate']
+        slew, pitches = angles_from_joints(MODEL, estimate)
+        assert step.angles[0] == step.diagnostics.angles[0] == slew, method
+        np.testing.assert_array_equal(step.angles[1], pitches)
+        np.testing.assert_array_equal(step.diagnostics.angles[1], pitches)
+        np.testing.assert_array_equal(step.joints, MODEL.forward_kinematics(slew, pitches))
+        np.testing.assert_allclose(step.joints, joints, atol=1e-4)

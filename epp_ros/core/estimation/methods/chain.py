@@ -36,6 +36,7 @@ fitted to the end, and from the best fit each joint is folded the other way and 
 tried at its other well-fitting pitches until nothing fits better.
 """
 from dataclasses import replace
+from functools import lru_cache
 from typing import NamedTuple
 
 from epp_ros.core.model.folds import folded_angles, tip_circle, tip_minima
@@ -58,6 +59,20 @@ LEANING_TAIL = 1e-3
 
 def angles_from_joints(model, joints):
     """Slew and pitches (radians) of the chain closest to the given joints (p, 3)."""
+    joints = np.ascontiguousarray(joints, dtype=float)
+    slew, pitches = _angles(model, joints.tobytes(), joints.shape)
+    return slew, pitches.copy()
+
+
+@lru_cache(maxsize=8)
+def _angles(model, joints_bytes, shape):
+    """
+    Return :func:`angles_from_joints` of the joints ``joints_bytes`` of ``shape``, kept.
+
+    A frame's judgement, its separation fits, its publication and the next frame's warm
+    start all ask for the same posture's (a model's arrays are read-only).
+    """
+    joints = np.frombuffer(joints_bytes).reshape(shape)
     slew = fit_slew(joints, model.base)
     slews = [slew] if model.pivot_offset == 0.0 else [slew, slew + np.pi]
     fits = []

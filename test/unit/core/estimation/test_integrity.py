@@ -519,3 +519,17 @@ def test_the_residual_thresholds_grade_the_line_of_sight_residuals():
         levels[(warn, error)] = (diagnostics['level'], diagnostics['status'])
     assert levels == {(0.5, 2.0): (0, 'ok'), (0.01, 2.0): (1, 'ok'),
                       (0.01, 0.02): (2, 'inconsistent')}
+
+
+def test_a_frames_link_sigmas_are_its_own_and_read_only():
+    """Kept for the frame's several checks, never handed from one frame to the next."""
+    integrity = Integrity(MODEL, SensorNoise(0.05), NlosMixture(0.0, 1.0), eta=0.01)
+    joints = MODEL.forward_kinematics(0.3, np.radians([50.0, 20.0, 0.0, -20.0, -40.0]))
+    near = Measurements.ranges_only(MODEL.ranges(joints))
+    far = Measurements.ranges_only(MODEL.ranges(joints) + 10.0)
+    for measurements in (near, far, near):
+        sigma = integrity.link_sigma(measurements)
+        np.testing.assert_allclose(sigma, np.hypot(0.05, 0.01 * measurements.ranges))
+        assert integrity.link_sigma(measurements) is sigma
+        with pytest.raises(ValueError):
+            sigma[0, 0] = 1.0
