@@ -239,8 +239,9 @@ class LinkLoss:
     """
     :meth:`NlosMixture.loss` for links of given sigmas, called on their excesses.
 
-    Per-link constants (and the loss's value and slope at zero) are computed once, which
-    matters inside an iterative fit where the same links are evaluated many times.
+    Per-link constants (and the loss's value and slope at zero, when first called) are
+    computed once, which matters inside an iterative fit where the same links are
+    evaluated many times.
     ``off_line`` is the mean prior share of the links blocked or outliers (0 for a
     Gaussian loss): how many a fit may set aside by chance.
     """
@@ -307,16 +308,16 @@ class LinkLoss:
         s = np.asarray(excess, dtype=float)
         if self.gaussian:
             return 0.5 * s ** 2, s, np.zeros_like(s)
-        return self._less(s, *self._at_zero)
+        return self._relative(s, *self._at_zero)
 
     @cached_property
     def _at_zero(self):
         """Return the value and slope at zero excess, which the loss takes off (once needed)."""
-        cost, slope, _ = self._less(np.zeros_like(self.inverse_g), 0.0, 0.0)
+        cost, slope, _ = self._relative(np.zeros_like(self.inverse_g), 0.0, 0.0)
         return cost, slope
 
-    def _less(self, s, zero_cost, zero_slope):
-        """:meth:`__call__` with ``zero_cost`` and ``zero_slope`` taken off."""
+    def _relative(self, s, zero_cost, zero_slope):
+        """Return :meth:`__call__` less ``zero_cost`` and ``zero_slope`` times the excess."""
         los, blocked, outlier, z, log_cdf = self._terms(s)
         total = np.logaddexp(np.logaddexp(los, blocked), outlier)
         nlos, outlying = np.exp(blocked - total), np.exp(outlier - total)
