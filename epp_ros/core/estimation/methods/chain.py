@@ -70,9 +70,10 @@ def _angles(model, joints_bytes, shape):
     Return :func:`angles_from_joints` of the joints ``joints_bytes`` of ``shape``, kept.
 
     A frame's judgement, its separation fits, its publication and the next frame's warm
-    start all ask for the same posture's (a model's arrays are read-only).
+    start all ask for the same posture's (a model's arrays are read-only). The last eight
+    are kept, and with them up to eight models.
     """
-    joints = np.frombuffer(joints_bytes).reshape(shape)
+    joints = np.frombuffer(joints_bytes, dtype=float).reshape(shape)
     slew = fit_slew(joints, model.base)
     slews = [slew] if model.pivot_offset == 0.0 else [slew, slew + np.pi]
     fits = []

@@ -99,15 +99,3 @@ def test_keep_folds_restores_the_reference_fold_of_free_joints_only():
     straight[1] = 0.5 * (straight[0] + straight[2])
     assert not keep_folds(coords, straight, pivot, free)[1].any()
     assert not keep_folds(coords, reference, pivot, [False, True, True, False])[1].any()
-
-
-def test_the_angles_of_a_posture_asked_for_again_are_the_same_and_the_callers_own():
-    """A frame's judgement, its publication and the next frame's start share them."""
-    joints = MODEL.forward_kinematics(PSI[0], PSI[1:])
-    slew, pitches = angles_from_joints(MODEL, joints)
-    pitches[:] = 0.0                                 # the caller's copy
-    again = angles_from_joints(MODEL, joints.tolist())
-    assert again[0] == slew
-    np.testing.assert_allclose(again[1], PSI[1:], atol=1e-9)
-    moved = joints + [0.0, 0.0, 0.1]
-    assert not np.allclose(angles_from_joints(MODEL, moved)[1], again[1], atol=1e-3)

@@ -213,3 +213,18 @@ def test_fits_side_by_side_on_some_links_are_the_one_loops_fits():
             batch_cost = method.cost(np.r_[angles_from_joints(model, fitted)], residuals)
             assert batch_cost <= fit.cost * (1 + 1e-6)      # the single loop's stall
             np.testing.assert_allclose(fitted, single, atol=0.05)
+
+
+def test_a_postures_angles_asked_for_again_are_the_same_and_the_callers_own():
+    """A frame's judgement, its publication and the next frame's start share them, per boom."""
+    model = truck_pump()
+    psi = np.r_[0.4, np.radians([50.0, 20.0, 0.0, -20.0, -40.0])]
+    joints = model.forward_kinematics(psi[0], psi[1:])
+    slew, pitches = angles_from_joints(model, joints)
+    pitches[:] = 0.0                                 # the caller's copy
+    again = angles_from_joints(model, joints.tolist())
+    assert again[0] == slew
+    np.testing.assert_allclose(again[1], psi[1:], atol=1e-9)
+    higher = truck_pump(base_height=model.base[2] + 1.0)     # the same joints, another base
+    assert abs(angles_from_joints(higher, joints)[1][0] - psi[1]) > 0.01
+    assert abs(angles_from_joints(model, joints + [0.0, 0.0, 0.5])[1][0] - psi[1]) > 0.01
