@@ -28,7 +28,6 @@ from typing import NamedTuple, Optional
 
 from epp_ros.app.contract import frame_number, FrameNumbers
 from epp_ros.core.estimation import ADMIT, CLOCK_JUMP, FramePolicy, MALFORMED, OUT_OF_ORDER
-from epp_ros.core.estimation.methods import angles_from_joints
 import numpy as np
 
 __all__ = ['RangePipeline', 'Step', 'REJECTED']
@@ -113,9 +112,8 @@ class RangePipeline:
             self.counts['malformed'] += 1
             return Step(None, None)
         self.counts['unknown_links'] += links.unknown
-        joints = self.estimator.update(links.ranges, tag_ranges=links.tag_ranges,
-                                       pitches=pitches, slew=slew, stamp=stamp,
-                                       range_stamps=links.range_stamps(stamp))
+        self.estimator.update(links.ranges, tag_ranges=links.tag_ranges, pitches=pitches,
+                              slew=slew, stamp=stamp, range_stamps=links.range_stamps(stamp))
         diagnostics = self.estimator.last_diagnostics
         if not self._judged(diagnostics):
             return Step(None, diagnostics)
@@ -123,7 +121,7 @@ class RangePipeline:
         # that the joint angles and the positions agree exactly (a method that does not
         # hold the lengths, epp1 and epp2, moves by the errors its diagnostics report).
         model = self.estimator.model
-        slew, pitches = diagnostics.angles or angles_from_joints(model, joints)
+        slew, pitches = diagnostics.angles      # as judged: every judged frame has them
         return Step(model.forward_kinematics(slew, pitches), diagnostics, (slew, pitches))
 
     def _count_numbers(self, number):

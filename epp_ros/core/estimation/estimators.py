@@ -36,7 +36,6 @@ from typing import NamedTuple
 
 from epp_ros.core.estimation.integrity import ERROR, Integrity, IntegrityLimits, OK, Thresholds
 from epp_ros.core.estimation.learned_errors import LearnedErrors, told_noise
-from epp_ros.core.estimation.methods.chain import angles_from_joints
 from epp_ros.core.estimation.methods.registry import make_method, method_options, METHODS
 from epp_ros.core.estimation.noise_learning import frame_scale
 from epp_ros.core.estimation.posture_method import FrameResult
@@ -359,8 +358,7 @@ class PostureEstimator:
         if rows is None:        # a method not held to the chain: not in its judgement
             residuals = Residuals(self.model, Measurements.ranges_only(
                 np.where(kept, measurements.ranges, np.nan)), SensorNoise(sigma))
-            slew, pitches = verdict.angles or angles_from_joints(self.model, joints)
-            rows = residuals.rows(np.r_[slew, pitches])
+            rows = residuals.rows(np.r_[verdict.angles[0], verdict.angles[1]])
         timed = info.get('timed_joints', joints)
         fitted = self.model.ranges(timed)[kept]
         scaled = (fitted - measurements.ranges[kept]) / sigma[kept]
