@@ -21,6 +21,7 @@ A bad description raises :class:`ConfigError` with one line naming the field. Wr
 calibration back into the file is ``app.pump_yaml``; a ``uwb/ranges`` message's link names
 are the contract's (``app.contract.link_name``).
 """
+from array import array
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -321,7 +322,8 @@ def pump_config_from_parameters(values):
         raise ConfigError(f'unknown pump parameter(s) {unknown}')
     get = {name: values.get(name, default) for name, (default, _) in PUMP_PARAMETERS.items()}
     for name, (default, _) in PUMP_PARAMETERS.items():
-        if isinstance(default, list) and not isinstance(get[name], (list, tuple)):
+        # rclpy gives an array parameter set from a message as an array.array.
+        if isinstance(default, list) and not isinstance(get[name], (list, tuple, array)):
             raise ConfigError(f'{name}: must be a list, got {_short(get[name])}')
     frame_id = str(get['frame_id']).strip()
     if not frame_id:

@@ -48,7 +48,10 @@ jump and the estimator starts over, a zero stamp is malformed. Those steps are
 Parameters (``epp_ros.app.settings.SETTINGS``) are live: a change is checked as at start
 (refused with the reason otherwise) and applies from the next frame; a new ``method``
 starts cold, which ``/diagnostics`` counts. The pump's description and the angle sensors'
-names are read-only.
+names are read-only. Frames are solved on a thread of the node's own
+(:mod:`epp_ros.nodes.worker`), in the order they came, the changes of parameters among
+them: the executor answers ``set_parameters`` while a frame is being solved. The 1 Hz
+report goes before the frames waiting (``messages waiting`` counts them).
 """
 import sys
 
@@ -66,6 +69,7 @@ from epp_ros.nodes.messages import (posture_markers, posture_message, POSTURE_QO
                                     RANGES_INPUT_PROFILES, RANGES_INPUT_QOS, to_seconds, to_time)
 from epp_ros.nodes.parameters import declare, declare_pump_parameters, pump_id
 from epp_ros.nodes.runtime import run_node, StartupError
+from epp_ros.nodes.worker import Worker
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, SetParametersResult
 from rclpy.node import Node
@@ -98,8 +102,9 @@ class PostureEstimatorNode(Node):
 
     node_name = 'posture_estimator'
 
-    def __init__(self):
-        super().__init__(self.node_name)
+    def __init__(self, **options):
+        """Take rclpy Node's keywords (``namespace``, ``parameter_overrides``, ...)."""
+        super().__init__(self.node_name, **options)
         self.config = declare_pump_parameters(self)
         self.model = self.config.model()
         self.lengths = self.model.arm_lengths
@@ -125,17 +130,20 @@ class PostureEstimatorNode(Node):
         self._publish_description()
         self.diagnostics = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name,
                                                  DIAGNOSTICS.depth)
-        self.create_subscription(JointState, RANGES.name, self.on_ranges,
-                                 self._ranges_profile(self.values['ranges_qos']))
+        ranges_profile = self._ranges_profile(self.values['ranges_qos'])
+        self.publish_markers = self.values['publish_markers']
+        self.last_frame_time = None
+        self.worst = None               # worst (level, message) since the last report
+        self.status_name = f'{self.get_fully_qualified_name()}'
+        self.worker = Worker('posture_estimator: frames', self._job_failed)
+        self._closed = False
+        self.create_subscription(JointState, RANGES.name, self.on_ranges, ranges_profile)
         self.angles_subscription = None
         self.next_estimator = None      # built by the check of a change of method
         self._subscribe_angles()
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        self.create_timer(1.0, self.publish_diagnostics)
-        self.last_frame_time = None
-        self.worst = None               # worst (level, message) since the last report
-        self.status_name = f'{self.get_fully_qualified_name()}'
+        self.create_timer(1.0, lambda: self.worker.submit_urgent(self.publish_diagnostics))
         self.get_logger().info(f'{self.estimator.method} on {self.model.n_sections} '
                                f'sections, {self.model.n_anchors} anchors')
 
@@ -164,8 +172,7 @@ class PostureEstimatorNode(Node):
     @property
     def angles(self):
         """Return the angle samples, when the method fuses angle sensors (else None)."""
-        return self.angle_samples if 'pitches' in METHODS[self.estimator.method].inputs \
-            else None
+        return self.angle_samples if _fuses_angles(self.estimator.method) else None
 
     def _angle_samples(self, values):
         pitch_names = list(values['pitch_names'])
@@ -175,7 +182,8 @@ class PostureEstimatorNode(Node):
         return AngleSamples(values['slew_name'], pitch_names, values['angle_max_age'])
 
     def _subscribe_angles(self):
-        if self.angles is not None and self.angles_subscription is None:
+        """Subscribe to the angle sensors once a method accepted fuses them."""
+        if _fuses_angles(self.values['method']) and self.angles_subscription is None:
             self.angles_subscription = self.create_subscription(
                 JointState, ANGLES.name, self.on_angles, RANGES_INPUT_QOS)
 
@@ -198,7 +206,7 @@ class PostureEstimatorNode(Node):
             self._angle_samples(values)
             # A new method is built here, where a failure can still refuse the change (the
             # SDP baseline needs cvxpy); the change, once accepted, takes it.
-            self.next_estimator = None if settings['method'] == self.estimator.method \
+            self.next_estimator = None if settings['method'] == self.values['method'] \
                 else PostureEstimator(self.model, moving_anchors=self.config.moving_anchor_indices,
                                       **settings)
         except ImportError as exc:
@@ -208,24 +216,30 @@ class PostureEstimatorNode(Node):
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters):
-        """From the next frame on: a new method starts cold, the rest keeps the warm start."""
+        """Queue an accepted change behind the frames that came before it."""
         changed = {p.name: p.value for p in parameters if p.name in SETTINGS}
         if not changed:
             return
         self.values.update(changed)
-        settings = self.config.with_link_biases(estimator_settings(self.values))
+        if 'max_angular_rate' in changed:           # the URDF's velocity limits
+            self._publish_description()
+        self._subscribe_angles()
+        self.worker.submit(self._use_settings, dict(self.values), set(changed),
+                           self.next_estimator)
+
+    def _use_settings(self, values, changed, next_estimator):
+        """From the next frame on: a new method starts cold, the rest keeps the warm start."""
+        settings = self.config.with_link_biases(estimator_settings(values))
         method = settings.pop('method')
         if method != self.estimator.method:
-            self.pipeline.estimator = self.next_estimator
+            self.pipeline.estimator = next_estimator
             self.counts['method_changes'] += 1
             self.get_logger().info(f'method changed to {method}: starting cold')
         else:
             self.estimator.reconfigure(**settings)
         if 'angle_max_age' in changed:
-            self.angle_samples = self._angle_samples(self.values)
-        if 'max_angular_rate' in changed:           # the URDF's velocity limits
-            self._publish_description()
-        self._subscribe_angles()
+            self.angle_samples = self._angle_samples(values)
+        self.publish_markers = values['publish_markers']
 
     def _publish_description(self):
         """Publish the pump's URDF (latched), its joints' velocity limit the one in use."""
@@ -234,16 +248,27 @@ class PostureEstimatorNode(Node):
 
     # -- frames ---------------------------------------------------------------------------
     def on_angles(self, message):
+        self.worker.submit(self._add_angles, message)
+
+    def on_ranges(self, message):
+        self.worker.submit(self._solve_frame, message)
+
+    def _add_angles(self, message):
         if self.angles is not None:
             self.angles.add(to_seconds(message.header.stamp), message.name, message.position)
 
-    def on_ranges(self, message):
+    def _solve_frame(self, message):
         try:
             self._on_ranges(message)
         except Exception as exc:  # noqa: BLE001 - one bad frame must not stop the node
             self.counts['errors'] += 1
             self.estimator.reset()
             self.get_logger().error(f'frame dropped: {exc!r}', throttle_duration_sec=5.0)
+
+    def _job_failed(self, exc):
+        """Count and log a job of the worker that raised (a frame's are caught in it)."""
+        self.counts['errors'] += 1
+        self.get_logger().error(f'{exc!r}', throttle_duration_sec=5.0)
 
     def _on_ranges(self, message):
         stamp = to_seconds(message.header.stamp)
@@ -263,7 +288,7 @@ class PostureEstimatorNode(Node):
         self.joint_states.publish(JointState(
             header=message.header, name=self.joint_names,
             position=[float(v) for v in joint_positions(slew, pitches)]))
-        if self.values['publish_markers']:
+        if self.publish_markers:
             self.markers.publish(posture_markers(pivot, step.joints, stamp, frame_id))
 
     def _keep_worst(self, diagnostics):
@@ -296,6 +321,7 @@ class PostureEstimatorNode(Node):
         self.worst = None
         values['method'] = self.estimator.method
         values.update({f'frames {key}': str(value) for key, value in self.counts.items()})
+        values['messages waiting'] = str(self.worker.waiting)
         if self.angles is not None:
             values.update({f'boom_angles {key}': str(value)
                            for key, value in self.angles.counts.items()})
@@ -303,6 +329,21 @@ class PostureEstimatorNode(Node):
         array = DiagnosticArray(status=[status])
         array.header.stamp = to_time(self._now())
         self.diagnostics.publish(array)
+
+    def close(self):
+        """Finish the frame being solved and start no other; once (``run_node`` may ask again)."""
+        if self._closed:
+            return
+        self._closed = True
+        left = self.worker.close()
+        unsolved = sum(job == self._solve_frame for job, _ in left)
+        if unsolved:
+            self.get_logger().info(f'{unsolved} frame(s) left unsolved at shutdown')
+
+
+def _fuses_angles(method):
+    """Tell whether a method takes the angle sensors' readings."""
+    return 'pitches' in METHODS[method].inputs
 
 
 def main(args=None):
