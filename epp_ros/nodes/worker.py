@@ -21,18 +21,24 @@ the frames that came before it applies from the next one. Not rclpy's
 ``MultiThreadedExecutor`` with callback groups: its ``shutdown`` does not wait for the
 callbacks in flight (Jazzy), and a node destroyed under a running frame fails in it.
 """
+from collections import deque
 import itertools
 import queue
 import threading
 
 __all__ = ['Worker']
 
+#: The entry that ends the worker: it goes before every job.
+_STOP = [None, ()]
+
 
 class Worker:
     """
     Run jobs one at a time, in the order they were given, on a daemon thread.
 
-    An urgent job (a report) goes before the others waiting, after the urgent ones.
+    An urgent job (a report) goes before the others waiting, after the urgent ones. Of the
+    jobs submitted as droppable (frames), at most ``limit`` wait: a new one drops the
+    oldest, as a keep-last history does, and ``dropped`` counts them.
 
     Parameters
     ----------
@@ -40,28 +46,41 @@ class Worker:
         The thread's name.
     on_error : callable
         Called with the exception a job raised; the worker goes on with the next job.
+    limit : int
+        How many droppable jobs may wait.
 
     """
 
-    def __init__(self, name, on_error):
-        self._jobs = queue.PriorityQueue()      # (urgency, order, job, args)
+    def __init__(self, name, on_error, limit=100):
+        self._jobs = queue.PriorityQueue()      # (urgency, order, [job, args])
         self._order = itertools.count()
         self._on_error = on_error
+        self._limit = limit
+        self._droppable = deque()               # their entries waiting, oldest first
+        self._lock = threading.Lock()
+        self.dropped = 0
         self._closing = threading.Event()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
 
-    def submit(self, job, *args):
+    def submit(self, job, *args, droppable=False):
         """Queue ``job(*args)`` after every job given before it."""
-        self._jobs.put((1, next(self._order), job, args))
+        entry = [job, args]
+        with self._lock:
+            if droppable:
+                self._droppable.append(entry)
+                if len(self._droppable) > self._limit:
+                    self._droppable.popleft()[0] = None     # it will not run
+                    self.dropped += 1
+            self._jobs.put((1, next(self._order), entry))
 
     def submit_urgent(self, job, *args):
         """Queue ``job(*args)`` before the jobs waiting that are not urgent."""
-        self._jobs.put((0, next(self._order), job, args))
+        self._jobs.put((0, next(self._order), [job, args]))
 
     @property
     def waiting(self):
-        """Return the number of jobs queued and not yet started."""
+        """Return the number of jobs queued and not yet started (dropped ones among them)."""
         return self._jobs.qsize()
 
     def close(self, timeout=10.0):
@@ -75,22 +94,32 @@ class Worker:
 
         """
         self._closing.set()
-        self._jobs.put((-1, next(self._order), None, ()))    # wakes a worker waiting
+        self._jobs.put((-1, next(self._order), _STOP))      # wakes a worker waiting
         self._thread.join(timeout)
         left = []
         while True:
             try:
-                _, _, job, args = self._jobs.get_nowait()
+                _, _, (job, args) = self._jobs.get_nowait()
             except queue.Empty:
                 return left
             if job is not None:
                 left.append((job, args))
 
+    def _take(self):
+        """Return the next job to run and its arguments; (None, ()) for a dropped one."""
+        _, _, entry = self._jobs.get()
+        with self._lock:
+            if self._droppable and self._droppable[0] is entry:
+                self._droppable.popleft()
+            return tuple(entry)
+
     def _run(self):
         while not self._closing.is_set():
-            _, _, job, args = self._jobs.get()
-            if job is None or self._closing.is_set():
+            job, args = self._take()
+            if self._closing.is_set():
                 break
+            if job is None:
+                continue
             try:
                 job(*args)
             except Exception as exc:  # noqa: BLE001 - one failed job must not stop the rest

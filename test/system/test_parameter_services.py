@@ -23,20 +23,13 @@ request, which rclpy applies one parameter at a time, in the file's order.
 import os
 import signal
 import subprocess
-import threading
 
-from builtin_interfaces.msg import Time
 from epp_ros.app.config import PUMP_PARAMETERS
-from epp_ros.app.contract import RANGES
-from epp_ros.app.pipeline import Step
-from epp_ros.nodes.messages import RANGES_QOS
 import pytest
 from rcl_interfaces.msg import Parameter as ParameterMessage, ParameterType
 from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
 from rclpy.parameter import Parameter, parameter_dict_from_yaml_file
 from ros_processes import PUMP_YAML, script
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Header
 import yaml
 
 pytestmark = pytest.mark.usefixtures('fresh_listener')
@@ -178,58 +171,3 @@ def test_a_method_that_cannot_be_built_is_refused_and_the_node_lives(
     assert accepted.successful
     assert values(listener, '/posture_estimator', ['method']) == {'method': 'chain'}
 
-
-#: The in-process estimator's namespace: apart from the other tests' processes.
-NAMESPACE = '/in_process'
-
-
-@pytest.fixture
-def estimator_in_process(listener):
-    """Run a posture_estimator in this process, spun on a thread as ``run_node`` spins it."""
-    from epp_ros.nodes.estimator import PostureEstimatorNode
-    from rclpy.executors import SingleThreadedExecutor
-    pump = parameter_dict_from_yaml_file(str(PUMP_YAML), use_wildcard=True)
-    node = PostureEstimatorNode(namespace=NAMESPACE, parameter_overrides=[
-        Parameter.from_parameter_msg(message) for message in pump.values()])
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    spinning = threading.Thread(target=executor.spin, daemon=True)
-    spinning.start()
-    yield node
-    node.close()
-    executor.shutdown(timeout_sec=0)
-    spinning.join(TIMEOUT)
-    node.destroy_node()
-
-
-def test_a_change_is_answered_while_a_frame_is_solved_and_applies_from_the_next(
-        listener, estimator_in_process):
-    """The executor answers while the node's worker solves; the change waits its turn."""
-    node = estimator_in_process
-    solving, release, seen = threading.Event(), threading.Event(), []
-
-    def step(*args, **kwargs):                      # what each frame is solved with
-        seen.append((node.estimator.method, node.publish_markers))
-        solving.set()
-        assert release.wait(TIMEOUT)
-        return Step(None, None)
-
-    node.pipeline.step = step
-    ranges = listener.create_publisher(JointState, f'{NAMESPACE}/{RANGES.name}', RANGES_QOS)
-    stamp = Time(sec=1)
-    ranges.publish(JointState(header=Header(stamp=stamp), name=['frame'], position=[1.0]))
-    assert listener.spin_until(solving.is_set, TIMEOUT)
-    request = SetParameters.Request(parameters=[
-        Parameter('method', value='chain').to_parameter_msg(),
-        Parameter('publish_markers', value=False).to_parameter_msg()])
-    results = call(listener, SetParameters, f'{NAMESPACE}/posture_estimator/set_parameters',
-                   request).results
-    assert [r.successful for r in results] == [True, True]
-    assert seen == [('cepp', True)]                 # answered with the frame still open
-    release.set()
-    ranges.publish(JointState(header=Header(stamp=Time(sec=2)), name=['frame'],
-                              position=[2.0]))
-    assert listener.spin_until(lambda: len(seen) == 2, TIMEOUT)
-    assert seen == [('cepp', True), ('chain', False)]
-    assert node.counts['method_changes'] == 1
-    listener.destroy_publisher(ranges)

@@ -1,0 +1,140 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+posture_estimator in this process: its executor free while its worker solves a frame.
+
+The node is spun on a thread as ``run_node`` spins it; the test speaks to it over DDS
+from the listener and holds a frame open by blocking the estimator's update on an event.
+"""
+import threading
+
+from builtin_interfaces.msg import Time
+from epp_ros.app.config import load_pump_config
+from epp_ros.app.contract import FRAME_NUMBER, RANGES
+from epp_ros.app.pipeline import Step
+from epp_ros.nodes.messages import RANGES_INPUT_QOS, RANGES_QOS, to_time
+import numpy as np
+import pytest
+from rcl_interfaces.srv import SetParameters
+from rclpy.parameter import Parameter, parameter_dict_from_yaml_file
+from ros_processes import PUMP_YAML
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
+
+TIMEOUT = 30.0
+#: The node's namespace: apart from the other tests' processes.
+NAMESPACE = '/in_process'
+CONFIG = load_pump_config(PUMP_YAML)
+
+
+@pytest.fixture
+def estimator_in_process(listener):
+    """Run a posture_estimator in this process, spun on a thread as ``run_node`` spins it."""
+    from epp_ros.nodes.estimator import PostureEstimatorNode
+    from rclpy.executors import SingleThreadedExecutor
+    pump = parameter_dict_from_yaml_file(str(PUMP_YAML), use_wildcard=True)
+    node = PostureEstimatorNode(namespace=NAMESPACE, parameter_overrides=[
+        Parameter.from_parameter_msg(message) for message in pump.values()])
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    spinning = threading.Thread(target=executor.spin, daemon=True)
+    spinning.start()
+    yield node
+    node.close()
+    executor.shutdown(timeout_sec=0)
+    spinning.join(TIMEOUT)
+    node.destroy_node()
+
+
+def _set_parameters(listener, request):
+    client = listener.create_client(SetParameters, f'{NAMESPACE}/posture_estimator/'
+                                    'set_parameters')
+    try:
+        assert client.wait_for_service(timeout_sec=TIMEOUT)
+        future = client.call_async(request)
+        assert listener.spin_until(future.done, TIMEOUT)
+        return future.result().results
+    finally:
+        listener.destroy_client(client)
+
+
+def test_a_change_is_answered_while_a_frame_is_solved_and_applies_from_the_next(
+        listener, estimator_in_process):
+    """The executor answers while the node's worker solves; the change waits its turn."""
+    node = estimator_in_process
+    solving, release, seen = threading.Event(), threading.Event(), []
+
+    def step(*args, **kwargs):                      # what each frame is solved with
+        seen.append((node.estimator.method, node.publish_markers))
+        solving.set()
+        assert release.wait(TIMEOUT)
+        return Step(None, None)
+
+    node.pipeline.step = step
+    ranges = listener.create_publisher(JointState, f'{NAMESPACE}/{RANGES.name}', RANGES_QOS)
+    ranges.publish(JointState(header=Header(stamp=Time(sec=1)), name=['x'], position=[1.0]))
+    assert listener.spin_until(solving.is_set, TIMEOUT)
+    results = _set_parameters(listener, SetParameters.Request(parameters=[
+        Parameter('method', value='chain').to_parameter_msg(),
+        Parameter('publish_markers', value=False).to_parameter_msg()]))
+    assert [r.successful for r in results] == [True, True]
+    assert seen == [('cepp', True)]                 # answered with the frame still open
+    release.set()
+    ranges.publish(JointState(header=Header(stamp=Time(sec=2)), name=['x'], position=[2.0]))
+    assert listener.spin_until(lambda: len(seen) == 2, TIMEOUT)
+    assert seen == [('cepp', True), ('chain', False)]
+    assert node.counts['method_changes'] == 1
+    listener.destroy_publisher(ranges)
+
+
+def test_frames_behind_past_the_drivers_history_are_dropped_oldest_first_and_counted(
+        listener, estimator_in_process):
+    """101 frames wait behind an open one: 5 past the 100 are dropped, lost and overrun."""
+    node = estimator_in_process
+    update, solving, release = node.estimator.update, threading.Event(), threading.Event()
+
+    def first_held(*args, **kwargs):
+        if not solving.is_set():
+            solving.set()
+            assert release.wait(TIMEOUT)
+        return update(*args, **kwargs)
+
+    node.estimator.update = first_held
+    ranges = listener.create_publisher(JointState, f'{NAMESPACE}/{RANGES.name}',
+                                       RANGES_INPUT_QOS)   # keep all: DDS loses none
+    still = [float(r) for r in CONFIG.model().ranges(CONFIG.model().forward_kinematics(
+        0.3, np.radians([50.0, 20.0, 0.0, -20.0, -40.0]))).ravel()]
+
+    def publish(number):
+        ranges.publish(JointState(header=Header(stamp=to_time(100.0 + 0.1 * number)),
+                                  name=[*CONFIG.link_names, FRAME_NUMBER],
+                                  position=[*still, float(number)]))
+
+    publish(1)
+    assert listener.spin_until(solving.is_set, TIMEOUT)
+    for number in range(2, 107):
+        publish(number)
+    assert listener.spin_until(lambda: node.worker.dropped == 5, TIMEOUT)
+    release.set()
+    assert listener.spin_until(lambda: node.counts['received'] == 101, 10 * TIMEOUT)
+    assert node.counts['lost'] == 5 and node.worker.dropped == 5
+
+    def reported():
+        statuses = [s for s in listener.statuses('posture_estimator') if NAMESPACE in s.name]
+        return statuses and {kv.key: kv.value for kv in statuses[-1].values}
+    assert listener.spin_until(lambda: reported() and reported().get('frames overrun') == '5',
+                               TIMEOUT)
+    assert reported()['frames lost'] == '5' and reported()['frames received'] == '101'
+    listener.destroy_publisher(ranges)
