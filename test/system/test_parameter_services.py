@@ -170,4 +170,3 @@ def test_a_method_that_cannot_be_built_is_refused_and_the_node_lives(
                       request).results
     assert accepted.successful
     assert values(listener, '/posture_estimator', ['method']) == {'method': 'chain'}
-
