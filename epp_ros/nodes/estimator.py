@@ -51,9 +51,8 @@ starts cold, which ``/diagnostics`` counts. The pump's description and the angle
 names are read-only. Frames are solved on a thread of the node's own
 (:mod:`epp_ros.nodes.worker`), in the order they came, the changes of parameters among
 them: the executor answers ``set_parameters`` while a frame is being solved. The 1 Hz
-report goes before the frames waiting (``messages waiting`` counts them). Of the frames
-waiting, the newest 100 are kept (as the driver's writer keeps them for a reader behind):
-``frames overrun`` counts the others, which ``frames lost`` counts too.
+report goes before the frames waiting (``messages waiting`` counts them); as the reader's
+keep-all queue did, the worker keeps every frame that came.
 """
 import sys
 
@@ -137,8 +136,7 @@ class PostureEstimatorNode(Node):
         self.last_frame_time = None
         self.worst = None               # worst (level, message) since the last report
         self.status_name = f'{self.get_fully_qualified_name()}'
-        # As many frames wait as the driver's writer keeps for a reader behind it.
-        self.worker = Worker('posture_estimator: frames', self._job_failed, RANGES.depth)
+        self.worker = Worker('posture_estimator: frames', self._job_failed)
         self._closed = False
         self.create_subscription(JointState, RANGES.name, self.on_ranges, ranges_profile)
         self.angles_subscription = None
@@ -254,7 +252,7 @@ class PostureEstimatorNode(Node):
         self.worker.submit(self._add_angles, message)
 
     def on_ranges(self, message):
-        self.worker.submit(self._solve_frame, message, droppable=True)
+        self.worker.submit(self._solve_frame, message)
 
     def _add_angles(self, message):
         if self.angles is not None:
@@ -323,7 +321,6 @@ class PostureEstimatorNode(Node):
                 status.level = LEVELS[level]
         self.worst = None
         values['method'] = self.estimator.method
-        self.counts['overrun'] = self.worker.dropped
         values.update({f'frames {key}': str(value) for key, value in self.counts.items()})
         values['messages waiting'] = str(self.worker.waiting)
         if self.angles is not None:

@@ -21,11 +21,9 @@ from the listener and holds a frame open by blocking the estimator's update on a
 import threading
 
 from builtin_interfaces.msg import Time
-from epp_ros.app.config import load_pump_config
-from epp_ros.app.contract import FRAME_NUMBER, RANGES
+from epp_ros.app.contract import RANGES
 from epp_ros.app.pipeline import Step
-from epp_ros.nodes.messages import RANGES_INPUT_QOS, RANGES_QOS, to_time
-import numpy as np
+from epp_ros.nodes.messages import RANGES_QOS
 import pytest
 from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter, parameter_dict_from_yaml_file
@@ -36,7 +34,6 @@ from std_msgs.msg import Header
 TIMEOUT = 30.0
 #: The node's namespace: apart from the other tests' processes.
 NAMESPACE = '/in_process'
-CONFIG = load_pump_config(PUMP_YAML)
 
 
 @pytest.fixture
@@ -96,45 +93,4 @@ def test_a_change_is_answered_while_a_frame_is_solved_and_applies_from_the_next(
     assert listener.spin_until(lambda: len(seen) == 2, TIMEOUT)
     assert seen == [('cepp', True), ('chain', False)]
     assert node.counts['method_changes'] == 1
-    listener.destroy_publisher(ranges)
-
-
-def test_frames_behind_past_the_drivers_history_are_dropped_oldest_first_and_counted(
-        listener, estimator_in_process):
-    """101 frames wait behind an open one: 5 past the 100 are dropped, lost and overrun."""
-    node = estimator_in_process
-    update, solving, release = node.estimator.update, threading.Event(), threading.Event()
-
-    def first_held(*args, **kwargs):
-        if not solving.is_set():
-            solving.set()
-            assert release.wait(TIMEOUT)
-        return update(*args, **kwargs)
-
-    node.estimator.update = first_held
-    ranges = listener.create_publisher(JointState, f'{NAMESPACE}/{RANGES.name}',
-                                       RANGES_INPUT_QOS)   # keep all: DDS loses none
-    still = [float(r) for r in CONFIG.model().ranges(CONFIG.model().forward_kinematics(
-        0.3, np.radians([50.0, 20.0, 0.0, -20.0, -40.0]))).ravel()]
-
-    def publish(number):
-        ranges.publish(JointState(header=Header(stamp=to_time(100.0 + 0.1 * number)),
-                                  name=[*CONFIG.link_names, FRAME_NUMBER],
-                                  position=[*still, float(number)]))
-
-    publish(1)
-    assert listener.spin_until(solving.is_set, TIMEOUT)
-    for number in range(2, 107):
-        publish(number)
-    assert listener.spin_until(lambda: node.worker.dropped == 5, TIMEOUT)
-    release.set()
-    assert listener.spin_until(lambda: node.counts['received'] == 101, 10 * TIMEOUT)
-    assert node.counts['lost'] == 5 and node.worker.dropped == 5
-
-    def reported():
-        statuses = [s for s in listener.statuses('posture_estimator') if NAMESPACE in s.name]
-        return statuses and {kv.key: kv.value for kv in statuses[-1].values}
-    assert listener.spin_until(                     # a report made after the last frame
-        lambda: reported() and reported().get('frames received') == '101', TIMEOUT)
-    assert reported()['frames overrun'] == '5' and reported()['frames lost'] == '5'
     listener.destroy_publisher(ranges)
