@@ -21,7 +21,6 @@ the frames that came before it applies from the next one. Not rclpy's
 ``MultiThreadedExecutor`` with callback groups: its ``shutdown`` does not wait for the
 callbacks in flight (Jazzy), and a node destroyed under a running frame fails in it.
 """
-from collections import deque
 import itertools
 import queue
 import threading
@@ -36,9 +35,7 @@ class Worker:
     """
     Run jobs one at a time, in the order they were given, on a daemon thread.
 
-    An urgent job (a report) goes before the others waiting, after the urgent ones. Of the
-    jobs submitted as droppable (frames), at most ``limit`` wait: a new one drops the
-    oldest, as a keep-last history does, and ``dropped`` counts them.
+    An urgent job (a report) goes before the others waiting, after the urgent ones.
 
     Parameters
     ----------
@@ -46,33 +43,20 @@ class Worker:
         The thread's name.
     on_error : callable
         Called with the exception a job raised; the worker goes on with the next job.
-    limit : int
-        How many droppable jobs may wait.
 
     """
 
-    def __init__(self, name, on_error, limit=100):
+    def __init__(self, name, on_error):
         self._jobs = queue.PriorityQueue()      # (urgency, order, [job, args])
         self._order = itertools.count()
         self._on_error = on_error
-        self._limit = limit
-        self._droppable = deque()               # their entries waiting, oldest first
-        self._lock = threading.Lock()
-        self.dropped = 0
         self._closing = threading.Event()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
 
-    def submit(self, job, *args, droppable=False):
+    def submit(self, job, *args):
         """Queue ``job(*args)`` after every job given before it."""
-        entry = [job, args]
-        with self._lock:
-            if droppable:
-                self._droppable.append(entry)
-                if len(self._droppable) > self._limit:
-                    self._droppable.popleft()[0] = None     # it will not run
-                    self.dropped += 1
-            self._jobs.put((1, next(self._order), entry))
+        self._jobs.put((1, next(self._order), [job, args]))
 
     def submit_urgent(self, job, *args):
         """Queue ``job(*args)`` before the jobs waiting that are not urgent."""
@@ -80,7 +64,7 @@ class Worker:
 
     @property
     def waiting(self):
-        """Return the number of jobs queued and not yet started (dropped ones among them)."""
+        """Return the number of jobs queued and not yet started."""
         return self._jobs.qsize()
 
     def close(self, timeout=10.0):
@@ -105,21 +89,11 @@ class Worker:
             if job is not None:
                 left.append((job, args))
 
-    def _take(self):
-        """Return the next job to run and its arguments; (None, ()) for a dropped one."""
-        _, _, entry = self._jobs.get()
-        with self._lock:
-            if self._droppable and self._droppable[0] is entry:
-                self._droppable.popleft()
-            return tuple(entry)
-
     def _run(self):
         while not self._closing.is_set():
-            job, args = self._take()
-            if self._closing.is_set():
+            _, _, (job, args) = self._jobs.get()
+            if job is None or self._closing.is_set():
                 break
-            if job is None:
-                continue
             try:
                 job(*args)
             except Exception as exc:  # noqa: BLE001 - one failed job must not stop the rest

@@ -107,21 +107,3 @@ def test_an_urgent_job_goes_before_the_others_waiting_but_after_the_urgent_ones(
     assert finished.wait(TIMEOUT)
     assert done == ['report 1', 'report 2', 'frame 0', 'frame 1', 'frame 2']
     worker.close()
-
-
-def test_past_its_limit_a_droppable_job_drops_the_oldest_waiting_and_counts_it():
-    started, release, finished, done = (threading.Event(), threading.Event(),
-                                        threading.Event(), [])
-    worker = Worker('test worker', [].append, limit=3)
-    worker.submit(lambda: (started.set(), release.wait(TIMEOUT)), droppable=True)
-    assert started.wait(TIMEOUT)                # running: no longer waiting
-    worker.submit(done.append, 'frame 1', droppable=True)
-    worker.submit(done.append, 'change')        # not droppable: kept in its place
-    for k in range(2, 6):
-        worker.submit(done.append, f'frame {k}', droppable=True)
-    worker.submit(finished.set)
-    assert worker.dropped == 2
-    release.set()
-    assert finished.wait(TIMEOUT)
-    assert done == ['change', 'frame 3', 'frame 4', 'frame 5']
-    worker.close()
