@@ -30,7 +30,7 @@ setup(
         ('share/' + package_name + '/rviz', glob('rviz/*.rviz')),
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'pyserial', 'PyYAML', 'rich', 'rosbags',
-                      'threadpoolctl'],
+                      'threadpoolctl', 'numba'],
     # test: what colcon test looks for to run pytest (the ament_python template's
     # tests_require, which setuptools 80 dropped). bench: the SDP baseline and the
     # benchmarks' plots (python3 dev.py bench); never needed at runtime.

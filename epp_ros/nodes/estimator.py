@@ -65,7 +65,7 @@ from epp_ros.app.health import assess, grade
 from epp_ros.app.pipeline import RangePipeline
 from epp_ros.app.robot_description import joint_names, joint_positions, urdf
 from epp_ros.app.settings import estimator_settings, parameter_name, SETTINGS
-from epp_ros.core import METHODS, PostureEstimator
+from epp_ros.core import compile_fit, METHODS, PostureEstimator
 from epp_ros.nodes.messages import (posture_markers, posture_message, POSTURE_QOS, qos,
                                     RANGES_INPUT_PROFILES, RANGES_INPUT_QOS, to_seconds, to_time)
 from epp_ros.nodes.parameters import declare, declare_pump_parameters, pump_id
@@ -121,6 +121,7 @@ class PostureEstimatorNode(Node):
             raise StartupError(f'method: {exc}') from None
         except ValueError as exc:
             raise StartupError(parameter_name(str(exc))) from None
+        compile_fit()       # before the first frame: the first compile takes seconds
         self.posture = self.create_publisher(PoseArray, POSTURE.name, POSTURE_QOS)
         self.markers = self.create_publisher(MarkerArray, MARKERS.name, POSTURE_QOS)
         self.joint_states = self.create_publisher(JointState, JOINT_STATES.name,

@@ -31,6 +31,7 @@ THIRD_PARTY = {'numpy': ('numpy', 'python3-numpy'), 'scipy': ('scipy', 'python3-
                'serial': ('pyserial', 'python3-serial'), 'yaml': ('PyYAML', 'python3-yaml'),
                'rich': ('rich', 'python3-rich'), 'rosbags': ('rosbags', 'python3-rosbags-pip'),
                'threadpoolctl': ('threadpoolctl', 'python3-threadpoolctl'),
+               'numba': ('numba', 'python3-numba'),
                'pytest': ('pytest', 'python3-pytest'),
                'hypothesis': ('hypothesis', 'python3-hypothesis'),
                'yourdfpy': ('yourdfpy', 'python3-yourdfpy-pip'),

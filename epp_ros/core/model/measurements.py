@@ -295,6 +295,10 @@ class Residuals:
             self._angle_rows[-1, 0] = 1.0
         self._angle_index = np.r_[1 + self._pitch, [0] if self.slew_measured else []]
         self._angle_index = self._angle_index.astype(int)
+        #: Which rows measure what, int64 each: (tag, anchor) of each tag-anchor range,
+        #: (near, far) of each tag-tag range, the angle each angle row reads.
+        self.layout = tuple(np.ascontiguousarray(index, dtype=np.int64) for index in (
+            self._tag, self._anchor, self._near, self._far, self._angle_index))
 
     @property
     def size(self):

@@ -308,11 +308,11 @@ class LinkLoss:
         s = np.asarray(excess, dtype=float)
         if self.gaussian:
             return 0.5 * s ** 2, s, np.zeros_like(s)
-        return self._relative(s, *self._at_zero)
+        return self._relative(s, *self.at_zero)
 
     @cached_property
-    def _at_zero(self):
-        """Return the value and slope at zero excess, which the loss takes off (once needed)."""
+    def at_zero(self):
+        """Value and slope at zero excess (shaped like the sigmas), which the loss takes off."""
         cost, slope, _ = self._relative(np.zeros_like(self.inverse_g), 0.0, 0.0)
         return cost, slope
 

@@ -37,6 +37,9 @@ tried at its other well-fitting pitches until nothing fits better.
 """
 from dataclasses import replace
 from functools import lru_cache
+import importlib
+import importlib.util
+import os
 from typing import NamedTuple
 
 from epp_ros.core.model.folds import folded_angles, tip_circle, tip_minima
@@ -45,16 +48,39 @@ from epp_ros.core.model.nlos import NlosMixture, OUTLIER_FRACTION, range_excess
 from epp_ros.core.model.noise import DEFAULT_NOISE, fitted_link_bias
 from epp_ros.core.model.plane import fit_slew, to_plane
 from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt, \
-    levenberg_marquardt_batch, STALL
+    levenberg_marquardt_batch, LevenbergMarquardtResult, STALL
 import numpy as np
 from scipy.special import bdtrc
 
 __all__ = ['ChainMethod', 'Fit', 'SearchExhausted', 'angles_from_joints', 'canonical_angles',
-           'grow_chains']
+           'compile_fit', 'grow_chains']
+
+#: Whether the chain fits compiled (``compiled_chain``): numba is installed and
+#: ``EPP_ROS_COMPILED`` is not 0. Else the numpy path, which is the same fit.
+COMPILED = (importlib.util.find_spec('numba') is not None
+            and os.environ.get('EPP_ROS_COMPILED', '1') != '0')
 
 #: A screening fit leaning on more of its ranges (blocked or outliers by the judge) than
 #: the judge's shares give this chance has a sigma told too small (``_screened``).
 LEANING_TAIL = 1e-3
+
+
+@lru_cache(maxsize=None)
+def _compiled_chain():
+    """Return the ``compiled_chain`` module, imported at its first use (it imports numba)."""
+    return importlib.import_module('epp_ros.core.estimation.methods.compiled_chain')
+
+
+def compile_fit():
+    """
+    Compile the chain's fit now, where it is compiled (``COMPILED``); return whether it is.
+
+    The first compile on a machine takes some 10 s; numba then loads it from its disk cache
+    (a fraction of a second). Called before the first frame where that frame's time matters.
+    """
+    if COMPILED:
+        _compiled_chain().compile_now()
+    return COMPILED
 
 
 def angles_from_joints(model, joints):
@@ -458,18 +484,30 @@ class ChainMethod:
 
         n = residuals.n_ranged
         result = judged_minimum(minimise, self.losses(residuals),
-                                lambda result: result.state[2][2][:n],
+                                lambda result: result.state[:n],
                                 lambda x: self.cost(x, residuals), psi, also,
                                 refit=max_iter is None)
         return Fit(result.x, result.cost, result.iterations, result.converged)
 
     def _levenberg_marquardt(self, psi, residuals, judged, max_iter, stall):
-        """Return :func:`levenberg_marquardt`'s result under the fit's or the judge's loss."""
-        return levenberg_marquardt(
+        """
+        Return :func:`levenberg_marquardt`'s result under the fit's or the judge's loss.
+
+        Its ``state`` is the scaled residuals where it stopped. Compiled where numba is
+        (``compiled_chain``); the numpy path is the same fit.
+        """
+        max_iter = self.max_iter if max_iter is None else max_iter
+        if COMPILED:
+            compiled = _compiled_chain()
+            terms = compiled.loss_terms(self.losses(residuals)[judged])
+            return LevenbergMarquardtResult(*compiled.fit(
+                psi, self.model, residuals, terms, self.lowest_joint, self.GROUND_SIGMA,
+                max_iter, self.tol, stall))
+        result = levenberg_marquardt(
             psi, lambda x: self._evaluate(x, residuals, judged),
             lambda x, parts: self._normal_equations(x, residuals, *parts),
-            max_iter=self.max_iter if max_iter is None else max_iter, tol=self.tol,
-            stall=stall)
+            max_iter=max_iter, tol=self.tol, stall=stall)
+        return replace(result, state=result.state[2][2])
 
     def residuals_of(self, measurements):
         """Return the frame's :class:`Residuals` under this chain's noise (with its own biases)."""
@@ -591,6 +629,11 @@ class ChainMethod:
 
     def cost(self, psi, residuals):
         """Return the loss at angles ``psi`` (p + 1,) on a :class:`Residuals`, as :meth:`fit`'s."""
+        if COMPILED:
+            compiled = _compiled_chain()
+            return compiled.cost(psi, self.model, residuals,
+                                 compiled.loss_terms(self.losses(residuals)[True]),
+                                 self.lowest_joint, self.GROUND_SIGMA)
         return self._evaluate(np.asarray(psi, dtype=float), residuals, judged=True)[0]
 
     # -- starts ---------------------------------------------------------------------------

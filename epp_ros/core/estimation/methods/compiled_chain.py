@@ -1,0 +1,370 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The chain's Levenberg–Marquardt fit, compiled: the same cost, steps and stopping rules.
+
+A frame's fit is a few dozen residuals in p + 1 unknowns. In numpy each step is some forty
+array operations on arrays that small, and their calls, not their arithmetic, are the time
+(issue #30). This module does the same arithmetic in one function compiled by numba, from
+the same inputs: the boom's geometry (``BoomModel.forward_kinematics`` and
+``joint_jacobian``), the rows of ``Residuals``, the constants of the NLOS loss
+(``LinkLoss``, whose formulas :func:`_link_loss` repeats) and the damping schedule of
+``core.solvers.levenberg_marquardt``, whose constants it imports.
+
+The numpy path in :class:`~epp_ros.core.estimation.methods.chain.ChainMethod` stays the
+reference: the tests fit the same frames both ways and compare. It is the path taken where
+numba is not installed, or with ``EPP_ROS_COMPILED=0`` in the environment; this module
+(and numba, about 0.4 s) is imported at the first compiled fit only. The first fit on a
+machine compiles (some 10 s, once: numba caches it beside this file); the compiled
+function releases the GIL, so a node's executor thread runs while its worker fits.
+"""
+from functools import lru_cache
+import math
+
+from epp_ros.core.solvers.levenberg_marquardt import FALL, GROWTH, INITIAL_DAMPING, MAX_DAMPING
+import numba
+import numpy as np
+
+__all__ = ['compile_now', 'cost', 'fit', 'loss_terms']
+
+_SQRT1_2 = math.sqrt(0.5)
+_HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
+_LOG_2 = math.log(2.0)
+#: Ridge on the damped diagonal, as ``marquardt_step``'s default.
+_RIDGE = 1e-9
+#: Rows of :func:`loss_terms`.
+_TERMS = ('inverse_g', 'los_offset', 'blocked_offset', 'outlier_ratio', 'outlier_offset')
+
+
+def _compiled(function):
+    """Return ``function`` compiled: in nopython mode, cached on disk, without the GIL."""
+    return numba.njit(cache=True, nogil=True)(function)
+
+
+@lru_cache(maxsize=32)
+def loss_terms(link_loss):
+    """
+    Return a ``LinkLoss``'s constants as one array for :func:`fit`: shape (7, n), or (0, 0).
+
+    Rows: ``inverse_g``, ``los_offset``, ``blocked_offset``, ``outlier_ratio``,
+    ``outlier_offset``, then the loss's value and slope at zero excess. A Gaussian loss has
+    none.
+    """
+    if link_loss.gaussian:
+        return np.zeros((0, 0))
+    zero_cost, zero_slope = link_loss.at_zero
+    return np.ascontiguousarray(np.vstack(
+        [np.broadcast_to(getattr(link_loss, name), zero_cost.shape) for name in _TERMS]
+        + [zero_cost, zero_slope]), dtype=float)
+
+
+@_compiled
+def _log_ndtr(z):
+    """Return log Phi(z), as ``scipy.special.log_ndtr`` to rounding."""
+    if z > -1.0:
+        return math.log1p(-0.5 * math.erfc(z * _SQRT1_2))
+    if z > -37.0:               # erfc stays a normal number
+        return math.log(0.5 * math.erfc(-z * _SQRT1_2))
+    inverse = 1.0 / (z * z)     # Mills' ratio's asymptotic series
+    series = 1.0 + inverse * (-1.0 + inverse * (3.0 + inverse * (-15.0 + inverse * (
+        105.0 + inverse * (-945.0 + inverse * 10395.0)))))
+    return -0.5 * z * z - math.log(-z) - _HALF_LOG_2PI + math.log(series)
+
+
+@_compiled
+def _logaddexp(x, y):
+    """Return log(exp(x) + exp(y)), as ``numpy.logaddexp``."""
+    if x == y:
+        return x + _LOG_2
+    difference = x - y
+    if difference > 0:
+        return x + math.log1p(math.exp(-difference))
+    return y + math.log1p(math.exp(difference))
+
+
+@_compiled
+def _link_loss(s, terms, i):
+    """Return (cost, slope) of excess ``s`` on link ``i``: ``LinkLoss.__call__``'s formulas."""
+    inverse_g, los_offset, blocked_offset = terms[0, i], terms[1, i], terms[2, i]
+    outlier_ratio, outlier_offset = terms[3, i], terms[4, i]
+    z = s - inverse_g
+    log_cdf = _log_ndtr(z)
+    los = los_offset - 0.5 * s ** 2
+    blocked = blocked_offset - inverse_g * s + log_cdf
+    outlier = outlier_offset - 0.5 * (outlier_ratio * s) ** 2
+    total = _logaddexp(_logaddexp(los, blocked), outlier)
+    nlos, outlying = math.exp(blocked - total), math.exp(outlier - total)
+    mills = math.exp(-0.5 * z ** 2 - _HALF_LOG_2PI - log_cdf)
+    slope = ((1.0 - nlos - outlying) * s + nlos * (inverse_g - mills)
+             + outlying * outlier_ratio ** 2 * s - terms[6, i])
+    return -total - terms[5, i] - terms[6, i] * s, slope
+
+
+@_compiled
+def _joints(psi, arm_lengths, base, pivot_offset, joints):
+    """Fill ``joints`` (p, 3) at angles ``psi``: ``BoomModel.forward_kinematics``."""
+    cos_slew, sin_slew = math.cos(psi[0]), math.sin(psi[0])
+    along, height = 0.0, 0.0
+    for k in range(arm_lengths.size):
+        along += arm_lengths[k] * math.cos(psi[1 + k])
+        height += arm_lengths[k] * math.sin(psi[1 + k])
+        reach = pivot_offset + along
+        joints[k, 0] = base[0] + reach * cos_slew
+        joints[k, 1] = base[1] + reach * sin_slew
+        joints[k, 2] = base[2] + height
+
+
+@_compiled
+def _joint_jacobian(psi, arm_lengths, pivot_offset, jacobian):
+    """Fill ``jacobian`` (p, 3, p + 1) at ``psi``: ``BoomModel.joint_jacobian``."""
+    p = arm_lengths.size
+    cos_slew, sin_slew = math.cos(psi[0]), math.sin(psi[0])
+    jacobian[:] = 0.0
+    along = 0.0
+    for i in range(p):
+        along += arm_lengths[i] * math.cos(psi[1 + i])
+        reach = pivot_offset + along
+        jacobian[i, 0, 0] = -reach * sin_slew
+        jacobian[i, 1, 0] = reach * cos_slew
+        rise = arm_lengths[i] * math.sin(psi[1 + i])
+        for k in range(i, p):      # joint k moves with sections i <= k
+            jacobian[k, 0, 1 + i] = -rise * cos_slew
+            jacobian[k, 1, 1 + i] = -rise * sin_slew
+            jacobian[k, 2, 1 + i] = arm_lengths[i] * math.cos(psi[1 + i])
+
+
+@_compiled
+def _evaluate(psi, geometry, rows, measured, sigma, terms, ground, joints, state):
+    """
+    Return the cost at ``psi``; fill ``joints`` and ``state`` (scaled, slope, weights, depth).
+
+    ``ChainMethod._evaluate`` and ``loss``: ranges under the NLOS loss (``terms``), angles
+    Gaussian, IRLS weights, the ground penalty.
+    """
+    arm_lengths, base, anchors = geometry[0], geometry[1], geometry[2]
+    tag, anchor, near, far, angle_index = rows[0], rows[1], rows[2], rows[3], rows[4]
+    pivot_offset, lowest_joint, ground_sigma = ground[0], ground[1], ground[2]
+    scaled, slope, weights, depth = state[0], state[1], state[2], state[3]
+    _joints(psi, arm_lengths, base[0], pivot_offset, joints)
+    n_links, n_tags = tag.size, near.size
+    n_ranged = n_links + n_tags
+    cost = 0.0
+    for r in range(measured.size):
+        if r < n_ranged:
+            if r < n_links:
+                a, b = joints[tag[r]], anchors[anchor[r]]
+            else:
+                a, b = joints[near[r - n_links]], joints[far[r - n_links]]
+            distance = math.sqrt((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2)
+            scaled[r] = (distance - measured[r]) / sigma[r]
+            if terms.shape[0]:
+                c, excess_slope = _link_loss(-scaled[r], terms, r)
+                slope[r] = -excess_slope
+            else:
+                c, slope[r] = 0.5 * scaled[r] ** 2, scaled[r]
+        else:
+            turn = psi[angle_index[r - n_ranged]] - measured[r]
+            scaled[r] = ((turn + math.pi) % (2.0 * math.pi) - math.pi) / sigma[r]
+            c, slope[r] = 0.5 * scaled[r] ** 2, scaled[r]
+        cost += c
+        weights[r] = 1.0
+        if abs(scaled[r]) > 1.0:
+            weights[r] = min(max(slope[r] / scaled[r], 1e-3), 1.0)
+    for k in range(joints.shape[0]):
+        depth[k] = max(lowest_joint - joints[k, 2], 0.0) / ground_sigma
+        cost += 0.5 * depth[k] ** 2
+    return cost
+
+
+@_compiled
+def _normal_equations(psi, geometry, rows, sigma, ground, joints, state, jacobian, normal,
+                      gradient):
+    """Fill the IRLS ``normal`` matrix and ``gradient`` at ``psi``: ``_normal_equations``."""
+    arm_lengths, anchors = geometry[0], geometry[2]
+    tag, anchor, near, far, angle_index = rows[0], rows[1], rows[2], rows[3], rows[4]
+    pivot_offset, ground_sigma = ground[0], ground[2]
+    slope, weights, depth = state[1], state[2], state[3]
+    n = psi.size
+    _joint_jacobian(psi, arm_lengths, pivot_offset, jacobian)
+    normal[:] = 0.0
+    gradient[:] = 0.0
+    row = np.empty(n)
+    n_links, n_tags = tag.size, near.size
+    for r in range(sigma.size):
+        row[:] = 0.0
+        if r < n_links + n_tags:
+            if r < n_links:
+                k, other, b = tag[r], -1, anchors[anchor[r]]
+            else:
+                k, other, b = near[r - n_links], far[r - n_links], joints[far[r - n_links]]
+            a = joints[k]
+            distance = max(math.sqrt((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2
+                                     + (a[2] - b[2]) ** 2), 1e-12)
+            for c in range(3):
+                unit = (a[c] - b[c]) / distance / sigma[r]
+                for q in range(n):
+                    moved = jacobian[k, c, q] - (jacobian[other, c, q] if other >= 0 else 0.0)
+                    row[q] += unit * moved
+        else:
+            row[angle_index[r - n_links - n_tags]] = 1.0 / sigma[r]
+        for q in range(n):
+            gradient[q] += row[q] * slope[r]
+            for s in range(n):
+                normal[q, s] += row[q] * weights[r] * row[s]
+    for k in range(joints.shape[0]):
+        if depth[k] > 0.0:
+            for q in range(n):
+                gradient[q] -= jacobian[k, 2, q] / ground_sigma * depth[k]
+                for s in range(n):
+                    normal[q, s] += jacobian[k, 2, q] * jacobian[k, 2, s] / ground_sigma ** 2
+
+
+@_compiled
+def _damped_step(normal, gradient, damping, step):
+    """Fill ``step`` with ``-(normal + damping diag(diag + ridge))^-1 gradient`` (LU, pivoting)."""
+    n = gradient.size
+    system = normal.copy()
+    for q in range(n):
+        system[q, q] += damping * (normal[q, q] + _RIDGE)
+    step[:] = -gradient
+    for col in range(n):
+        pivot = col + np.argmax(np.abs(system[col:, col]))
+        if pivot != col:
+            for c in range(n):
+                system[col, c], system[pivot, c] = system[pivot, c], system[col, c]
+            step[col], step[pivot] = step[pivot], step[col]
+        for r in range(col + 1, n):
+            factor = system[r, col] / system[col, col]
+            for c in range(col, n):
+                system[r, c] -= factor * system[col, c]
+            step[r] -= factor * step[col]
+    for r in range(n - 1, -1, -1):
+        total = step[r]
+        for c in range(r + 1, n):
+            total -= system[r, c] * step[c]
+        step[r] = total / system[r, r]
+
+
+@_compiled
+def _fit(start, geometry, rows, measured, sigma, terms, ground, limits):
+    """Compiled :func:`fit`; ``limits`` = (max_iter, tol, stall, damping_floor)."""
+    max_iter, tol, stall, damping_floor = int(limits[0]), limits[1], limits[2], limits[3]
+    n, p, size = start.size, start.size - 1, measured.size
+    x = start.copy()
+    joints, trial_joints = np.empty((p, 3)), np.empty((p, 3))
+    state, trial_state = np.empty((4, max(size, p))), np.empty((4, max(size, p)))
+    jacobian = np.empty((p, 3, n))
+    normal, gradient, step = np.empty((n, n)), np.empty(n), np.empty(n)
+    cost = _evaluate(x, geometry, rows, measured, sigma, terms, ground, joints, state)
+    damping = INITIAL_DAMPING
+    for iteration in range(1, max_iter + 1):
+        _normal_equations(x, geometry, rows, sigma, ground, joints, state, jacobian, normal,
+                          gradient)
+        while True:
+            _damped_step(normal, gradient, damping, step)
+            trial = x + step
+            trial_cost = _evaluate(trial, geometry, rows, measured, sigma, terms, ground,
+                                   trial_joints, trial_state)
+            if trial_cost <= cost or damping > MAX_DAMPING:
+                break
+            damping *= GROWTH
+        if trial_cost > cost:               # no step lowers the cost: a minimum
+            return x, cost, state[0, :size].copy(), iteration, True
+        stalled = cost - trial_cost <= stall * max(abs(trial_cost), 1e-300)
+        x, cost = trial, trial_cost
+        joints, trial_joints = trial_joints, joints
+        state, trial_state = trial_state, state
+        damping = max(damping / FALL, damping_floor)
+        if stalled or np.max(np.abs(step)) <= tol:
+            return x, cost, state[0, :size].copy(), iteration, True
+    return x, cost, state[0, :size].copy(), max_iter, False
+
+
+def fit(start, model, residuals, terms, lowest_joint, ground_sigma, max_iter, tol, stall,
+        damping_floor=1e-9):
+    """
+    Fit a frame's chain by Levenberg–Marquardt from ``start``, compiled.
+
+    Parameters
+    ----------
+    start : ndarray, shape (p + 1,)
+        Slew and pitches, radians.
+    model : BoomModel
+        The boom and the anchors.
+    residuals : Residuals
+        The frame's rows, measured values and sigmas.
+    terms : ndarray, shape (7, n_ranged) or (0, 0)
+        The ranges' loss, :func:`loss_terms`.
+    lowest_joint, ground_sigma : float
+        The ground penalty, metres.
+    max_iter : int
+        Iterations at most.
+    tol, stall, damping_floor : float
+        As ``levenberg_marquardt``'s.
+
+    Returns
+    -------
+    x : ndarray, shape (p + 1,)
+    cost : float
+    scaled : ndarray, shape (size,)
+        The scaled residuals at ``x``.
+    iterations : int
+    converged : bool
+
+    """
+    limits = np.array([max_iter, tol, stall, damping_floor], dtype=float)
+    x, cost, scaled, iterations, converged = _fit(
+        np.array(start, dtype=float), *_problem(model, residuals, terms, lowest_joint,
+                                                ground_sigma), limits)
+    return x, float(cost), scaled, int(iterations), bool(converged)
+
+
+def cost(psi, model, residuals, terms, lowest_joint, ground_sigma):
+    """Return the fit's cost at ``psi`` (p + 1,): :func:`fit`'s arguments, compiled."""
+    return float(_cost(np.array(psi, dtype=float),
+                       *_problem(model, residuals, terms, lowest_joint, ground_sigma)))
+
+
+@_compiled
+def _cost(psi, geometry, rows, measured, sigma, terms, ground):
+    """Compiled :func:`cost`."""
+    p = psi.size - 1
+    state = np.empty((4, max(measured.size, p)))
+    return _evaluate(psi, geometry, rows, measured, sigma, terms, ground, np.empty((p, 3)),
+                     state)
+
+
+def _problem(model, residuals, terms, lowest_joint, ground_sigma):
+    """Return a frame's arguments of :func:`_fit` and :func:`_cost`, after the start."""
+    geometry = (_array(model.arm_lengths), _array(model.base).reshape(1, 3),
+                _array(model.anchors))
+    ground = np.array([model.pivot_offset, lowest_joint, ground_sigma], dtype=float)
+    return (geometry, residuals.layout, _array(residuals.measured), _array(residuals.sigma),
+            _array(terms), ground)
+
+
+def _array(values):
+    """Return ``values`` as the array type :func:`_fit` is compiled for (else it recompiles)."""
+    return np.require(values, dtype=float, requirements=['C', 'W'])
+
+
+def compile_now():
+    """Compile the fit and the cost (or load them from numba's disk cache), on one link."""
+    empty = np.zeros(0, dtype=np.int64)
+    rows = (np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), empty, empty, empty)
+    problem = ((np.ones(1), np.zeros((1, 3)), np.ones((1, 3))), rows, np.ones(1), np.ones(1),
+               np.zeros((0, 0)), np.array([0.0, -1.0, 0.05]))
+    _fit(np.zeros(2), *problem, np.array([5.0, 1e-10, 1e-6, 1e-9]))
+    _cost(np.zeros(2), *problem)
