@@ -489,6 +489,11 @@ class ChainMethod:
                                 refit=max_iter is None)
         return Fit(result.x, result.cost, result.iterations, result.converged)
 
+    @staticmethod
+    def compiled():
+        """Return the module of the compiled fit, or None where the fit runs in numpy."""
+        return _compiled_chain() if COMPILED else None
+
     def _levenberg_marquardt(self, psi, residuals, judged, max_iter, stall):
         """
         Return :func:`levenberg_marquardt`'s result under the fit's or the judge's loss.
@@ -497,12 +502,13 @@ class ChainMethod:
         (``compiled_chain``); the numpy path is the same fit.
         """
         max_iter = self.max_iter if max_iter is None else max_iter
-        if COMPILED:
-            compiled = _compiled_chain()
+        compiled = self.compiled()
+        if compiled is not None:
             terms = compiled.loss_terms(self.losses(residuals)[judged])
-            return LevenbergMarquardtResult(*compiled.fit(
+            x, cost, (scaled, _), iterations, converged = compiled.fit(
                 psi, self.model, residuals, terms, self.lowest_joint, self.GROUND_SIGMA,
-                max_iter, self.tol, stall))
+                max_iter, self.tol, stall)
+            return LevenbergMarquardtResult(x, cost, scaled, iterations, converged)
         result = levenberg_marquardt(
             psi, lambda x: self._evaluate(x, residuals, judged),
             lambda x, parts: self._normal_equations(x, residuals, *parts),
@@ -629,8 +635,8 @@ class ChainMethod:
 
     def cost(self, psi, residuals):
         """Return the loss at angles ``psi`` (p + 1,) on a :class:`Residuals`, as :meth:`fit`'s."""
-        if COMPILED:
-            compiled = _compiled_chain()
+        compiled = self.compiled()
+        if compiled is not None:
             return compiled.cost(psi, self.model, residuals,
                                  compiled.loss_terms(self.losses(residuals)[True]),
                                  self.lowest_joint, self.GROUND_SIGMA)

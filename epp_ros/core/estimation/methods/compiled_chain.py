@@ -13,9 +13,9 @@
 # limitations under the License.
 
 """
-The chain's Levenberg–Marquardt fit, compiled: the same cost, steps and stopping rules.
+The chain's and the tracker's Levenberg–Marquardt fit, compiled: the same costs and steps.
 
-A frame's fit is a few dozen residuals in p + 1 unknowns. In numpy each step is some forty
+A frame's fit is a few dozen residuals in p + 1 unknowns (the tracker's, 2 (p + 1)). In numpy each step is some forty
 array operations on arrays that small, and their calls, not their arithmetic, are the time
 (issue #30). This module does the same arithmetic in one function compiled by numba, from
 the same inputs: the boom's geometry (``BoomModel.forward_kinematics`` and
@@ -23,12 +23,15 @@ the same inputs: the boom's geometry (``BoomModel.forward_kinematics`` and
 (``LinkLoss``, whose formulas :func:`_link_loss` repeats) and the damping schedule of
 ``core.solvers.levenberg_marquardt``, whose constants it imports.
 
-The numpy path in :class:`~epp_ros.core.estimation.methods.chain.ChainMethod` stays the
-reference: the tests fit the same frames both ways and compare. It is the path taken where
-numba is not installed, or with ``EPP_ROS_COMPILED=0`` in the environment; this module
-(and numba, about 0.4 s) is imported at the first compiled fit only. The first fit on a
-machine compiles (some 10 s, once: numba caches it beside this file); the compiled
-function releases the GIL, so a node's executor thread runs while its worker fits.
+The tracker's update is the same fit in the angles and their rates, each tag's ranges at
+the time it ranged, under the prediction's Gaussian prior (``TrackMethod._evaluate``).
+The numpy paths of :class:`~epp_ros.core.estimation.methods.chain.ChainMethod` and
+``TrackMethod`` stay the reference: the tests fit the same frames both ways and compare.
+They are the paths taken where numba is not installed, or with ``EPP_ROS_COMPILED=0`` in
+the environment; this module (and numba, about 0.4 s) is imported at the first compiled
+fit only. The first fit on a machine compiles (some 10 s, once: numba caches it beside
+this file); the compiled function releases the GIL, so a node's executor thread runs
+while its worker fits.
 """
 from functools import lru_cache
 import math
@@ -146,27 +149,49 @@ def _joint_jacobian(psi, arm_lengths, pivot_offset, jacobian):
 
 
 @_compiled
-def _evaluate(psi, geometry, rows, measured, sigma, terms, ground, joints, state):
+def _boom_at_tags(x, geometry, ground, motion, boom):
     """
-    Return the cost at ``psi``; fill ``joints`` and ``state`` (scaled, slope, weights, depth).
+    Fill ``boom`` (p, p, 3): every joint when each tag ranged, ``x``'s angles + delay rates.
 
-    ``ChainMethod._evaluate`` and ``loss``: ranges under the NLOS loss (``terms``), angles
-    Gaussian, IRLS weights, the ground penalty.
+    ``x`` is the angles (p + 1,), or the angles and their rates (2 (p + 1),) with
+    ``motion[0]`` each tag's delay from the stamp (``Residuals.timed``).
     """
-    arm_lengths, base, anchors = geometry[0], geometry[1], geometry[2]
+    n = geometry[0].size + 1
+    posture = x[:n].copy()
+    for k in range(n - 1):
+        if x.size > n:
+            posture[:] = x[:n] + motion[0][k] * x[n:]
+        _joints(posture, geometry[0], geometry[1][0], ground[0], boom[k])
+
+
+@_compiled
+def _evaluate(x, geometry, rows, measured, sigma, terms, ground, motion, joints, state):
+    """
+    Return the cost at ``x``; fill ``joints`` (at the stamp) and ``state``.
+
+    ``state`` rows: scaled residuals, slopes, IRLS weights, ground depths. The chain's
+    ``_evaluate`` and ``loss`` (ranges under the NLOS loss ``terms``, angles Gaussian, the
+    ground); for the tracker's state of angles and rates, each tag's ranges when it ranged,
+    and the prediction's Gaussian prior ``motion[1:]`` (mean, information; none when empty).
+    """
+    arm_lengths, anchors = geometry[0], geometry[2]
     tag, anchor, near, far, angle_index = rows[0], rows[1], rows[2], rows[3], rows[4]
-    pivot_offset, lowest_joint, ground_sigma = ground[0], ground[1], ground[2]
+    lowest_joint, ground_sigma = ground[1], ground[2]
     scaled, slope, weights, depth = state[0], state[1], state[2], state[3]
-    _joints(psi, arm_lengths, base[0], pivot_offset, joints)
+    p = arm_lengths.size
+    _joints(x[:p + 1], arm_lengths, geometry[1][0], ground[0], joints)
+    boom = np.empty((p, p, 3))
+    _boom_at_tags(x, geometry, ground, motion, boom)
     n_links, n_tags = tag.size, near.size
     n_ranged = n_links + n_tags
     cost = 0.0
     for r in range(measured.size):
         if r < n_ranged:
             if r < n_links:
-                a, b = joints[tag[r]], anchors[anchor[r]]
+                a, b = boom[tag[r], tag[r]], anchors[anchor[r]]
             else:
-                a, b = joints[near[r - n_links]], joints[far[r - n_links]]
+                at = boom[near[r - n_links]]
+                a, b = at[near[r - n_links]], at[far[r - n_links]]
             distance = math.sqrt((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2)
             scaled[r] = (distance - measured[r]) / sigma[r]
             if terms.shape[0]:
@@ -175,32 +200,57 @@ def _evaluate(psi, geometry, rows, measured, sigma, terms, ground, joints, state
             else:
                 c, slope[r] = 0.5 * scaled[r] ** 2, scaled[r]
         else:
-            turn = psi[angle_index[r - n_ranged]] - measured[r]
-            scaled[r] = ((turn + math.pi) % (2.0 * math.pi) - math.pi) / sigma[r]
+            scaled[r] = _wrap(x[angle_index[r - n_ranged]] - measured[r]) / sigma[r]
             c, slope[r] = 0.5 * scaled[r] ** 2, scaled[r]
         cost += c
         weights[r] = 1.0
         if abs(scaled[r]) > 1.0:
             weights[r] = min(max(slope[r] / scaled[r], 1e-3), 1.0)
-    for k in range(joints.shape[0]):
+    if motion[2].shape[0]:
+        difference = _from_prior(x, motion[1])
+        cost += 0.5 * (difference @ (motion[2] @ difference))
+    for k in range(p):
         depth[k] = max(lowest_joint - joints[k, 2], 0.0) / ground_sigma
         cost += 0.5 * depth[k] ** 2
     return cost
 
 
 @_compiled
-def _normal_equations(psi, geometry, rows, sigma, ground, joints, state, jacobian, normal,
+def _wrap(angle):
+    """Return ``angle`` wrapped into [-pi, pi), as ``wrap_angle``."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@_compiled
+def _from_prior(x, mean):
+    """Return ``x - mean``, its angles (the first half) wrapped."""
+    difference = x - mean
+    for q in range(x.size // 2):
+        difference[q] = _wrap(difference[q])
+    return difference
+
+
+@_compiled
+def _normal_equations(x, geometry, rows, sigma, ground, motion, joints, state, normal,
                       gradient):
-    """Fill the IRLS ``normal`` matrix and ``gradient`` at ``psi``: ``_normal_equations``."""
+    """Fill the IRLS ``normal`` matrix and ``gradient`` at ``x`` (the methods' own)."""
     arm_lengths, anchors = geometry[0], geometry[2]
     tag, anchor, near, far, angle_index = rows[0], rows[1], rows[2], rows[3], rows[4]
     pivot_offset, ground_sigma = ground[0], ground[2]
     slope, weights, depth = state[1], state[2], state[3]
-    n = psi.size
-    _joint_jacobian(psi, arm_lengths, pivot_offset, jacobian)
+    size, p = x.size, arm_lengths.size
+    n = p + 1
+    boom = np.empty((p, p, 3))
+    _boom_at_tags(x, geometry, ground, motion, boom)
+    jacobian = np.empty((p, p, 3, n))        # tag k's time: every joint's
+    posture = x[:n].copy()
+    for k in range(p):
+        if size > n:
+            posture[:] = x[:n] + motion[0][k] * x[n:]
+        _joint_jacobian(posture, arm_lengths, pivot_offset, jacobian[k])
     normal[:] = 0.0
     gradient[:] = 0.0
-    row = np.empty(n)
+    row = np.empty(size)
     n_links, n_tags = tag.size, near.size
     for r in range(sigma.size):
         row[:] = 0.0
@@ -208,27 +258,36 @@ def _normal_equations(psi, geometry, rows, sigma, ground, joints, state, jacobia
             if r < n_links:
                 k, other, b = tag[r], -1, anchors[anchor[r]]
             else:
-                k, other, b = near[r - n_links], far[r - n_links], joints[far[r - n_links]]
-            a = joints[k]
+                k, other = near[r - n_links], far[r - n_links]
+                b = boom[k, other]
+            a = boom[k, k]
             distance = max(math.sqrt((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2
                                      + (a[2] - b[2]) ** 2), 1e-12)
             for c in range(3):
                 unit = (a[c] - b[c]) / distance / sigma[r]
                 for q in range(n):
-                    moved = jacobian[k, c, q] - (jacobian[other, c, q] if other >= 0 else 0.0)
+                    moved = jacobian[k, k, c, q] - (jacobian[k, other, c, q] if other >= 0
+                                                    else 0.0)
                     row[q] += unit * moved
+            if size > n:
+                row[n:] = row[:n] * motion[0][k]
         else:
             row[angle_index[r - n_links - n_tags]] = 1.0 / sigma[r]
-        for q in range(n):
+        for q in range(size):
             gradient[q] += row[q] * slope[r]
-            for s in range(n):
+            for s in range(size):
                 normal[q, s] += row[q] * weights[r] * row[s]
-    for k in range(joints.shape[0]):
+    if motion[2].shape[0]:
+        normal += motion[2]
+        gradient += motion[2] @ _from_prior(x, motion[1])
+    stamp = np.empty((p, 3, n))
+    _joint_jacobian(x[:n], arm_lengths, pivot_offset, stamp)
+    for k in range(p):
         if depth[k] > 0.0:
             for q in range(n):
-                gradient[q] -= jacobian[k, 2, q] / ground_sigma * depth[k]
+                gradient[q] -= stamp[k, 2, q] / ground_sigma * depth[k]
                 for s in range(n):
-                    normal[q, s] += jacobian[k, 2, q] * jacobian[k, 2, s] / ground_sigma ** 2
+                    normal[q, s] += stamp[k, 2, q] * stamp[k, 2, s] / ground_sigma ** 2
 
 
 @_compiled
@@ -258,49 +317,53 @@ def _damped_step(normal, gradient, damping, step):
 
 
 @_compiled
-def _fit(start, geometry, rows, measured, sigma, terms, ground, limits):
+def _fit(start, geometry, rows, measured, sigma, terms, ground, motion, limits):
     """Compiled :func:`fit`; ``limits`` = (max_iter, tol, stall, damping_floor)."""
     max_iter, tol, stall, damping_floor = int(limits[0]), limits[1], limits[2], limits[3]
-    n, p, size = start.size, start.size - 1, measured.size
+    n, p, size = start.size, geometry[0].size, measured.size
     x = start.copy()
     joints, trial_joints = np.empty((p, 3)), np.empty((p, 3))
     state, trial_state = np.empty((4, max(size, p))), np.empty((4, max(size, p)))
-    jacobian = np.empty((p, 3, n))
     normal, gradient, step = np.empty((n, n)), np.empty(n), np.empty(n)
-    cost = _evaluate(x, geometry, rows, measured, sigma, terms, ground, joints, state)
+    cost = _evaluate(x, geometry, rows, measured, sigma, terms, ground, motion, joints, state)
     damping = INITIAL_DAMPING
+    iterations, converged = max_iter, False
     for iteration in range(1, max_iter + 1):
-        _normal_equations(x, geometry, rows, sigma, ground, joints, state, jacobian, normal,
+        _normal_equations(x, geometry, rows, sigma, ground, motion, joints, state, normal,
                           gradient)
         while True:
             _damped_step(normal, gradient, damping, step)
             trial = x + step
             trial_cost = _evaluate(trial, geometry, rows, measured, sigma, terms, ground,
-                                   trial_joints, trial_state)
+                                   motion, trial_joints, trial_state)
             if trial_cost <= cost or damping > MAX_DAMPING:
                 break
             damping *= GROWTH
         if trial_cost > cost:               # no step lowers the cost: a minimum
-            return x, cost, state[0, :size].copy(), iteration, True
+            iterations, converged = iteration, True
+            break
         stalled = cost - trial_cost <= stall * max(abs(trial_cost), 1e-300)
         x, cost = trial, trial_cost
         joints, trial_joints = trial_joints, joints
         state, trial_state = trial_state, state
         damping = max(damping / FALL, damping_floor)
         if stalled or np.max(np.abs(step)) <= tol:
-            return x, cost, state[0, :size].copy(), iteration, True
-    return x, cost, state[0, :size].copy(), max_iter, False
+            iterations, converged = iteration, True
+            break
+    _normal_equations(x, geometry, rows, sigma, ground, motion, joints, state, normal,
+                      gradient)
+    return x, cost, state[0, :size].copy(), iterations, converged, normal
 
 
 def fit(start, model, residuals, terms, lowest_joint, ground_sigma, max_iter, tol, stall,
-        damping_floor=1e-9):
+        damping_floor=1e-9, motion=None):
     """
     Fit a frame's chain by Levenberg–Marquardt from ``start``, compiled.
 
     Parameters
     ----------
-    start : ndarray, shape (p + 1,)
-        Slew and pitches, radians.
+    start : ndarray, shape (p + 1,) or (2 (p + 1),)
+        Slew and pitches, radians; or those and their rates, rad/s (the tracker's state).
     model : BoomModel
         The boom and the anchors.
     residuals : Residuals
@@ -313,46 +376,51 @@ def fit(start, model, residuals, terms, lowest_joint, ground_sigma, max_iter, to
         Iterations at most.
     tol, stall, damping_floor : float
         As ``levenberg_marquardt``'s.
+    motion : (ndarray, ndarray, ndarray), optional
+        The tracker's: each tag's delay from the stamp (p,), seconds, and the prediction's
+        mean and information (Gaussian prior on the state).
 
     Returns
     -------
-    x : ndarray, shape (p + 1,)
+    x : ndarray, shape of ``start``
     cost : float
-    scaled : ndarray, shape (size,)
-        The scaled residuals at ``x``.
+    state : (ndarray, ndarray)
+        The scaled residuals at ``x`` (size,), and the normal matrix there.
     iterations : int
     converged : bool
 
     """
     limits = np.array([max_iter, tol, stall, damping_floor], dtype=float)
-    x, cost, scaled, iterations, converged = _fit(
+    x, cost, scaled, iterations, converged, normal = _fit(
         np.array(start, dtype=float), *_problem(model, residuals, terms, lowest_joint,
-                                                ground_sigma), limits)
-    return x, float(cost), scaled, int(iterations), bool(converged)
+                                                ground_sigma, motion), limits)
+    return x, float(cost), (scaled, normal), int(iterations), bool(converged)
 
 
-def cost(psi, model, residuals, terms, lowest_joint, ground_sigma):
-    """Return the fit's cost at ``psi`` (p + 1,): :func:`fit`'s arguments, compiled."""
-    return float(_cost(np.array(psi, dtype=float),
-                       *_problem(model, residuals, terms, lowest_joint, ground_sigma)))
+def cost(x, model, residuals, terms, lowest_joint, ground_sigma, motion=None):
+    """Return the fit's cost at ``x``: :func:`fit`'s arguments, compiled."""
+    return float(_cost(np.array(x, dtype=float),
+                       *_problem(model, residuals, terms, lowest_joint, ground_sigma, motion)))
 
 
 @_compiled
-def _cost(psi, geometry, rows, measured, sigma, terms, ground):
+def _cost(x, geometry, rows, measured, sigma, terms, ground, motion):
     """Compiled :func:`cost`."""
-    p = psi.size - 1
+    p = geometry[0].size
     state = np.empty((4, max(measured.size, p)))
-    return _evaluate(psi, geometry, rows, measured, sigma, terms, ground, np.empty((p, 3)),
-                     state)
+    return _evaluate(x, geometry, rows, measured, sigma, terms, ground, motion,
+                     np.empty((p, 3)), state)
 
 
-def _problem(model, residuals, terms, lowest_joint, ground_sigma):
+def _problem(model, residuals, terms, lowest_joint, ground_sigma, motion):
     """Return a frame's arguments of :func:`_fit` and :func:`_cost`, after the start."""
     geometry = (_array(model.arm_lengths), _array(model.base).reshape(1, 3),
                 _array(model.anchors))
     ground = np.array([model.pivot_offset, lowest_joint, ground_sigma], dtype=float)
+    if motion is None:
+        motion = (np.zeros(model.n_sections), np.zeros(0), np.zeros((0, 0)))
     return (geometry, residuals.layout, _array(residuals.measured), _array(residuals.sigma),
-            _array(terms), ground)
+            _array(terms), ground, tuple(_array(part) for part in motion))
 
 
 def _array(values):
@@ -365,6 +433,7 @@ def compile_now():
     empty = np.zeros(0, dtype=np.int64)
     rows = (np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), empty, empty, empty)
     problem = ((np.ones(1), np.zeros((1, 3)), np.ones((1, 3))), rows, np.ones(1), np.ones(1),
-               np.zeros((0, 0)), np.array([0.0, -1.0, 0.05]))
+               np.zeros((0, 0)), np.array([0.0, -1.0, 0.05]),
+               (np.zeros(1), np.zeros(0), np.zeros((0, 0))))
     _fit(np.zeros(2), *problem, np.array([5.0, 1e-10, 1e-6, 1e-9]))
     _cost(np.zeros(2), *problem)

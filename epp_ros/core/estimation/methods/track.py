@@ -36,12 +36,13 @@ in its own TDMA slot, ``delays`` seconds from the frame's stamp, when the boom w
 
 A start, or a fit lost, goes back to the chain's global search (``core.chain``).
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from epp_ros.core.estimation.methods.chain import angles_from_joints, canonical_angles, \
     ChainMethod, judged_minimum
 from epp_ros.core.model.measurements import wrap_angle
-from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt
+from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt, \
+    LevenbergMarquardtResult, STALL
 import numpy as np
 from scipy.stats import chi2
 
@@ -323,26 +324,41 @@ class TrackMethod:
         """
         prior_information = _inverse(predicted.covariance)
 
+        chain, compiled = self.chain, self.chain.compiled()
+        motion = (np.asarray(delays, dtype=float), predicted.state, prior_information)
+
         def evaluate(x, judged=False):
+            if compiled is not None:
+                return compiled.cost(x, self.model, residuals, compiled.loss_terms(
+                    chain.losses(residuals)[judged]), chain.lowest_joint, chain.GROUND_SIGMA,
+                    motion), None
             return self._evaluate(x, predicted, prior_information, residuals, delays, judged)
 
         def minimise(start, judged):
-            return levenberg_marquardt(
+            """Fit from ``start``: its state the scaled residuals and the normal matrix."""
+            iterations = chain.max_iter if max_iter is None else max_iter
+            if compiled is not None:
+                return LevenbergMarquardtResult(*compiled.fit(
+                    start, self.model, residuals,
+                    compiled.loss_terms(chain.losses(residuals)[judged]), chain.lowest_joint,
+                    chain.GROUND_SIGMA, iterations, chain.tol, STALL, motion=motion))
+            result = levenberg_marquardt(
                 start, lambda x: evaluate(x, judged),
                 lambda x, parts: self._normal_equations(x, predicted, prior_information,
                                                         *parts),
-                max_iter=self.chain.max_iter if max_iter is None else max_iter,
-                tol=self.chain.tol)
+                max_iter=iterations, tol=chain.tol)
+            normal, _ = self._normal_equations(result.x, predicted, prior_information,
+                                               *result.state)
+            return replace(result, state=(result.state[2][3], normal))
 
         n = residuals.n_ranged
         # Under the judge's loss, as the chain's fits: one short range is let go.
-        fit = judged_minimum(minimise, self.chain.losses(residuals),
-                             lambda result: result.state[2][3][:n],
+        fit = judged_minimum(minimise, chain.losses(residuals),
+                             lambda result: result.state[0][:n],
                              lambda x: evaluate(x, True)[0], predicted.state.copy(),
                              refit=max_iter is None)
         state, cost, iterations, converged = fit.x, fit.cost, fit.iterations, fit.converged
-        normal, _ = self._normal_equations(state, predicted, prior_information, *fit.state)
-        covariance = _inverse(normal)
+        covariance = _inverse(fit.state[1])
         n = self.model.n_sections + 1
         correction = state - predicted.state
         # Laplace: -log p(frame) ~ cost + 0.5 log det(P_prior / P_posterior).

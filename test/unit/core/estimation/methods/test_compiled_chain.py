@@ -17,6 +17,7 @@ from epp_ros.core import PostureEstimator
 from epp_ros.core.estimation.methods import chain
 from epp_ros.core.estimation.methods import compiled_chain
 from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMethod
+from epp_ros.core.estimation.methods.track import Hypothesis, TrackMethod
 from epp_ros.core.model.measurements import Measurements
 from epp_ros.core.simulation.simulate import (field_effects, make_motion, random_posture,
                                               simulate_field, truck_pump)
@@ -106,8 +107,39 @@ def test_each_fit_is_the_numpy_fit_to_rounding(paths, options):
     assert fits == 12 * 6
 
 
+def test_each_tracker_update_is_the_numpy_update_to_rounding(paths):
+    """Tags ranging at their own times, the prediction's prior, both losses, the ground."""
+    rng = np.random.default_rng(11)
+    updates = 0
+    for model, joints, measurements in _frames(rng, count=8):
+        track = TrackMethod(model, lowest_joint=float(rng.choice([-0.5, 12.0])))
+        residuals = track.chain.residuals_of(measurements)
+        n = model.n_sections + 1
+        psi = np.r_[angles_from_joints(model, joints + rng.normal(0.0, 0.3, joints.shape))]
+        spread = rng.normal(0.0, 0.1, (2 * n, 2 * n))
+        predicted = Hypothesis(np.r_[psi, rng.normal(0.0, 0.1, n)],
+                               spread @ spread.T + np.eye(2 * n) * 1e-3)
+        delays = rng.uniform(-0.1, 0.0, model.n_sections)
+        for max_iter in (None, 3):
+            compiled, reference = paths(lambda: track._update(predicted, residuals, delays,
+                                                              max_iter))
+            (fitted, iterations, converged, surprise) = compiled
+            (expected, expected_iterations, expected_converged, expected_surprise) = reference
+            np.testing.assert_allclose(fitted.state, expected.state, rtol=0, atol=1e-6)
+            np.testing.assert_allclose(fitted.covariance, expected.covariance, rtol=1e-5,
+                                       atol=1e-12)
+            assert fitted.log_weight == pytest.approx(expected.log_weight, rel=1e-6)
+            assert surprise == pytest.approx(expected_surprise, rel=1e-4, abs=1e-9)
+            assert converged == expected_converged
+            if max_iter is not None:
+                assert iterations == expected_iterations
+            updates += 1
+    assert updates == 16
+
+
 @pytest.mark.parametrize('method', ['chain', 'track', 'cepp'])
-@pytest.mark.parametrize('case', ['real_uwb', 'nlos_persistent,dropouts'])
+@pytest.mark.parametrize('case', ['real_uwb',
+                                  'nlos_persistent,dropouts,tdma,inclinometer_bias'])
 def test_an_estimator_publishes_the_same_frames_either_way(paths, method, case):
     model = truck_pump()
     rng = np.random.default_rng(3)
