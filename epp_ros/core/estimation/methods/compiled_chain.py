@@ -17,11 +17,11 @@ The chain's and the tracker's Levenberg–Marquardt fit, compiled: the same cost
 
 A frame's fit is a few dozen residuals in p + 1 unknowns (the tracker's: 2 (p + 1)). In
 numpy each step is some forty array operations on arrays that small, and their calls, not
-their arithmetic, are the time (issue #30). This module does the same arithmetic in one function compiled by numba, from
-the same inputs: the boom's geometry (``BoomModel.forward_kinematics`` and
-``joint_jacobian``), the rows of ``Residuals``, the constants of the NLOS loss
-(``LinkLoss``, whose formulas :func:`_link_loss` repeats) and the damping schedule of
-``core.solvers.levenberg_marquardt``, whose constants it imports.
+their arithmetic, are the time (issue #30). This module does the same arithmetic in one
+function compiled by numba, from the same inputs: the boom's geometry
+(``BoomModel.forward_kinematics`` and ``joint_jacobian``), the rows of ``Residuals``, the
+constants of the NLOS loss (``LinkLoss``, whose formulas :func:`_link_loss` repeats) and
+the damping schedule of ``core.solvers.levenberg_marquardt``, whose constants it imports.
 
 The tracker's update is the same fit in the angles and their rates, each tag's ranges at
 the time it ranged, under the prediction's Gaussian prior (``TrackMethod._evaluate``).
