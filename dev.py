@@ -73,10 +73,11 @@ def main(argv):
     # Quick Fast DDS discovery for processes started together (unless the user set one).
     env.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE',
                    str(ROOT / 'config' / 'fastdds_fast_discovery.xml'))
-    # The chain's fit is compiled once per checkout (numba caches it beside its source),
-    # here rather than in the first frame of whichever test or node comes first.
-    subprocess.run([str(python), '-c', 'from epp_ros.core import compile_fit; compile_fit()'],
-                   cwd=ROOT, env=env, check=True)
+    if command != 'test':   # (the tests' conftest.py does it for them)
+        # The chain's fit is compiled once per checkout (numba caches it beside its
+        # source): here rather than in the first frame of the demo or a benchmark.
+        subprocess.run([str(python), '-c', 'from epp_ros.core import compile_fit; '
+                        'compile_fit()'], cwd=ROOT, env=env, check=True)
     if command == 'test':
         args = [str(python), '-m', 'pytest'] + rest
     elif command == 'bench':

@@ -39,11 +39,15 @@ _configure_ros_environment()
 
 # Fixtures of the multi-process tests (imported here, after the environment is set).
 from epp_ros.app.threads import single_blas_thread  # noqa: E402
+from epp_ros.core import compile_fit  # noqa: E402
 import pytest  # noqa: E402
 
 # The numerics run as the nodes and tools run them, whatever test ran first: on one BLAS
 # thread (a test that runs epp_bag's or the benchmarks' main would set it for all after it).
 single_blas_thread()
+# The chain's fit compiled (or loaded from numba's cache) before any test, so that no
+# node's first frame waits for the compiler (some 10 s on a fresh checkout).
+compile_fit()
 
 #: A test that uses one of these runs processes or speaks DDS: it is a system test.
 SYSTEM_FIXTURES = {'processes', 'listener', 'fresh_listener', 'install'}
