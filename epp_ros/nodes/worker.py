@@ -28,7 +28,7 @@ import threading
 __all__ = ['Worker']
 
 #: The entry that ends the worker: it goes before every job.
-_STOP = [None, ()]
+_STOP = (None, ())
 
 
 class Worker:
@@ -47,7 +47,7 @@ class Worker:
     """
 
     def __init__(self, name, on_error):
-        self._jobs = queue.PriorityQueue()      # (urgency, order, [job, args])
+        self._jobs = queue.PriorityQueue()      # (urgency, order, (job, args))
         self._order = itertools.count()
         self._on_error = on_error
         self._closing = threading.Event()
@@ -56,11 +56,11 @@ class Worker:
 
     def submit(self, job, *args):
         """Queue ``job(*args)`` after every job given before it."""
-        self._jobs.put((1, next(self._order), [job, args]))
+        self._jobs.put((1, next(self._order), (job, args)))
 
     def submit_urgent(self, job, *args):
         """Queue ``job(*args)`` before the jobs waiting that are not urgent."""
-        self._jobs.put((0, next(self._order), [job, args]))
+        self._jobs.put((0, next(self._order), (job, args)))
 
     @property
     def waiting(self):

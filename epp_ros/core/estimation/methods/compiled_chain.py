@@ -149,19 +149,21 @@ def _joint_jacobian(psi, arm_lengths, pivot_offset, jacobian):
 
 
 @_compiled
-def _boom_at_tags(x, geometry, ground, motion, boom):
+def _boom_at_tags(x, geometry, ground, motion, joints, boom):
     """
     Fill ``boom`` (p, p, 3): every joint when each tag ranged, ``x``'s angles + delay rates.
 
     ``x`` is the angles (p + 1,), or the angles and their rates (2 (p + 1),) with
-    ``motion[0]`` each tag's delay from the stamp (``Residuals.timed``).
+    ``motion[0]`` each tag's delay from the stamp (``Residuals.timed``); ``joints`` (p, 3)
+    are those at the stamp.
     """
     n = geometry[0].size + 1
-    posture = x[:n].copy()
     for k in range(n - 1):
         if x.size > n:
-            posture[:] = x[:n] + motion[0][k] * x[n:]
-        _joints(posture, geometry[0], geometry[1][0], ground[0], boom[k])
+            _joints(x[:n] + motion[0][k] * x[n:], geometry[0], geometry[1][0], ground[0],
+                    boom[k])
+        else:                               # no rates: every tag ranged at the stamp
+            boom[k] = joints
 
 
 @_compiled
@@ -181,7 +183,7 @@ def _evaluate(x, geometry, rows, measured, sigma, terms, ground, motion, joints,
     p = arm_lengths.size
     _joints(x[:p + 1], arm_lengths, geometry[1][0], ground[0], joints)
     boom = np.empty((p, p, 3))
-    _boom_at_tags(x, geometry, ground, motion, boom)
+    _boom_at_tags(x, geometry, ground, motion, joints, boom)
     n_links, n_tags = tag.size, near.size
     n_ranged = n_links + n_tags
     cost = 0.0
@@ -241,13 +243,16 @@ def _normal_equations(x, geometry, rows, sigma, ground, motion, joints, state, n
     size, p = x.size, arm_lengths.size
     n = p + 1
     boom = np.empty((p, p, 3))
-    _boom_at_tags(x, geometry, ground, motion, boom)
+    _boom_at_tags(x, geometry, ground, motion, joints, boom)
     jacobian = np.empty((p, p, 3, n))        # tag k's time: every joint's
-    posture = x[:n].copy()
+    stamp = np.empty((p, 3, n))
+    _joint_jacobian(x[:n], arm_lengths, pivot_offset, stamp)
     for k in range(p):
         if size > n:
-            posture[:] = x[:n] + motion[0][k] * x[n:]
-        _joint_jacobian(posture, arm_lengths, pivot_offset, jacobian[k])
+            _joint_jacobian(x[:n] + motion[0][k] * x[n:], arm_lengths, pivot_offset,
+                            jacobian[k])
+        else:                               # one time for every tag
+            jacobian[k] = stamp
     normal[:] = 0.0
     gradient[:] = 0.0
     row = np.empty(size)
@@ -280,8 +285,6 @@ def _normal_equations(x, geometry, rows, sigma, ground, motion, joints, state, n
     if motion[2].shape[0]:
         normal += motion[2]
         gradient += motion[2] @ _from_prior(x, motion[1])
-    stamp = np.empty((p, 3, n))
-    _joint_jacobian(x[:n], arm_lengths, pivot_offset, stamp)
     for k in range(p):
         if depth[k] > 0.0:
             for q in range(n):

@@ -328,11 +328,14 @@ class TrackMethod:
         motion = (np.asarray(delays, dtype=float), predicted.state, prior_information)
 
         def evaluate(x, judged=False):
+            return self._evaluate(x, predicted, prior_information, residuals, delays, judged)
+
+        def judged_cost(x):
             if compiled is not None:
                 return compiled.cost(x, self.model, residuals, compiled.loss_terms(
-                    chain.losses(residuals)[judged]), chain.lowest_joint, chain.GROUND_SIGMA,
-                    motion), None
-            return self._evaluate(x, predicted, prior_information, residuals, delays, judged)
+                    chain.losses(residuals)[True]), chain.lowest_joint, chain.GROUND_SIGMA,
+                    motion)
+            return evaluate(x, True)[0]
 
         def minimise(start, judged):
             """Fit from ``start``: its state the scaled residuals and the normal matrix."""
@@ -355,7 +358,7 @@ class TrackMethod:
         # Under the judge's loss, as the chain's fits: one short range is let go.
         fit = judged_minimum(minimise, chain.losses(residuals),
                              lambda result: result.state[0][:n],
-                             lambda x: evaluate(x, True)[0], predicted.state.copy(),
+                             judged_cost, predicted.state.copy(),
                              refit=max_iter is None)
         state, cost, iterations, converged = fit.x, fit.cost, fit.iterations, fit.converged
         covariance = _inverse(fit.state[1])
