@@ -74,7 +74,7 @@ def main(argv):
     env.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE',
                    str(ROOT / 'config' / 'fastdds_fast_discovery.xml'))
     if command != 'test':   # (the tests' conftest.py does it for them)
-        # The chain's fit is compiled once per checkout (numba caches it beside its
+        # The kernels are compiled once per checkout (numba caches them beside their
         # source): here rather than in the first frame of the demo or a benchmark.
         subprocess.run([str(python), '-c', 'from epp_ros.core import compile_fit; '
                         'compile_fit()'], cwd=ROOT, env=env, check=True)

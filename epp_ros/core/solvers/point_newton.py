@@ -28,12 +28,16 @@ the constraints and damped by the package's Levenberg-Marquardt loop, converge i
 steps of a few small dense solves each. ``nearest_edm`` takes them once its iterates are
 of rank r: the start or the penalty method chooses the basin, Newton's method finishes in it.
 """
+from epp_ros.core.solvers.compiled import kernel
 from epp_ros.core.solvers.edm import squared_distances, symmetric_eigh
 from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt
 import numpy as np
 from scipy.linalg import lapack
 
 __all__ = ['PointProblem']
+
+#: The compiled twin of :meth:`PointProblem.refine` and :meth:`PointProblem.stationarity`.
+KERNEL = 'epp_ros.core.solvers.compiled_points'
 
 
 def _least_squares(matrix, rhs):
@@ -138,6 +142,8 @@ class PointProblem:
         """
         if not np.all(np.isfinite(points)):
             return np.inf
+        if kernel(KERNEL) is not None:
+            return kernel(KERNEL).stationarity(self, points)
         centred = points - points.mean(axis=0)
         distances = squared_distances(centred)
         stress = self.sq_weights * (distances - self.goal)
@@ -254,6 +260,8 @@ class PointProblem:
             return points, stationarity, 0
         feasible = max(self.FEASIBLE, float(np.max(np.abs(self.violations(points)),
                                                    initial=0.0)))
+        if kernel(KERNEL) is not None and np.all(np.isfinite(points)):
+            return kernel(KERNEL).refine(self, points, tol, max_steps, stationarity, feasible)
         reached = {'stationarity': stationarity}
 
         def evaluate(flat):

@@ -37,9 +37,6 @@ tried at its other well-fitting pitches until nothing fits better.
 """
 from dataclasses import replace
 from functools import lru_cache
-import importlib
-import importlib.util
-import os
 from typing import NamedTuple
 
 from epp_ros.core.model.folds import folded_angles, tip_circle, tip_minima
@@ -47,6 +44,8 @@ from epp_ros.core.model.measurements import Residuals, SensorNoise, wrap_angle
 from epp_ros.core.model.nlos import NlosMixture, OUTLIER_FRACTION, range_excess
 from epp_ros.core.model.noise import DEFAULT_NOISE, fitted_link_bias
 from epp_ros.core.model.plane import fit_slew, to_plane
+from epp_ros.core.solvers import point_newton
+from epp_ros.core.solvers.compiled import kernel
 from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt, \
     levenberg_marquardt_batch, LevenbergMarquardtResult, STALL
 import numpy as np
@@ -55,32 +54,28 @@ from scipy.special import bdtrc
 __all__ = ['ChainMethod', 'Fit', 'SearchExhausted', 'angles_from_joints', 'canonical_angles',
            'compile_fit', 'grow_chains']
 
-#: Whether the chain fits compiled (``compiled_chain``): numba is installed and
-#: ``EPP_ROS_COMPILED`` is not 0. Else the numpy path, which is the same fit.
-COMPILED = (importlib.util.find_spec('numba') is not None
-            and os.environ.get('EPP_ROS_COMPILED', '1') != '0')
-
 #: A screening fit leaning on more of its ranges (blocked or outliers by the judge) than
 #: the judge's shares give this chance has a sigma told too small (``_screened``).
 LEANING_TAIL = 1e-3
 
 
-@lru_cache(maxsize=None)
-def _compiled_chain():
-    """Return the ``compiled_chain`` module, imported at its first use (it imports numba)."""
-    return importlib.import_module('epp_ros.core.estimation.methods.compiled_chain')
+#: The chain's and the tracker's compiled fit (``core.solvers.compiled``).
+KERNEL = 'epp_ros.core.estimation.methods.compiled_chain'
 
 
 def compile_fit():
     """
-    Compile the chain's fit now, where it is compiled (``COMPILED``); return whether it is.
+    Compile the fits now where they run compiled (``compiled.COMPILED``); return whether.
 
-    The first compile on a machine takes some 10 s; numba then loads it from its disk cache
-    (a fraction of a second). Called before the first frame where that frame's time matters.
+    The chain's and the tracker's fit, and CEPP's Newton finish in the points. The first
+    compile on a machine takes some 15 s; numba then loads them from its disk cache (a
+    fraction of a second). Called before the first frame where that frame's time matters.
     """
-    if COMPILED:
-        _compiled_chain().compile_now()
-    return COMPILED
+    for module in (KERNEL, point_newton.KERNEL):
+        if kernel(module) is None:
+            return False
+        kernel(module).compile_now()
+    return True
 
 
 def angles_from_joints(model, joints):
@@ -492,7 +487,7 @@ class ChainMethod:
     @staticmethod
     def compiled():
         """Return the module of the compiled fit, or None where the fit runs in numpy."""
-        return _compiled_chain() if COMPILED else None
+        return kernel(KERNEL)
 
     def _levenberg_marquardt(self, psi, residuals, judged, max_iter, stall):
         """

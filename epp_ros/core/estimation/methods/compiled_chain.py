@@ -36,8 +36,8 @@ while its worker fits.
 from functools import lru_cache
 import math
 
+from epp_ros.core.solvers.compiled import compiled
 from epp_ros.core.solvers.levenberg_marquardt import FALL, GROWTH, INITIAL_DAMPING, MAX_DAMPING
-import numba
 import numpy as np
 
 __all__ = ['compile_now', 'cost', 'fit', 'loss_terms']
@@ -49,11 +49,6 @@ _LOG_2 = math.log(2.0)
 _RIDGE = 1e-9
 #: Rows of :func:`loss_terms`.
 _TERMS = ('inverse_g', 'los_offset', 'blocked_offset', 'outlier_ratio', 'outlier_offset')
-
-
-def _compiled(function):
-    """Return ``function`` compiled: in nopython mode, cached on disk, without the GIL."""
-    return numba.njit(cache=True, nogil=True)(function)
 
 
 @lru_cache(maxsize=32)
@@ -73,7 +68,7 @@ def loss_terms(link_loss):
         + [zero_cost, zero_slope]), dtype=float)
 
 
-@_compiled
+@compiled
 def _log_ndtr(z):
     """Return log Phi(z), as ``scipy.special.log_ndtr`` to rounding."""
     if z > -1.0:
@@ -86,7 +81,7 @@ def _log_ndtr(z):
     return -0.5 * z * z - math.log(-z) - _HALF_LOG_2PI + math.log(series)
 
 
-@_compiled
+@compiled
 def _logaddexp(x, y):
     """Return log(exp(x) + exp(y)), as ``numpy.logaddexp``."""
     if x == y:
@@ -97,7 +92,7 @@ def _logaddexp(x, y):
     return y + math.log1p(math.exp(difference))
 
 
-@_compiled
+@compiled
 def _link_loss(s, terms, i):
     """Return (cost, slope) of excess ``s`` on link ``i``: ``LinkLoss.__call__``'s formulas."""
     inverse_g, los_offset, blocked_offset = terms[0, i], terms[1, i], terms[2, i]
@@ -115,7 +110,7 @@ def _link_loss(s, terms, i):
     return -total - terms[5, i] - terms[6, i] * s, slope
 
 
-@_compiled
+@compiled
 def _joints(psi, arm_lengths, base, pivot_offset, joints):
     """Fill ``joints`` (p, 3) at angles ``psi``: ``BoomModel.forward_kinematics``."""
     cos_slew, sin_slew = math.cos(psi[0]), math.sin(psi[0])
@@ -129,7 +124,7 @@ def _joints(psi, arm_lengths, base, pivot_offset, joints):
         joints[k, 2] = base[2] + height
 
 
-@_compiled
+@compiled
 def _joint_jacobian(psi, arm_lengths, pivot_offset, jacobian):
     """Fill ``jacobian`` (p, 3, p + 1) at ``psi``: ``BoomModel.joint_jacobian``."""
     p = arm_lengths.size
@@ -148,7 +143,7 @@ def _joint_jacobian(psi, arm_lengths, pivot_offset, jacobian):
             jacobian[k, 2, 1 + i] = arm_lengths[i] * math.cos(psi[1 + i])
 
 
-@_compiled
+@compiled
 def _boom_at_tags(x, geometry, ground, motion, joints, boom):
     """
     Fill ``boom`` (p, p, 3): every joint when each tag ranged, ``x``'s angles + delay rates.
@@ -166,7 +161,7 @@ def _boom_at_tags(x, geometry, ground, motion, joints, boom):
             boom[k] = joints
 
 
-@_compiled
+@compiled
 def _evaluate(x, geometry, rows, measured, sigma, terms, ground, motion, joints, state):
     """
     Return the cost at ``x``; fill ``joints`` (at the stamp) and ``state``.
@@ -217,13 +212,13 @@ def _evaluate(x, geometry, rows, measured, sigma, terms, ground, motion, joints,
     return cost
 
 
-@_compiled
+@compiled
 def _wrap(angle):
     """Return ``angle`` wrapped into [-pi, pi), as ``wrap_angle``."""
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
-@_compiled
+@compiled
 def _from_prior(x, mean):
     """Return ``x - mean``, its angles (the first half) wrapped."""
     difference = x - mean
@@ -232,7 +227,7 @@ def _from_prior(x, mean):
     return difference
 
 
-@_compiled
+@compiled
 def _normal_equations(x, geometry, rows, sigma, ground, motion, joints, state, normal,
                       gradient):
     """Fill the IRLS ``normal`` matrix and ``gradient`` at ``x`` (the methods' own)."""
@@ -293,7 +288,7 @@ def _normal_equations(x, geometry, rows, sigma, ground, motion, joints, state, n
                     normal[q, s] += stamp[k, 2, q] * stamp[k, 2, s] / ground_sigma ** 2
 
 
-@_compiled
+@compiled
 def _damped_step(normal, gradient, damping, step):
     """Fill ``step`` with ``-(normal + damping diag(diag + ridge))^-1 gradient`` (LU, pivoting)."""
     n = gradient.size
@@ -319,7 +314,7 @@ def _damped_step(normal, gradient, damping, step):
         step[r] = total / system[r, r]
 
 
-@_compiled
+@compiled
 def _fit(start, geometry, rows, measured, sigma, terms, ground, motion, limits):
     """Compiled :func:`fit`; ``limits`` = (max_iter, tol, stall, damping_floor)."""
     max_iter, tol, stall, damping_floor = int(limits[0]), limits[1], limits[2], limits[3]
@@ -406,7 +401,7 @@ def cost(x, model, residuals, terms, lowest_joint, ground_sigma, motion=None):
                        *_problem(model, residuals, terms, lowest_joint, ground_sigma, motion)))
 
 
-@_compiled
+@compiled
 def _cost(x, geometry, rows, measured, sigma, terms, ground, motion):
     """Compiled :func:`cost`."""
     p = geometry[0].size

@@ -12,13 +12,25 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Newton's method in the points, and ``nearest_edm`` finishing with it."""
-from epp_ros.core.solvers import nedm
+"""
+Newton's method in the points, and ``nearest_edm`` finishing with it.
+
+Every test runs on both paths, compiled (``compiled_points``) and numpy;
+``test_compiled_points`` compares the two on the same problems.
+"""
+from epp_ros.core.solvers import compiled, nedm
 from epp_ros.core.solvers.edm import squared_distances
 from epp_ros.core.solvers.point_newton import PointProblem
 import numpy as np
 import pytest
 from scipy.optimize import least_squares
+
+
+@pytest.fixture(autouse=True, params=['compiled', 'numpy'])
+def path(request, monkeypatch):
+    """Run the test with the points' Newton steps compiled, then in numpy."""
+    monkeypatch.setattr(compiled, 'COMPILED', request.param == 'compiled')
+    return request.param
 
 
 def chain_problem(seed, sections=5, anchors=4, noise=0.05):

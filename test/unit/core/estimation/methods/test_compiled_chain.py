@@ -14,13 +14,13 @@
 
 """The chain's compiled fit against its numpy reference: the same fits, to rounding."""
 from epp_ros.core import PostureEstimator
-from epp_ros.core.estimation.methods import chain
 from epp_ros.core.estimation.methods import compiled_chain
 from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMethod
 from epp_ros.core.estimation.methods.track import Hypothesis, TrackMethod
 from epp_ros.core.model.measurements import Measurements
 from epp_ros.core.simulation.simulate import (field_effects, make_motion, random_posture,
                                               simulate_field, truck_pump)
+from epp_ros.core.solvers import compiled as compiled_gate
 import numpy as np
 import pytest
 from scipy.special import log_ndtr
@@ -32,7 +32,7 @@ def paths(monkeypatch):
     def both(run):
         results = []
         for compiled in (True, False):
-            monkeypatch.setattr(chain, 'COMPILED', compiled)
+            monkeypatch.setattr(compiled_gate, 'COMPILED', compiled)
             results.append(run())
         return results
     return both

@@ -14,12 +14,12 @@
 
 """The tracking estimator: time, silence, folds and manoeuvres."""
 from epp_ros.core import PostureEstimator
-from epp_ros.core.estimation.methods import chain
 from epp_ros.core.estimation.methods.chain import ChainMethod
 from epp_ros.core.estimation.methods.track import constant_velocity, TrackMethod
 from epp_ros.core.model.measurements import Measurements
 from epp_ros.core.simulation.simulate import (field_effects, FieldEffects, JoystickMotion,
                                               simulate_field, truck_pump, WorkingMotion)
+from epp_ros.core.solvers import compiled
 from epp_ros.core.solvers.levenberg_marquardt import STALL
 from monte_carlo import UNBIASED
 import numpy as np
@@ -148,7 +148,7 @@ def test_both_folds_are_kept_until_the_data_decides():
 
 def started(monkeypatch, stall, frames):
     """Run the track on ``frames``, its folds settled to ``stall``; (costs evaluated, diags)."""
-    monkeypatch.setattr(chain, 'COMPILED', False)      # the numpy fit's costs are counted
+    monkeypatch.setattr(compiled, 'COMPILED', False)      # the numpy fit's costs are counted
     evaluated = []
     evaluate = ChainMethod._evaluate
 

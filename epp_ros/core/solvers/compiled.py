@@ -1,0 +1,54 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The switch for the compiled kernels, and how they are compiled.
+
+Two hot loops have a numba-compiled twin of their numpy code: the chain's and the
+tracker's fit (``estimation.methods.compiled_chain``) and Newton's method in the points
+that finishes CEPP (``solvers.compiled_points``). The numpy code stays the reference and
+the path taken where numba is not installed or ``EPP_ROS_COMPILED=0`` is in the
+environment. A kernel module (and numba, about 0.4 s) is imported at its first use only.
+"""
+from functools import lru_cache
+import importlib
+import importlib.util
+import os
+
+__all__ = ['COMPILED', 'compiled', 'kernel']
+
+#: Whether the kernels run compiled: numba is installed and ``EPP_ROS_COMPILED`` is not 0.
+COMPILED = (importlib.util.find_spec('numba') is not None
+            and os.environ.get('EPP_ROS_COMPILED', '1') != '0')
+
+
+def kernel(module):
+    """Return the kernel ``module`` (a dotted name) where ``COMPILED``, else None."""
+    return _imported(module) if COMPILED else None
+
+
+@lru_cache(maxsize=None)
+def _imported(module):
+    return importlib.import_module(module)
+
+
+def compiled(function):
+    """
+    Return ``function`` compiled: nopython, cached on disk, without the GIL.
+
+    The first compile on a machine takes seconds; numba then loads it from its cache beside
+    the module. Without the GIL a node's executor thread runs while its worker fits.
+    """
+    import numba
+    return numba.njit(cache=True, nogil=True)(function)
