@@ -46,7 +46,7 @@ import pytest  # noqa: E402
 # thread (a test that runs epp_bag's or the benchmarks' main would set it for all after it).
 single_blas_thread()
 # The kernels compiled (or loaded from numba's cache) before any test, so that no node's
-# first frame waits for the compiler (some 50 s on a fresh checkout).
+# first frame waits for the compiler (about a minute on a fresh checkout).
 compile_fit()
 
 #: A test that uses one of these runs processes or speaks DDS: it is a system test.

@@ -91,7 +91,7 @@ def test_installed_nodes_run_with_the_installed_config(install, tmp_path):
                 [str(executable), '--ros-args', '--params-file', str(config), *extra],
                 env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
         # The installed estimator compiles its kernels on its first start (numba's cache
-        # is per installed file): some 50 s, more on a loaded machine.
+        # is per installed file): about a minute, more on a loaded machine.
         assert listener.spin_until(lambda: len(listener.postures) >= 5, 360), \
             [p.stderr.read() for p in processes.started[1:] if p.poll() is not None]
     finally:

@@ -44,6 +44,7 @@ from epp_ros.core.model.bounds import (bias_covariance, bound_from_covariance,
                                        bound_from_information, RangeBiasPrior)
 from epp_ros.core.model.folds import fold_alternatives, tip_circle
 from epp_ros.core.model.measurements import Measurements, Residuals, wrap_angle
+from epp_ros.core.model.vectors import norms
 import numpy as np
 from scipy.special import betainc, gammaincc, gammainccinv
 
@@ -90,11 +91,6 @@ def _explained_otherwise(loss, excess, measured):
     nlos, outlier = loss.posteriors(_zero_nan(excess))
     other = measured & (nlos + outlier > 0.5)
     return other & (nlos >= outlier), other & (nlos < outlier)
-
-
-def _norm(vectors):
-    """Euclidean norms over the last axis (np.linalg.norm's overhead dominates here)."""
-    return np.sqrt(np.einsum('...i,...i->...', vectors, vectors))
 
 
 def _zero_nan(values):
@@ -304,7 +300,7 @@ class Integrity:
         """Range excesses in sigmas: tag-anchor (p, m) and tag-tag (p, p), NaN unmeasured."""
         predicted = self.model.ranges(joints)
         links = (measurements.ranges - predicted) / self.link_sigma(measurements)
-        between = _norm(joints[:, None] - joints[None, :])
+        between = norms(joints[:, None] - joints[None, :])
         tag_links = (measurements.tag_ranges - between) / self.noise.tag_sigma
         return links, tag_links
 
@@ -324,7 +320,7 @@ class Integrity:
         ranges = measurements.ranges[which]
         valid = np.isfinite(ranges)
         sigma = self.link_sigma(measurements)[which]
-        distance = _norm(positions[:, None, :] - self.model.anchors)
+        distance = norms(positions[:, None, :] - self.model.anchors)
         excess = np.where(valid, (ranges - distance) / sigma, 0.0)
         total = np.sum(np.where(valid, self._mixture(excess, sigma)[0], 0.0), axis=1)
         # Sensors the frame lacks would add zeros: skipped (most frames are ranges only).
@@ -337,7 +333,7 @@ class Integrity:
     def _add_tag_cost(self, total, which, positions, measurements, joints):
         """Return ``total`` (n,) plus the tag-tag ranges' share of :meth:`_joint_cost`."""
         p = self.model.n_sections
-        gaps = _norm(positions[:, None, :] - joints[None, :, :])   # (n, p)
+        gaps = norms(positions[:, None, :] - joints[None, :, :])   # (n, p)
         for measured in (measurements.tag_ranges[which], measurements.tag_ranges[:, which].T):
             seen = np.isfinite(measured) & (np.arange(p) != which[:, None])
             error = np.where(seen, (measured - gaps) / self.noise.tag_sigma, 0.0)
@@ -480,8 +476,8 @@ class Integrity:
         deviation ``reference_std`` (p,). Shape (p,), metres.
         """
         chain = np.vstack([self.model.pivot_of(reference), reference])
-        radius = _norm(reference[:, :2] - self.model.base[:2])
-        inside = np.tril(_norm(chain[:, None] - chain[None, :]), k=-1)   # joint k: row k + 1
+        radius = norms(reference[:, :2] - self.model.base[:2])
+        inside = np.tril(norms(chain[:, None] - chain[None, :]), k=-1)   # joint k: row k + 1
         levers = inside[1:].sum(axis=1)
         return (self.limits.max_angular_rate * elapsed * (radius + levers)
                 + 3.0 * np.asarray(reference_std))
@@ -489,7 +485,7 @@ class Integrity:
     def anchor_directions(self, joints):
         """Return unit vectors (p, m, 3) from each anchor to each joint."""
         units = joints[:, None, :] - self.model.anchors
-        return units / np.maximum(_norm(units), 1e-12)[..., None]
+        return units / np.maximum(norms(units), 1e-12)[..., None]
 
     def point_bound(self, joints, measurements, kept, biased=False):
         """
@@ -620,9 +616,9 @@ class Integrity:
         tip = self._tip_circle(joints, slew)
         positions = np.vstack([fold_alternatives(self.model, joints), tip])
         which = np.r_[np.arange(p - 1), np.full(len(tip), p - 1)]
-        keep = _norm(positions - joints[which]) > near[which]
+        keep = norms(positions - joints[which]) > near[which]
         if reach is not None:
-            keep &= _norm(positions - reach[0][which]) <= reach[1][which]
+            keep &= norms(positions - reach[0][which]) <= reach[1][which]
         return positions, which, keep
 
     def _margins(self, joints, measurements, slew, positions, which):
@@ -637,7 +633,7 @@ class Integrity:
         which = np.arange(len(folds))
         close = margin < math.log(self.limits.ambiguity_odds)
         spread = np.zeros(self.model.n_sections)
-        spread[which[close]] = _norm(folds[close] - joints[which[close]])
+        spread[which[close]] = norms(folds[close] - joints[which[close]])
         return spread
 
     def _found(self, positions, which, margin):
@@ -668,12 +664,12 @@ class Integrity:
         """Loss of every measurement of the frame at each posture (n, p, 3): shape (n,)."""
         valid = np.isfinite(measurements.ranges)
         sigma = self.link_sigma(measurements)
-        distance = _norm(postures[:, :, None, :] - self.model.anchors)         # (n, p, m)
+        distance = norms(postures[:, :, None, :] - self.model.anchors)         # (n, p, m)
         excess = np.where(valid, (measurements.ranges - distance) / sigma, 0.0)
         cost = np.where(valid, self._mixture(excess, sigma)[0], 0.0).sum(axis=(1, 2))
         tag_valid = np.isfinite(measurements.tag_ranges)
         if tag_valid.any():
-            gaps = _norm(postures[:, :, None, :] - postures[:, None, :, :])
+            gaps = norms(postures[:, :, None, :] - postures[:, None, :, :])
             error = np.where(tag_valid, (measurements.tag_ranges - gaps)
                              / self.noise.tag_sigma, 0.0)
             cost = cost + 0.5 * np.sum(error ** 2, axis=(1, 2))
@@ -701,10 +697,10 @@ class Integrity:
         candidates += [np.asarray(a, dtype=float)[None] for a in alternatives]
         candidates = np.concatenate(candidates)
         near = self._near(joint_std)
-        far = _norm(candidates - joints) > near                               # (n, p)
+        far = norms(candidates - joints) > near                               # (n, p)
         keep = far.any(axis=1)
         if reach is not None:
-            keep &= np.all(_norm(candidates - reach[0]) <= reach[1], axis=1)
+            keep &= np.all(norms(candidates - reach[0]) <= reach[1], axis=1)
         if not keep.any():
             return set()
         costs = self.posture_cost(np.concatenate([joints[None], candidates[keep]]),
@@ -771,7 +767,7 @@ class Integrity:
         ambiguous |= self.ambiguous_postures(seen, measurements, joint_std, angles[0], reach,
                                              [np.asarray(a) + shift for a in alternatives])
         for rival in rivals:
-            far = _norm(np.asarray(rival, dtype=float) - joints) > self.limits.ambiguity_distance
+            far = norms(np.asarray(rival, dtype=float) - joints) > self.limits.ambiguity_distance
             ambiguous |= set(np.flatnonzero(far).tolist())
         values['ambiguous_joints'] = sorted(k + 1 for k in ambiguous)
         if ambiguous:
@@ -888,7 +884,7 @@ class Integrity:
         elif off_plane > t.arm_length_warn:
             checks.append((WARN, 'ok', f'a joint {off_plane:.3f} m off the boom plane'))
         if reach is not None:
-            moved = _norm(joints - reach[0])
+            moved = norms(joints - reach[0])
             values['moved'] = float(moved.max())
             jumped = np.flatnonzero(moved > reach[1])
             if jumped.size:
@@ -905,7 +901,7 @@ class Integrity:
         def steps(chain):
             return np.diff(np.vstack([self.model.pivot_of(chain), chain]), axis=0)
         now, then = steps(joints), steps(reference)
-        return np.arctan2(_norm(np.cross(now, then)), np.einsum('ki,ki->k', now, then))
+        return np.arctan2(norms(np.cross(now, then)), np.einsum('ki,ki->k', now, then))
 
     def _direction_std(self, joint_std):
         """

@@ -38,6 +38,7 @@ explain it.
 from dataclasses import dataclass, replace
 from functools import cached_property, lru_cache
 
+from epp_ros.core.model.vectors import norms
 import numpy as np
 from scipy.special import log_ndtr
 
@@ -90,7 +91,7 @@ def range_excess(points, anchors, ranges, sigma):
         here scores 0.
 
     """
-    distance = np.linalg.norm(np.asarray(points)[..., None, :] - anchors, axis=-1)
+    distance = norms(np.asarray(points)[..., None, :] - anchors)
     return np.where(np.isfinite(ranges), ranges - distance, 0.0) / sigma
 
 

@@ -19,10 +19,14 @@ All sections of a pump boom lie in the vertical plane through the base pivot alo
 direction ``u = (cos theta, sin theta, 0)``. In-plane coordinates of a point x are
 ``a = (x - b) . u`` (horizontal reach) and its height z.
 """
+from epp_ros.core.solvers.compiled import kernel
 import numpy as np
 
 __all__ = ['fit_slew', 'fit_plane_to_ranges', 'slew_step', 'to_plane', 'from_plane',
            'project_ranges']
+
+#: The compiled twin of :func:`fit_plane_to_ranges`.
+KERNEL = 'epp_ros.core.model.compiled_plane'
 
 
 def fit_slew(points, base):
@@ -149,6 +153,7 @@ def fit_plane_to_ranges(coords, ranges, anchors, base, slew, pivot=None, arm_len
     ``w_k = from_plane(coords[k], base, slew)``, plus, given ``arm_lengths``, the squared
     misfits of the section lengths (pivot to tag 1, tag k-1 to tag k). The slew and every
     tag's (reach, z) are free. A small ridge holds directions the data leave open.
+    Compiled where the kernels are (``compiled_plane``); this numpy code is the reference.
 
     Parameters
     ----------
@@ -180,6 +185,9 @@ def fit_plane_to_ranges(coords, ranges, anchors, base, slew, pivot=None, arm_len
     """
     if arm_lengths is not None and pivot is None:
         raise ValueError('pivot: required with arm_lengths')
+    if kernel(KERNEL) is not None:
+        return kernel(KERNEL).fit_plane_to_ranges(coords, ranges, anchors, base, slew, pivot,
+                                                  arm_lengths, max_iter, tol)
     coords = np.array(coords, dtype=float)
     anchors = np.asarray(anchors, dtype=float)
     base = np.asarray(base, dtype=float)

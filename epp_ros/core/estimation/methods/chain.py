@@ -39,6 +39,7 @@ from dataclasses import replace
 from functools import lru_cache
 from typing import NamedTuple
 
+from epp_ros.core.model import plane
 from epp_ros.core.model.folds import folded_angles, tip_circle, tip_minima
 from epp_ros.core.model.measurements import Residuals, SensorNoise, wrap_angle
 from epp_ros.core.model.nlos import NlosMixture, OUTLIER_FRACTION, range_excess
@@ -67,11 +68,12 @@ def compile_fit():
     """
     Compile the fits now where they run compiled (``compiled.COMPILED``); return whether.
 
-    The chain's and the tracker's fit, and CEPP's Newton finish in the points. The first
-    compile on a machine takes some 15 s; numba then loads them from its disk cache (a
-    fraction of a second). Called before the first frame where that frame's time matters.
+    The chain's and the tracker's fit, and CEPP's plane prediction and Newton finish in
+    the points. The first compile on a machine takes about a minute; numba then loads them
+    from its disk cache (a second or two). Called before the first frame where that
+    frame's time matters.
     """
-    for module in (KERNEL, point_newton.KERNEL):
+    for module in (KERNEL, point_newton.KERNEL, plane.KERNEL):
         if kernel(module) is None:
             return False
         kernel(module).compile_now()

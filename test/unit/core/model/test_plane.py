@@ -14,10 +14,18 @@
 
 from epp_ros.core.model.plane import (fit_plane_to_ranges, fit_slew, from_plane, project_ranges,
                                       to_plane)
+from epp_ros.core.solvers import compiled
 import numpy as np
 import pytest
 
 BASE = np.array([1.0, -2.0, 3.5])
+
+
+@pytest.fixture(params=['compiled', 'numpy'])
+def path(request, monkeypatch):
+    """Run the plane fit compiled (``compiled_plane``), then in numpy."""
+    monkeypatch.setattr(compiled, 'COMPILED', request.param == 'compiled')
+    return request.param
 
 
 @pytest.mark.parametrize('slew', [0.0, 0.3, np.pi / 2, -np.pi / 2, 2.5, -3.0])
@@ -60,7 +68,7 @@ def test_range_projection_clips_impossible_ranges_and_keeps_missing():
 
 
 @pytest.mark.parametrize('with_lengths', [False, True])
-def test_plane_fit_recovers_the_slew_of_exact_ranges(with_lengths):
+def test_plane_fit_recovers_the_slew_of_exact_ranges(with_lengths, path):
     rng = np.random.default_rng(2)
     slew = 2.9
     coords = np.cumsum(rng.uniform(3, 6, (4, 2)), axis=0)          # a chain rising outward
@@ -77,7 +85,7 @@ def test_plane_fit_recovers_the_slew_of_exact_ranges(with_lengths):
     np.testing.assert_allclose(fitted, coords, atol=1e-7)
 
 
-def test_plane_fit_holds_a_tag_without_ranges():
+def test_plane_fit_holds_a_tag_without_ranges(path):
     anchors = np.array([[5.0, 1.0, 0.0], [-3.0, 4.0, 1.0], [0.0, -5.0, 2.0], [2.0, 2.0, 6.0]])
     coords = np.array([[4.0, 6.0], [9.0, 8.0]])
     ranges = np.linalg.norm(from_plane(coords, BASE, 0.4)[:, None] - anchors[None], axis=-1)
@@ -88,7 +96,43 @@ def test_plane_fit_holds_a_tag_without_ranges():
     np.testing.assert_allclose(fitted[1], start[1])
 
 
-def test_plane_fit_with_lengths_needs_the_pivot():
+def test_plane_fit_with_lengths_needs_the_pivot(path):
     with pytest.raises(ValueError, match='pivot'):
         fit_plane_to_ranges(np.ones((1, 2)), np.ones((1, 3)), np.zeros((3, 3)), BASE, 0.0,
                             arm_lengths=np.ones(1))
+
+
+def noisy_plane_problem(seed):
+    """Return a plane fit's arguments: tags in a plane, noisy ranges, some missing."""
+    rng = np.random.default_rng(seed)
+    slew = rng.uniform(-np.pi, np.pi)
+    p, m = 2 + seed % 5, 3 + seed % 6
+    coords = np.cumsum(rng.uniform(2, 8, (p, 2)) * [1.0, rng.choice([-1.0, 1.0])], axis=0)
+    pivot = np.array([0.5, BASE[2]])
+    lengths = np.linalg.norm(np.diff(np.vstack([pivot, coords]), axis=0), axis=1)
+    anchors = np.column_stack([rng.uniform(-6, 6, (m, 2)), rng.uniform(0, 4, m)])
+    ranges = np.linalg.norm(from_plane(coords, BASE, slew)[:, None] - anchors[None], axis=-1)
+    ranges += rng.normal(0.0, 0.05, ranges.shape) + (rng.random(ranges.shape) < 0.1) * 2.0
+    ranges[rng.random(ranges.shape) < 0.15] = np.nan
+    start = coords + rng.normal(0, 0.5, coords.shape)
+    sections = (pivot, lengths) if seed % 2 else ()
+    return (start, ranges, anchors, BASE, slew + rng.normal(0, 0.05), *sections)
+
+
+def test_the_compiled_plane_fit_is_the_numpy_fit_to_rounding(monkeypatch):
+    for seed in range(80):
+        arguments = noisy_plane_problem(seed)
+        found = []
+        for path in (True, False):
+            monkeypatch.setattr(compiled, 'COMPILED', path)
+            found.append(fit_plane_to_ranges(*arguments, max_iter=1 + seed % 6, tol=1e-10))
+        (slew, coords), (expected_slew, expected) = found
+        assert slew == pytest.approx(expected_slew, abs=1e-9)
+        np.testing.assert_allclose(coords, expected, atol=1e-8)
+
+
+def test_non_finite_coordinates_give_a_non_finite_fit_on_either_path(path):
+    start, ranges, anchors, base, slew = noisy_plane_problem(2)
+    start[0, 0] = np.nan
+    fitted_slew, _ = fit_plane_to_ranges(start, ranges, anchors, base, slew, max_iter=3)
+    assert not np.isfinite(fitted_slew)
