@@ -153,7 +153,6 @@ class NoiseLearner:
         self.rounds = int(rounds)
         self._frames = deque(maxlen=self.window)
         self._since = 0
-        self._pending = None        # a re-estimate's remaining rounds (a generator)
 
     @property
     def settled(self):
@@ -183,54 +182,29 @@ class NoiseLearner:
             return False
         self._frames.append((excess, distances, int(dof)))
         self._since += 1
-        if self._pending is not None:
-            return self._next_round()
         due = self._since >= self.every or not self.settled
         if not due or self.links() < self.settle_links:
             return False
         self._since = 0
-        self._pending = self._rounds()
-        if not self.settled:        # the first estimate at once: the scale is what matters
-            while self._pending is not None:
-                changed = self._next_round()
-            return changed
-        return self._next_round()
-
-    def _next_round(self):
-        """Run the pending re-estimate's next EM round; return whether the estimate changed."""
-        try:
-            next(self._pending)
-        except StopIteration as finished:
-            self._pending = None
-            before, self.estimate = self.estimate, finished.value
-            return self.estimate != before
-        return False
+        before = self.estimate
+        self.estimate = self._fit()
+        return self.estimate != before
 
     def rescale(self, factor):
         """Scale the current sigmas by ``factor`` (a frame's own scale, before settling)."""
         self.estimate = self._scaled(self.estimate, factor, self.estimate.links)
 
-    def _rounds(self):
-        """
-        Re-estimate from the window as it is now, yielding after each EM round but the last.
-
-        Returns the new estimate. Once settled, :meth:`observe` runs one round a frame:
-        four rounds on a window of 2,400 links take some 4 ms, which in one frame every
-        ten was the estimator's slowest frame (issue #30); the estimate is the same, a few
-        frames later.
-        """
+    def _fit(self):
         excess = np.concatenate([frame[0] for frame in self._frames])
         distances = np.concatenate([frame[1] for frame in self._frames])
         dof = sum(frame[2] for frame in self._frames)
-        # Each re-estimate starts from a scale no blocked link inflates.
+        # Each round starts from a scale no blocked link inflates.
         factor = frame_scale(excess, self.estimate.link_sigma(distances), dof)
         if not np.isfinite(factor):
             return self.estimate
         current = self._scaled(self.estimate, factor, excess.size)
-        for done in range(1, self.rounds + 1):
+        for _ in range(self.rounds):
             current = self._em_round(current, excess, distances, dof)
-            if done < self.rounds:
-                yield
         return current
 
     def _sigma(self, sigma):

@@ -13,8 +13,6 @@
 # limitations under the License.
 
 """The range noise learned from residuals: known answers, and through the estimator."""
-import copy
-
 from epp_ros.app.health import report
 from epp_ros.core import PostureEstimator
 from epp_ros.core.estimation.noise_learning import frame_scale, NoiseLearner, RangeNoiseEstimate
@@ -83,57 +81,6 @@ def test_the_outliers_share_is_learned_and_leaves_sigma_alone(outliers):
     assert estimate.outliers == pytest.approx(max(outliers, OUTLIER_FRACTION), abs=tolerance)
     assert estimate.outliers >= OUTLIER_FRACTION
     assert estimate.as_options()['outlier_fraction'] == estimate.outliers
-
-
-def test_a_settled_learner_spreads_each_re_estimate_over_its_rounds(monkeypatch):
-    """
-    One EM round a frame: the estimate of the window as it was, applied rounds - 1 later.
-
-    The first estimate comes at once (the scale before settling is what matters).
-    """
-    rng = np.random.default_rng(4)
-    learner = NoiseLearner(CONFIGURED)
-    rounds_run = []
-    em_round = NoiseLearner._em_round
-
-    def counted(self, *args):
-        rounds_run[-1] += self is learner
-        return em_round(self, *args)
-    monkeypatch.setattr(NoiseLearner, '_em_round', counted)
-
-    def frame():
-        distances = rng.uniform(5.0, 35.0, LINKS_PER_FRAME)
-        return 0.3 * rng.standard_normal(LINKS_PER_FRAME), distances
-
-    first = -(-learner.settle_links // LINKS_PER_FRAME) - 1       # the first estimate's frame
-    due = first + 3 * learner.every
-    changes = []
-    for k in range(60):
-        rounds_run.append(0)
-        if k == due:                # the window at this frame's re-estimate, computed at once
-            snapshot = copy.deepcopy(learner)
-            excess, distances = frame()
-            snapshot._frames.append((excess, distances, 0))
-            expected = snapshot._rounds()
-            while True:
-                try:
-                    next(expected)
-                except StopIteration as finished:
-                    expected = finished.value
-                    break
-            changed = learner.observe(excess, distances, 0)
-        else:
-            changed = learner.observe(*frame(), 0)
-        changes.append((k, changed, learner.estimate))
-    assert first == next(k for k, count in enumerate(rounds_run) if count)
-    assert rounds_run[first] == learner.rounds          # the first estimate at once
-    assert max(rounds_run[first + 1:]) == 1
-    assert sum(rounds_run[first + 1:]) == learner.rounds * sum(
-        1 for k in range(first + 1, 60) if (k - first) % learner.every == 0
-        and k + learner.rounds - 1 < 60)
-    # The re-estimate begun at frame ``due`` lands three frames later, as computed at once.
-    assert changes[due + learner.rounds - 1][1:] == (True, expected)
-    assert changes[due + learner.rounds - 2][2] != expected
 
 
 def test_sigma_growing_with_distance_is_learned():
