@@ -20,9 +20,10 @@ few SQP steps on a problem of a dozen points, each step some sixty numpy and LAP
 on matrices that small: the calls, not the arithmetic, are the time (issue #30). This
 module does the same arithmetic compiled by numba: the same residuals, Hessian of the
 Lagrangian made PSD, KKT system and restoration onto the fixed distances, damped by the
-schedule of ``core.solvers.levenberg_marquardt`` (whose constants it imports). Where they
-differ is LAPACK's routine for the minimum-norm least squares (numba's ``lstsq`` is
-``dgelsd``, the numpy path calls ``dgelsy``): the same solutions, to rounding.
+schedule of ``core.solvers.levenberg_marquardt`` (whose constants it imports). Its least
+squares, eigendecomposition and LU are the numpy path's LAPACK routines (scipy's
+``dgelsy``, ``dsyevd``, ``dgesv``), called from the compiled code: numba's own ``lstsq``
+(``dgelsd``) cost four times ``dgelsy`` on these systems.
 
 The numpy path stays the reference (the tests run both on the same problems) and is the
 one taken where numba is not installed or ``EPP_ROS_COMPILED=0``

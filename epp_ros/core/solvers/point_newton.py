@@ -27,6 +27,8 @@ everything is quadratic in the points), each followed by a minimum-norm restorat
 the constraints and damped by the package's Levenberg-Marquardt loop, converge in a few
 steps of a few small dense solves each. ``nearest_edm`` takes them once its iterates are
 of rank r: the start or the penalty method chooses the basin, Newton's method finishes in it.
+:meth:`PointProblem.refine` and :meth:`PointProblem.stationarity` run compiled where the
+kernels are (``compiled_points``); this numpy code is their reference.
 """
 from epp_ros.core.solvers.compiled import kernel
 from epp_ros.core.solvers.edm import squared_distances, symmetric_eigh
