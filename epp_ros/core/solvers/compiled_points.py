@@ -71,6 +71,19 @@ class _Lapack(NamedTuple):
 
 
 @compiled
+def _fortran_copy(matrix):
+    """
+    Return a copy of ``matrix`` in column order, for LAPACK to overwrite.
+
+    Always a copy: ``asfortranarray`` hands over an array already in column order (a
+    transpose) as it is, and LAPACK would overwrite the caller's.
+    """
+    copy = np.empty((matrix.shape[1], matrix.shape[0])).T
+    copy[:, :] = matrix
+    return copy
+
+
+@compiled
 def _least_squares(matrix, rhs, lapack):
     """
     Minimum-norm least squares ``matrix x = rhs``, (m, k) and (m,): ``x`` (k,) and success.
@@ -80,7 +93,7 @@ def _least_squares(matrix, rhs, lapack):
     m, k = matrix.shape
     if m == 0 or k == 0:
         return np.zeros(k), True
-    a = np.asfortranarray(matrix)
+    a = _fortran_copy(matrix)
     b = np.zeros(max(m, k))
     b[:m] = rhs
     #                    m  n  nrhs lda ldb   rank lwork info
@@ -108,7 +121,7 @@ def _eigh(matrix, lapack):
     ``edm.symmetric_eigh``'s call: ``dsyevd`` on the upper triangle, with scipy's workspace.
     """
     n = matrix.shape[0]
-    vectors = np.asfortranarray(matrix)
+    vectors = _fortran_copy(matrix)
     values = np.zeros(n)
     flags = np.array([ord('V'), ord('U')], dtype=np.uint8)
     #                    n  lda    lwork               liwork     info
@@ -124,7 +137,7 @@ def _eigh(matrix, lapack):
 def _solve(matrix, rhs, lapack):
     """Solution of the square system ``matrix x = rhs`` (LU, ``dgesv``) and success."""
     n = matrix.shape[0]
-    a = np.asfortranarray(matrix)
+    a = _fortran_copy(matrix)
     b = rhs.copy()
     #                    n  nrhs lda ldb info
     scalars = np.array([n, 1, n, n, 0], dtype=np.int32)

@@ -33,6 +33,44 @@ def test_the_compiled_least_squares_is_lapacks_to_the_last_bit():
         np.testing.assert_array_equal(solution, point_newton._least_squares(matrix, rhs))
 
 
+@pytest.mark.parametrize('order', ['C', 'F'])
+def test_lapack_never_overwrites_the_callers_matrix(order):
+    """LAPACK works in place: it gets a copy, whatever the order of the caller's matrix."""
+    rng = np.random.default_rng(7)
+    for shape in ((6, 1), (1, 6), (1, 1), (4, 3), (3, 3)):
+        matrix = np.array(rng.standard_normal(shape), order=order)
+        kept = matrix.copy()
+        compiled_points._least_squares(matrix, rng.standard_normal(shape[0]),
+                                       compiled_points._LAPACK)
+        if shape[0] == shape[1]:
+            compiled_points._eigh(matrix, compiled_points._LAPACK)
+            compiled_points._solve(matrix, np.ones(shape[0]), compiled_points._LAPACK)
+        np.testing.assert_array_equal(matrix, kept)
+
+
+def test_one_fixed_pair_steps_as_numpy_does(monkeypatch):
+    """The constraints' Jacobian is then one row (in both orders at once)."""
+    rng = np.random.default_rng(8)
+    truth = rng.uniform(-5.0, 5.0, (6, 2))
+    goal = squared_distances(truth) + rng.normal(0.0, 0.5, (6, 6))
+    goal = 0.5 * (goal + goal.T)
+    np.fill_diagonal(goal, 0.0)
+    goal /= goal.max()
+    sq_weights = np.ones((6, 6)) - np.eye(6)
+    problem = PointProblem(goal, sq_weights, np.array([[0, 3]]))
+    start = truth / np.sqrt(squared_distances(truth).max()) + rng.normal(0.0, 0.05, (6, 2))
+    results = []
+    for path in (True, False):
+        monkeypatch.setattr(compiled, 'COMPILED', path)
+        results.append((problem.stationarity(start),) + problem.refine(start, 1e-10, 8))
+    (first, points, stationarity, _), (expected_first, expected, expected_stationarity,
+                                       _) = results
+    assert first == pytest.approx(expected_first, rel=1e-9)
+    assert problem.objective(points) == pytest.approx(problem.objective(expected), rel=1e-6)
+    np.testing.assert_allclose(squared_distances(points), squared_distances(expected),
+                               atol=1e-7)
+
+
 def test_the_compiled_eigendecomposition_and_solve_are_lapacks():
     rng = np.random.default_rng(6)
     matrix = rng.standard_normal((9, 9))
