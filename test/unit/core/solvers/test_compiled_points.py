@@ -21,6 +21,15 @@ import pytest
 from test_point_newton import chain_problem
 
 
+def both_paths(monkeypatch, problem, start):
+    """Return (stationarity, points, stationarity, steps) of ``start``, compiled then numpy."""
+    results = []
+    for path in (True, False):
+        monkeypatch.setattr(compiled, 'COMPILED', path)
+        results.append((problem.stationarity(start),) + problem.refine(start, 1e-10, 8))
+    return results
+
+
 def test_the_compiled_least_squares_is_lapacks_to_the_last_bit():
     rng = np.random.default_rng(5)
     for rows, columns in ((26, 24), (24, 26), (5, 12), (12, 1), (0, 4), (3, 0)):
@@ -59,12 +68,9 @@ def test_one_fixed_pair_steps_as_numpy_does(monkeypatch):
     sq_weights = np.ones((6, 6)) - np.eye(6)
     problem = PointProblem(goal, sq_weights, np.array([[0, 3]]))
     start = truth / np.sqrt(squared_distances(truth).max()) + rng.normal(0.0, 0.05, (6, 2))
-    results = []
-    for path in (True, False):
-        monkeypatch.setattr(compiled, 'COMPILED', path)
-        results.append((problem.stationarity(start),) + problem.refine(start, 1e-10, 8))
-    first, points, stationarity, count = results[0]
-    expected_first, expected, expected_stationarity, expected_count = results[1]
+    ours, reference = both_paths(monkeypatch, problem, start)
+    first, points, stationarity, count = ours
+    expected_first, expected, expected_stationarity, expected_count = reference
     assert first == pytest.approx(expected_first, rel=1e-9) and first > 1e-10
     assert count > 0 and abs(count - expected_count) <= 1
     assert stationarity == pytest.approx(expected_stationarity, rel=1e-3, abs=1e-9)
@@ -104,12 +110,9 @@ def test_the_compiled_steps_are_the_numpy_steps(monkeypatch):
             seed, sections=3 + seed % 4, anchors=3 + seed % 5, noise=0.02 * (1 + seed % 7))
         problem = PointProblem(goal, sq_weights, fixed)
         start = truth + 0.02 * np.random.default_rng(seed).standard_normal(truth.shape)
-        results = []
-        for path in (True, False):
-            monkeypatch.setattr(compiled, 'COMPILED', path)
-            results.append((problem.stationarity(start),) + problem.refine(start, 1e-10, 8))
-        first, points, stationarity, count = results[0]
-        expected_first, expected, expected_stationarity, expected_count = results[1]
+        ours, reference = both_paths(monkeypatch, problem, start)
+        first, points, stationarity, count = ours
+        expected_first, expected, expected_stationarity, expected_count = reference
         assert first == pytest.approx(expected_first, rel=1e-9)
         assert abs(count - expected_count) <= 1
         steps.append(count == expected_count)
