@@ -304,11 +304,11 @@ class Integrity:
         tag_links = (measurements.tag_ranges - between) / self.noise.tag_sigma
         return links, tag_links
 
-    def _mixture(self, excess, sigma):
-        """NLOS mixture (cost, slope, posterior) of tag-anchor excesses in sigmas."""
+    def _bound_loss(self, measurements):
+        """Return the NLOS mixture bound to the frame's link sigmas (``LinkLoss``)."""
         if self._link_loss is not None:
-            return self._link_loss(excess)
-        return self.nlos.loss(excess, sigma)
+            return self._link_loss
+        return self.nlos.bind(self.link_sigma(measurements))
 
     def _joint_cost(self, which, positions, measurements, joints, slew):
         """
@@ -317,12 +317,8 @@ class Integrity:
         Its tag's ranges (NLOS mixture), its tag-tag ranges, and the inclinometers of the
         two sections it ends and starts, the other joints staying where they are. Shape (n,).
         """
-        ranges = measurements.ranges[which]
-        valid = np.isfinite(ranges)
-        sigma = self.link_sigma(measurements)[which]
-        distance = norms(positions[:, None, :] - self.model.anchors)
-        excess = np.where(valid, (ranges - distance) / sigma, 0.0)
-        total = np.sum(np.where(valid, self._mixture(excess, sigma)[0], 0.0), axis=1)
+        total = self._bound_loss(measurements).at_points(positions, measurements.ranges,
+                                                         self.model.anchors, tags=which)
         # Sensors the frame lacks would add zeros: skipped (most frames are ranges only).
         if np.isfinite(measurements.tag_ranges).any():
             total = self._add_tag_cost(total, which, positions, measurements, joints)
@@ -370,7 +366,7 @@ class Integrity:
         links, tag_links = self._excess(joints, measurements)
         measured, tag_measured = np.isfinite(links), np.isfinite(tag_links)
         sigma = self.link_sigma(measurements)
-        loss = self._link_loss if self._link_loss is not None else self.nlos.bind(sigma)
+        loss = self._bound_loss(measurements)
         blocked, outlying = _explained_otherwise(loss, links, measured)
         tag_blocked, tag_outlying = _explained_otherwise(self._tag_loss, tag_links, tag_measured)
         kept = measured & ~blocked & ~outlying
@@ -662,11 +658,8 @@ class Integrity:
 
     def posture_cost(self, postures, measurements):
         """Loss of every measurement of the frame at each posture (n, p, 3): shape (n,)."""
-        valid = np.isfinite(measurements.ranges)
-        sigma = self.link_sigma(measurements)
-        distance = norms(postures[:, :, None, :] - self.model.anchors)         # (n, p, m)
-        excess = np.where(valid, (measurements.ranges - distance) / sigma, 0.0)
-        cost = np.where(valid, self._mixture(excess, sigma)[0], 0.0).sum(axis=(1, 2))
+        cost = self._bound_loss(measurements).at_points(postures, measurements.ranges,
+                                                        self.model.anchors).sum(axis=1)
         tag_valid = np.isfinite(measurements.tag_ranges)
         if tag_valid.any():
             gaps = norms(postures[:, :, None, :] - postures[:, None, :, :])

@@ -35,10 +35,12 @@ in a public DW1000 recording; ``FieldEffects.outlier_rate``): a third, broad Gau
 without which one short range is a Gaussian impossibility that moves every joint to
 explain it.
 """
+from copy import copy
 from dataclasses import dataclass, replace
 from functools import cached_property, lru_cache
 
 from epp_ros.core.model.vectors import norms
+from epp_ros.core.solvers.compiled import kernel
 import numpy as np
 from scipy.special import log_ndtr
 
@@ -60,6 +62,8 @@ OUTLIER_SIGMA = 2.0
 OUTLIER_SPREAD = 10.0
 #: Links of at most this many ranges have their bound losses kept (:meth:`NlosMixture.bind`).
 BOUND_SIZE = 256
+#: The compiled twin of :meth:`LinkLoss.at_points` (``solvers.compiled``).
+KERNEL = 'epp_ros.core.model.compiled_nlos'
 
 
 def _outlier_ratio(sigma, outlier_sigma):
@@ -248,11 +252,12 @@ class LinkLoss:
     """
 
     def __init__(self, mixture, sigma, prior=None):
+        self.sigma = np.asarray(sigma, dtype=float)
         self.gaussian = mixture.gaussian
         self.off_line = 0.0
         if self.gaussian:
             return
-        sigma = np.asarray(sigma, dtype=float)
+        sigma = self.sigma
         self.inverse_g = sigma / mixture.gamma
         if prior is None or mixture.fraction == 0.0:
             prior = np.full(sigma.shape, mixture.fraction)
@@ -268,6 +273,66 @@ class LinkLoss:
             # A broad Gaussian, in units of sigma and scaled like the others.
             self.outlier_ratio = _outlier_ratio(sigma, mixture.outlier_sigma)
             self.outlier_offset = np.log(mixture.outliers * self.outlier_ratio)
+
+    def at_points(self, points, ranges, anchors, tags=None):
+        """
+        Return the cost of tags' ranges were the tags at candidate points, anchors summed.
+
+        The loss's sigmas are the ranges' (one, or one per range). Compiled where the kernels
+        are (``solvers.compiled``): many candidates are scored at once (a joint's other
+        folds, the tip all round its hinge, whole postures).
+
+        Parameters
+        ----------
+        points : ndarray, shape (..., q, 3), or (n, 3) with ``tags``
+            Candidate positions of the q tags (or of tag ``tags[i]``), metres.
+        ranges : ndarray, shape (q, m)
+            The tags' measured ranges, metres; NaN where none (it scores 0).
+        anchors : ndarray, shape (m, 3)
+            The anchors, metres.
+        tags : ndarray of int, shape (n,), optional
+            Each point's row of ``ranges``.
+
+        Returns
+        -------
+        ndarray, shape (..., q) or (n,)
+
+        """
+        points = np.asarray(points, dtype=float)
+        ranges = np.asarray(ranges, dtype=float)
+        if self.sigma.size != 1 and self.sigma.shape != ranges.shape:
+            raise ValueError(f'a loss bound to sigmas of shape {self.sigma.shape} scores '
+                             f'ranges of shape {ranges.shape}: one sigma, or one per range')
+        sigma = np.broadcast_to(self.sigma, ranges.shape)
+        rows = None if tags is None else np.asarray(tags, dtype=np.int64)
+        compiled = kernel(KERNEL)
+        if compiled is None:
+            if rows is None:
+                return np.sum(self(range_excess(points, anchors, ranges, sigma))[0], axis=-1)
+            excess = range_excess(points, anchors, ranges[rows], sigma[rows])   # (n, m)
+            return np.sum(self._rows(rows)(excess)[0], axis=-1)
+        if rows is None:
+            shape = points.shape[:-1]
+            rows = np.broadcast_to(np.arange(ranges.shape[0]), shape).ravel()
+            points = points.reshape(-1, 3)
+        else:
+            shape = rows.shape
+        return compiled.tag_losses(np.ascontiguousarray(points), rows, ranges,
+                                   np.ascontiguousarray(sigma), anchors,
+                                   compiled.loss_terms(self)).reshape(shape)
+
+    def _rows(self, rows):
+        """Return this loss for the links of ``rows`` of its (q, m) sigmas: (n, m) each."""
+        if self.sigma.ndim == 0:
+            return self
+        taken = copy(self)
+        for name, value in vars(self).items():
+            if isinstance(value, np.ndarray) and value.shape == self.sigma.shape:
+                setattr(taken, name, value[rows])
+            elif name == 'at_zero':
+                setattr(taken, name, tuple(np.broadcast_to(v, self.sigma.shape)[rows]
+                                           for v in value))
+        return taken
 
     def log_likelihood_ratio(self, excess):
         """

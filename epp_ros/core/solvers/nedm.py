@@ -41,6 +41,7 @@ holds one problem's fixed data and takes its MM steps and SQUAREM cycles; the it
 ``_Iterate`` values, and the multipliers carried between subproblems a ``_DualState``.
 """
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import NamedTuple, Optional
 
 from epp_ros.core.solvers.edm import (centering_matrix, classical_mds, rank_penalty,
@@ -94,6 +95,21 @@ def _constraint_operator(n, pairs):
     return rows, cols
 
 
+@lru_cache(maxsize=16)
+def _upper_pairs(n):
+    """
+    Return the (a, b) pairs, a <= b < n, and -1/4 of each one's Hessian term (read-only).
+
+    Counted twice off the diagonal. Kept: ``numpy.triu_indices`` builds a mask and
+    gathers from it (some 20 µs a call here), and every frame asks for the same n.
+    """
+    upper_a, upper_b = np.triu_indices(n)
+    factor = np.where(upper_a == upper_b, -0.25, -0.5)
+    for array in (upper_a, upper_b, factor):
+        array.setflags(write=False)
+    return upper_a, upper_b, factor
+
+
 class _Projector:
     """
     Projection onto ``K_-(q)`` with prescribed entries, for one constraint structure.
@@ -109,9 +125,7 @@ class _Projector:
         self.flat = rows * self.n + cols
         self.flat_transposed = cols * self.n + rows
         self.diagonal = np.arange(rows.size) * (rows.size + 1)   # of the (k, k) Hessian
-        self.upper_a, self.upper_b = np.triu_indices(self.n)
-        # -1/4 of each (a, b) term of the Hessian, counted twice off the diagonal.
-        self.pair_factor = np.where(self.upper_a == self.upper_b, -0.25, -0.5)
+        self.upper_a, self.upper_b, self.pair_factor = _upper_pairs(self.n)
 
     def adjoint(self, y):
         """``A*(y) = sum_s y_s A_s`` as a symmetric (n, n) matrix (pairs are unique)."""

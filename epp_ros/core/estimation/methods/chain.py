@@ -39,7 +39,7 @@ from dataclasses import replace
 from functools import lru_cache
 from typing import NamedTuple
 
-from epp_ros.core.model import plane
+from epp_ros.core.model import nlos, plane
 from epp_ros.core.model.folds import folded_angles, tip_circle, tip_minima
 from epp_ros.core.model.measurements import Residuals, SensorNoise, wrap_angle
 from epp_ros.core.model.nlos import NlosMixture, OUTLIER_FRACTION, range_excess
@@ -68,12 +68,12 @@ def compile_fit():
     """
     Compile the fits now where they run compiled (``compiled.COMPILED``); return whether.
 
-    The chain's and the tracker's fit, and CEPP's plane prediction and Newton finish in
-    the points. The first compile on a machine takes about a minute; numba then loads them
+    The chain's and the tracker's fit, CEPP's plane prediction and Newton finish in the
+    points, and the NLOS loss of candidate positions (``LinkLoss.at_points``). The first compile on a machine takes about a minute; numba then loads them
     from its disk cache (a second or two). Called before the first frame where that
     frame's time matters.
     """
-    for module in (KERNEL, point_newton.KERNEL, plane.KERNEL):
+    for module in (KERNEL, point_newton.KERNEL, plane.KERNEL, nlos.KERNEL):
         if kernel(module) is None:
             return False
         kernel(module).compile_now()
@@ -431,14 +431,14 @@ class ChainMethod:
         """
         n = residuals.n_ranged                   # ranges come first
         cost, slope = 0.5 * scaled ** 2, scaled.copy()
-        nlos = np.zeros_like(scaled)
-        cost[:n], excess_slope, nlos[:n] = self.losses(residuals)[judged](-scaled[:n])
+        blocked = np.zeros_like(scaled)
+        cost[:n], excess_slope, blocked[:n] = self.losses(residuals)[judged](-scaled[:n])
         slope[:n] = -excess_slope
         # IRLS curvature slope / residual: 1 for Gaussian rows, small on a blocked link.
         large = np.abs(scaled) > 1.0
         weights = np.ones_like(scaled)
         weights[large] = np.clip(slope[large] / scaled[large], 1e-3, 1.0)
-        return float(np.sum(cost)), slope, weights, nlos
+        return float(np.sum(cost)), slope, weights, blocked
 
     def _evaluate(self, psi, residuals, judged=False):
         """

@@ -20,7 +20,7 @@ numpy each step is some forty array operations on arrays that small, and their c
 their arithmetic, are the time (issue #30). This module does the same arithmetic in one
 function compiled by numba, from the same inputs: the boom's geometry
 (``BoomModel.forward_kinematics`` and ``joint_jacobian``), the rows of ``Residuals``, the
-constants of the NLOS loss (``LinkLoss``, whose formulas :func:`_link_loss` repeats) and
+constants of the NLOS loss (``LinkLoss``, whose formulas ``compiled_nlos.link_loss`` repeats) and
 the damping schedule of ``core.solvers.levenberg_marquardt``, whose constants it imports.
 
 The tracker's update is the same fit in the angles and their rates, each tag's ranges at
@@ -33,81 +33,17 @@ fit only. The first fit on a machine compiles (some 10 s, once: numba caches it 
 this file); the compiled function releases the GIL, so a node's executor thread runs
 while its worker fits.
 """
-from functools import lru_cache
 import math
 
+from epp_ros.core.model.compiled_nlos import link_loss, loss_terms
 from epp_ros.core.solvers.compiled import compiled
 from epp_ros.core.solvers.levenberg_marquardt import FALL, GROWTH, INITIAL_DAMPING, MAX_DAMPING
 import numpy as np
 
 __all__ = ['compile_now', 'cost', 'fit', 'loss_terms']
 
-_SQRT1_2 = math.sqrt(0.5)
-_HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
-_LOG_2 = math.log(2.0)
 #: Ridge on the damped diagonal, as ``marquardt_step``'s default.
 _RIDGE = 1e-9
-#: Rows of :func:`loss_terms`.
-_TERMS = ('inverse_g', 'los_offset', 'blocked_offset', 'outlier_ratio', 'outlier_offset')
-
-
-@lru_cache(maxsize=32)
-def loss_terms(link_loss):
-    """
-    Return a ``LinkLoss``'s constants as one array for :func:`fit`: shape (7, n), or (0, 0).
-
-    Rows: ``inverse_g``, ``los_offset``, ``blocked_offset``, ``outlier_ratio``,
-    ``outlier_offset``, then the loss's value and slope at zero excess. A Gaussian loss has
-    none.
-    """
-    if link_loss.gaussian:
-        return np.zeros((0, 0))
-    zero_cost, zero_slope = link_loss.at_zero
-    return np.ascontiguousarray(np.vstack(
-        [np.broadcast_to(getattr(link_loss, name), zero_cost.shape) for name in _TERMS]
-        + [zero_cost, zero_slope]), dtype=float)
-
-
-@compiled
-def _log_ndtr(z):
-    """Return log Phi(z), as ``scipy.special.log_ndtr`` to rounding."""
-    if z > -1.0:
-        return math.log1p(-0.5 * math.erfc(z * _SQRT1_2))
-    if z > -37.0:               # erfc stays a normal number
-        return math.log(0.5 * math.erfc(-z * _SQRT1_2))
-    inverse = 1.0 / (z * z)     # Mills' ratio's asymptotic series
-    series = 1.0 + inverse * (-1.0 + inverse * (3.0 + inverse * (-15.0 + inverse * (
-        105.0 + inverse * (-945.0 + inverse * 10395.0)))))
-    return -0.5 * z * z - math.log(-z) - _HALF_LOG_2PI + math.log(series)
-
-
-@compiled
-def _logaddexp(x, y):
-    """Return log(exp(x) + exp(y)), as ``numpy.logaddexp``."""
-    if x == y:
-        return x + _LOG_2
-    difference = x - y
-    if difference > 0:
-        return x + math.log1p(math.exp(-difference))
-    return y + math.log1p(math.exp(difference))
-
-
-@compiled
-def _link_loss(s, terms, i):
-    """Return (cost, slope) of excess ``s`` on link ``i``: ``LinkLoss.__call__``'s formulas."""
-    inverse_g, los_offset, blocked_offset = terms[0, i], terms[1, i], terms[2, i]
-    outlier_ratio, outlier_offset = terms[3, i], terms[4, i]
-    z = s - inverse_g
-    log_cdf = _log_ndtr(z)
-    los = los_offset - 0.5 * s ** 2
-    blocked = blocked_offset - inverse_g * s + log_cdf
-    outlier = outlier_offset - 0.5 * (outlier_ratio * s) ** 2
-    total = _logaddexp(_logaddexp(los, blocked), outlier)
-    nlos, outlying = math.exp(blocked - total), math.exp(outlier - total)
-    mills = math.exp(-0.5 * z ** 2 - _HALF_LOG_2PI - log_cdf)
-    slope = ((1.0 - nlos - outlying) * s + nlos * (inverse_g - mills)
-             + outlying * outlier_ratio ** 2 * s - terms[6, i])
-    return -total - terms[5, i] - terms[6, i] * s, slope
 
 
 @compiled
@@ -192,7 +128,7 @@ def _evaluate(x, geometry, rows, measured, sigma, terms, ground, motion, joints,
             distance = math.sqrt((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2)
             scaled[r] = (distance - measured[r]) / sigma[r]
             if terms.shape[0]:
-                c, excess_slope = _link_loss(-scaled[r], terms, r)
+                c, excess_slope = link_loss(-scaled[r], terms, r)
                 slope[r] = -excess_slope
             else:
                 c, slope[r] = 0.5 * scaled[r] ** 2, scaled[r]

@@ -48,7 +48,6 @@ from epp_ros.core.estimation.methods.chain import canonical_angles, ChainMethod,
 from epp_ros.core.estimation.methods.epp import CEPP
 from epp_ros.core.model.folds import fold_alternatives, keep_folds, tip_circle, tip_minima
 from epp_ros.core.model.measurements import Measurements
-from epp_ros.core.model.nlos import range_excess
 from epp_ros.core.model.noise import fitted_link_bias
 from epp_ros.core.model.plane import fit_slew
 from epp_ros.core.solvers.edm import squared_distances
@@ -316,8 +315,8 @@ class FieldCEPP(CEPP):
 
     def _tag_losses(self, points, ranges, sigma):
         """Return the judge's loss of q tags' ranges (q, m) at points (..., q, 3)."""
-        excess = range_excess(points, self.model.anchors, ranges, sigma)
-        return np.sum(self._finish.judged_nlos.loss(excess, sigma)[0], axis=-1)   # 0: unheard
+        loss = self._finish.judged_nlos.bind(sigma)
+        return loss.at_points(points, ranges, self.model.anchors)     # 0: unheard
 
     def _fold_starts(self, joints, ranges):
         """
@@ -354,10 +353,7 @@ class FieldCEPP(CEPP):
         """Return the judge's loss of the measured ranges at ``joints``; inf below ground."""
         if joints[:, 2].min() < self.lowest_joint or not np.all(np.isfinite(joints)):
             return np.inf
-        measured = np.isfinite(ranges)
-        sigma = self._range_sigma(ranges)[measured]
-        excess = (ranges[measured] - self.model.ranges(joints)[measured]) / sigma
-        return float(np.sum(self._finish.judged_nlos.loss(excess, sigma)[0]))
+        return float(np.sum(self._tag_losses(joints, ranges, self._range_sigma(ranges))))
 
     def _beam(self, ranges):
         """Return each slew of the beam search with its best chain: slews (s,), psi (s, p + 1)."""

@@ -1,0 +1,135 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The NLOS loss compiled: its formulas for one link, and tags' losses at candidate points.
+
+``LinkLoss`` (``core.model.nlos``) is the reference; :func:`link_loss` repeats its
+formulas for one range, from the constants :func:`loss_terms` collects, for the compiled
+fit (``estimation.methods.compiled_chain``) and for :func:`tag_losses`: a tag's ranges
+scored at each of many candidate positions (a joint's other folds, the tip all round its
+hinge, a whole posture), which in numpy is a dozen calls on arrays of a few hundred
+elements per candidate set (issue #30). Imported at first use only
+(``solvers.compiled``).
+"""
+from functools import lru_cache
+import math
+
+from epp_ros.core.solvers.compiled import compiled
+import numpy as np
+
+__all__ = ['link_loss', 'log_ndtr', 'loss_terms', 'tag_losses']
+
+_SQRT1_2 = math.sqrt(0.5)
+_HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
+_LOG_2 = math.log(2.0)
+#: Rows of :func:`loss_terms`.
+_TERMS = ('inverse_g', 'los_offset', 'blocked_offset', 'outlier_ratio', 'outlier_offset')
+
+
+@lru_cache(maxsize=32)
+def loss_terms(link_loss):
+    """
+    Return a ``LinkLoss``'s constants as one array: shape (7, n), or (0, 0).
+
+    Rows: ``inverse_g``, ``los_offset``, ``blocked_offset``, ``outlier_ratio``,
+    ``outlier_offset``, then the loss's value and slope at zero excess; one column per
+    link (n its sigmas' size). A Gaussian loss has none.
+    """
+    if link_loss.gaussian:
+        return np.zeros((0, 0))
+    zero_cost, zero_slope = link_loss.at_zero
+    return np.ascontiguousarray(np.vstack(
+        [np.broadcast_to(getattr(link_loss, name), zero_cost.shape).ravel() for name in _TERMS]
+        + [zero_cost.ravel(), zero_slope.ravel()]), dtype=float)
+
+
+@compiled
+def log_ndtr(z):
+    """Return log Phi(z), as ``scipy.special.log_ndtr`` to rounding."""
+    if z > -1.0:
+        return math.log1p(-0.5 * math.erfc(z * _SQRT1_2))
+    if z > -37.0:               # erfc stays a normal number
+        return math.log(0.5 * math.erfc(-z * _SQRT1_2))
+    inverse = 1.0 / (z * z)     # Mills' ratio's asymptotic series
+    series = 1.0 + inverse * (-1.0 + inverse * (3.0 + inverse * (-15.0 + inverse * (
+        105.0 + inverse * (-945.0 + inverse * 10395.0)))))
+    return -0.5 * z * z - math.log(-z) - _HALF_LOG_2PI + math.log(series)
+
+
+@compiled
+def _logaddexp(x, y):
+    """Return log(exp(x) + exp(y)), as ``numpy.logaddexp``."""
+    if x == y:
+        return x + _LOG_2
+    difference = x - y
+    if difference > 0:
+        return x + math.log1p(math.exp(-difference))
+    return y + math.log1p(math.exp(difference))
+
+
+@compiled
+def link_loss(s, terms, i):
+    """Return (cost, slope) of excess ``s`` on link ``i``: ``LinkLoss.__call__``'s formulas."""
+    inverse_g, los_offset, blocked_offset = terms[0, i], terms[1, i], terms[2, i]
+    outlier_ratio, outlier_offset = terms[3, i], terms[4, i]
+    z = s - inverse_g
+    log_cdf = log_ndtr(z)
+    los = los_offset - 0.5 * s ** 2
+    blocked = blocked_offset - inverse_g * s + log_cdf
+    outlier = outlier_offset - 0.5 * (outlier_ratio * s) ** 2
+    total = _logaddexp(_logaddexp(los, blocked), outlier)
+    nlos, outlying = math.exp(blocked - total), math.exp(outlier - total)
+    mills = math.exp(-0.5 * z ** 2 - _HALF_LOG_2PI - log_cdf)
+    slope = ((1.0 - nlos - outlying) * s + nlos * (inverse_g - mills)
+             + outlying * outlier_ratio ** 2 * s - terms[6, i])
+    return -total - terms[5, i] - terms[6, i] * s, slope
+
+
+@compiled
+def tag_losses(points, tags, ranges, sigma, anchors, terms):
+    """
+    Return the loss of tag ``tags[i]``'s ranges were it at ``points[i]``, shape (n,).
+
+    ``points`` (n, 3) metres; ``ranges`` and ``sigma`` (q, m), a missing range NaN (it
+    scores 0); ``terms``: :func:`loss_terms` of a loss bound to one sigma (one column) or
+    to each of the (q, m) links, or (0, 0) for the Gaussian ``excess**2 / 2``.
+    """
+    m = anchors.shape[0]
+    out = np.zeros(points.shape[0])
+    for i in range(points.shape[0]):
+        k = tags[i]
+        total = 0.0
+        for j in range(m):
+            measured = ranges[k, j]
+            if not math.isfinite(measured):
+                continue
+            distance = math.sqrt((points[i, 0] - anchors[j, 0]) ** 2
+                                 + (points[i, 1] - anchors[j, 1]) ** 2
+                                 + (points[i, 2] - anchors[j, 2]) ** 2)
+            s = (measured - distance) / sigma[k, j]
+            if terms.shape[0] == 0:
+                total += 0.5 * s * s
+            else:
+                total += link_loss(s, terms, k * m + j if terms.shape[1] > 1 else 0)[0]
+        out[i] = total
+    return out
+
+
+def compile_now():
+    """Compile :func:`tag_losses` (and the loss it calls) for both kinds of terms."""
+    points, tags = np.zeros((1, 3)), np.zeros(1, dtype=np.int64)
+    ranges, sigma, anchors = np.ones((1, 1)), np.ones((1, 1)), np.ones((1, 3))
+    tag_losses(points, tags, ranges, sigma, anchors, np.zeros((0, 0)))
+    tag_losses(points, tags, ranges, sigma, anchors, np.ones((7, 1)))
