@@ -60,7 +60,7 @@ def _scene(rng, q=4, m=7):
 
 
 def _reference(loss, points, anchors, ranges, sigma):
-    """The loss summed over anchors, straight from ``LinkLoss.__call__``; 0 where unheard."""
+    """Return the loss summed over anchors, from ``LinkLoss.__call__``; 0 where unheard."""
     excess = range_excess(points, anchors, ranges, sigma)
     return np.sum(np.where(np.isfinite(ranges), loss(excess)[0], 0.0), axis=-1)
 

@@ -14,7 +14,6 @@
 
 """The chain's compiled fit against its numpy reference: the same fits, to rounding."""
 from epp_ros.core import PostureEstimator
-from epp_ros.core.estimation.methods import compiled_chain
 from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMethod
 from epp_ros.core.estimation.methods.track import Hypothesis, TrackMethod
 from epp_ros.core.model.measurements import Measurements
