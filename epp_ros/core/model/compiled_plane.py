@@ -23,7 +23,7 @@ stays the reference and the path taken without numba or with ``EPP_ROS_COMPILED=
 """
 import math
 
-from epp_ros.core.solvers.compiled import compiled
+from epp_ros.core.solvers.compiled import compiled, plain
 import numpy as np
 
 __all__ = ['compile_now', 'fit_plane_to_ranges']
@@ -95,13 +95,10 @@ def _fit(coords, ranges, anchors, base, slew, pivot, arm_lengths, max_iter, tol)
 def fit_plane_to_ranges(coords, ranges, anchors, base, slew, pivot=None, arm_lengths=None,
                         max_iter=5, tol=1e-9):
     """Return ``plane.fit_plane_to_ranges``'s (slew, coords), compiled; its arguments."""
-    sections = np.zeros(0) if arm_lengths is None else np.asarray(arm_lengths, dtype=float)
-    pivot = np.zeros(2) if pivot is None else np.asarray(pivot, dtype=float)
-    slew, coords = _fit(np.ascontiguousarray(coords, dtype=float),
-                        np.ascontiguousarray(ranges, dtype=float),
-                        np.ascontiguousarray(anchors, dtype=float),
-                        np.ascontiguousarray(base, dtype=float), float(slew), pivot,
-                        np.ascontiguousarray(sections), int(max_iter), float(tol))
+    sections = np.zeros(0) if arm_lengths is None else arm_lengths
+    pivot = np.zeros(2) if pivot is None else pivot
+    slew, coords = _fit(plain(coords), plain(ranges), plain(anchors), plain(base), float(slew),
+                        plain(pivot), plain(sections), int(max_iter), float(tol))
     return float(slew), coords
 
 

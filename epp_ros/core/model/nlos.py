@@ -40,7 +40,7 @@ from dataclasses import dataclass, replace
 from functools import cached_property, lru_cache
 
 from epp_ros.core.model.vectors import norms
-from epp_ros.core.solvers.compiled import kernel
+from epp_ros.core.solvers.compiled import kernel, plain
 import numpy as np
 from scipy.special import log_ndtr
 
@@ -317,8 +317,8 @@ class LinkLoss:
             points = points.reshape(-1, 3)
         else:
             shape = rows.shape
-        return compiled.tag_losses(np.ascontiguousarray(points), rows, ranges,
-                                   np.ascontiguousarray(sigma), anchors,
+        return compiled.tag_losses(plain(points), plain(rows, np.int64), plain(ranges),
+                                   plain(sigma), plain(anchors),
                                    compiled.loss_terms(self)).reshape(shape)
 
     def _rows(self, rows):

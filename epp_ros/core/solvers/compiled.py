@@ -29,7 +29,9 @@ import importlib
 import importlib.util
 import os
 
-__all__ = ['COMPILED', 'compiled', 'kernel']
+import numpy as np
+
+__all__ = ['COMPILED', 'compiled', 'kernel', 'plain']
 
 #: Whether the kernels run compiled: numba is installed and ``EPP_ROS_COMPILED`` is not 0.
 COMPILED = (importlib.util.find_spec('numba') is not None
@@ -55,3 +57,13 @@ def compiled(function):
     """
     import numba
     return numba.njit(cache=True, nogil=True)(function)
+
+
+def plain(array, dtype=float):
+    """
+    Return ``array`` as the kernels are compiled for it: of ``dtype``, C order, writeable.
+
+    A copy only where it is not already. numba compiles a function again (seconds, on a
+    frame) for each new type of argument, and read-only or strided arrays are new types.
+    """
+    return np.require(array, dtype=dtype, requirements='CW')

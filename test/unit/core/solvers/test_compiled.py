@@ -39,10 +39,37 @@ print(json.dumps({'switch': compiled.COMPILED, 'compiled': compile_fit(), 'statu
                   'kernels': sorted(name for name in sys.modules if 'compiled_' in name)}))
 """
 
+# After compile_fit, field frames of every compiled method (refused ones too), then which
+# of the kernels' compiled functions took a new type of argument (numba compiles it then).
+PROBE_TYPES = """
+import json, sys
+from numba.core.registry import CPUDispatcher
+import numpy as np
+from epp_ros.core import compile_fit, PostureEstimator
+from epp_ros.core.simulation.simulate import (field_effects, make_motion, simulate_field,
+                                              truck_pump)
+compile_fit()
+modules = [module for name, module in sys.modules.items() if 'compiled_' in name]
+dispatchers = {f'{module.__name__}.{name}': value for module in modules
+               for name, value in vars(module).items() if isinstance(value, CPUDispatcher)}
+before = {name: len(value.signatures) for name, value in dispatchers.items()}
+model = truck_pump()
+rng = np.random.default_rng(4)
+frames = simulate_field(model, make_motion('working', model, 6.0, rng), 6.0,
+                        field_effects('real_uwb,tdma,dropouts'), rng)
+for method in ('chain', 'cepp', 'track'):
+    for lowest_joint in (-0.5, 10.0):
+        estimator = PostureEstimator(model, method, lowest_joint=lowest_joint)
+        for frame in frames:
+            estimator.update(**frame.inputs())
+print(json.dumps({'dispatchers': len(dispatchers), 'compiled again': sorted(
+    name for name, value in dispatchers.items() if len(value.signatures) > before[name])}))
+"""
 
-def probe(**environment):
-    """Run :data:`PROBE` in a fresh interpreter with ``environment`` added; its report."""
-    done = subprocess.run([sys.executable, '-c', PROBE], cwd=ROOT, capture_output=True,
+
+def probe(code=PROBE, **environment):
+    """Run ``code`` in a fresh interpreter with ``environment`` added; its report."""
+    done = subprocess.run([sys.executable, '-c', code], cwd=ROOT, capture_output=True,
                           text=True, timeout=600, env={**os.environ, **environment})
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout.strip().splitlines()[-1])
@@ -62,3 +89,9 @@ def test_the_switch_on_imports_every_kernel():
                                  'epp_ros.core.model.compiled_nlos',
                                  'epp_ros.core.model.compiled_plane',
                                  'epp_ros.core.solvers.compiled_points']
+
+
+def test_no_frame_waits_for_the_compiler_after_compile_fit():
+    report = probe(PROBE_TYPES, EPP_ROS_COMPILED='1')
+    assert report['dispatchers'] >= 4
+    assert report['compiled again'] == []
