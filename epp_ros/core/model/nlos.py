@@ -230,6 +230,31 @@ class NlosMixture:
         return np.where(s > 0.0, np.minimum(cost, inverse_g * s - offset), cost)
 
 
+def _candidates(points, ranges, anchors, tags):
+    """
+    Return :meth:`LinkLoss.at_points`' arguments as arrays, their shapes checked.
+
+    The compiled kernel reads them unchecked: a tag or anchor out of range would read
+    other memory, not fail.
+    """
+    points, ranges, anchors = (np.asarray(a, dtype=float) for a in (points, ranges, anchors))
+    if ranges.ndim != 2 or anchors.shape != (ranges.shape[1], 3) or points.shape[-1:] != (3,):
+        raise ValueError(f'candidates: points (..., 3), ranges (q, m) and anchors (m, 3), '
+                         f'got {points.shape}, {ranges.shape} and {anchors.shape}')
+    if tags is None:
+        if points.shape[-2:-1] != ranges.shape[:1]:
+            raise ValueError(f'candidates: points (..., q, 3) for ranges (q, m), got '
+                             f'{points.shape} and {ranges.shape}')
+        return points, ranges, anchors, None
+    tags = np.asarray(tags)
+    if (tags.ndim != 1 or points.shape != tags.shape + (3,)
+            or not (tags.size == 0 or np.issubdtype(tags.dtype, np.integer))
+            or np.any((tags < 0) | (tags >= len(ranges)))):
+        raise ValueError(f'candidates: points (n, 3) and tags (n,) each a row of ranges '
+                         f'(q = {len(ranges)}), got {points.shape} and {tags.tolist()}')
+    return points, ranges, anchors, tags.astype(np.int64)
+
+
 @lru_cache(maxsize=64)
 def _bound(mixture, shape, sigma_bytes):
     """Return ``LinkLoss(mixture, sigma)`` of the sigmas ``sigma_bytes`` of ``shape``, kept."""
@@ -298,13 +323,11 @@ class LinkLoss:
         ndarray, shape (..., q) or (n,)
 
         """
-        points = np.asarray(points, dtype=float)
-        ranges = np.asarray(ranges, dtype=float)
+        points, ranges, anchors, rows = _candidates(points, ranges, anchors, tags)
         if self.sigma.size != 1 and self.sigma.shape != ranges.shape:
             raise ValueError(f'a loss bound to sigmas of shape {self.sigma.shape} scores '
                              f'ranges of shape {ranges.shape}: one sigma, or one per range')
         sigma = np.broadcast_to(self.sigma, ranges.shape)
-        rows = None if tags is None else np.asarray(tags, dtype=np.int64)
         compiled = kernel(KERNEL)
         if compiled is None:
             if rows is None:

@@ -130,3 +130,27 @@ def test_a_loss_for_some_rows_has_the_constants_of_a_loss_bound_to_them():
     excess = rng.normal(0.0, 3.0, (4, 6))
     for ours, theirs in zip(taken(excess), fresh(excess)):
         np.testing.assert_array_equal(ours, theirs)
+
+
+@pytest.mark.parametrize('points, ranges, anchors, tags', [
+    (np.zeros((2, 4, 2)), np.ones((4, 7)), np.zeros((7, 3)), None),   # not 3-D points
+    (np.zeros((2, 3, 3)), np.ones((4, 7)), np.zeros((7, 3)), None),   # 3 tags for 4 rows
+    (np.zeros((2, 4, 3)), np.ones((4, 7)), np.zeros((6, 3)), None),   # 6 anchors for 7
+    (np.zeros((2, 4, 3)), np.ones(7), np.zeros((7, 3)), None),        # ranges of no tag
+    (np.zeros((3, 3)), np.ones((4, 7)), np.zeros((7, 3)), [0, 4, 1]),   # no tag 4
+    (np.zeros((3, 3)), np.ones((4, 7)), np.zeros((7, 3)), [0, -1, 1]),
+    (np.zeros((3, 3)), np.ones((4, 7)), np.zeros((7, 3)), [0, 1]),      # a tag short
+    (np.zeros((2, 3)), np.ones((4, 7)), np.zeros((7, 3)), [0.0, 1.0]),  # not indices
+])
+def test_misshapen_candidates_are_refused_never_read_past_their_arrays(
+        path, points, ranges, anchors, tags):
+    loss = MIXTURES['nlos'].bind(np.float64(0.1))
+    with pytest.raises(ValueError, match='candidates: '):
+        loss.at_points(points, ranges, anchors, tags=tags)
+
+
+def test_no_candidates_score_nothing(path):
+    anchors, tags, ranges = _scene(np.random.default_rng(9))
+    loss = MIXTURES['nlos'].bind(np.float64(0.1))
+    assert loss.at_points(np.zeros((0, 3)), ranges, anchors, tags=[]).shape == (0,)
+    assert loss.at_points(np.zeros((0, len(tags), 3)), ranges, anchors).shape == (0, len(tags))
