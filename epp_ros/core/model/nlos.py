@@ -301,11 +301,12 @@ class LinkLoss:
 
     def at_points(self, points, ranges, anchors, tags=None):
         """
-        Return the cost of tags' ranges were the tags at candidate points, anchors summed.
+        Return the cost of tags' ranges, summed over the anchors, at candidate positions.
 
-        The loss's sigmas are the ranges' (one, or one per range). Compiled where the kernels
-        are (``solvers.compiled``): many candidates are scored at once (a joint's other
-        folds, the tip all round its hinge, whole postures).
+        The ranges' sigmas are this loss's (one, or one per range). Compiled where the
+        kernels are (``solvers.compiled``): the fold searches and the integrity checks score
+        many candidates at once (a joint's other folds, the tip all round its hinge, whole
+        postures).
 
         Parameters
         ----------
