@@ -33,7 +33,7 @@ retried on the Hessian of the step's start, built once per step, not once per tr
 import ctypes
 from typing import NamedTuple
 
-from epp_ros.core.solvers.compiled import compiled
+from epp_ros.core.solvers.compiled import compiled, plain
 from epp_ros.core.solvers.levenberg_marquardt import FALL, GROWTH, INITIAL_DAMPING, MAX_DAMPING
 from epp_ros.core.solvers.point_newton import PointProblem
 import numba
@@ -390,8 +390,8 @@ def _problem(point_problem):
     """Return a ``PointProblem`` as a :class:`_Problem`."""
     pp = point_problem
     return _Problem(pp.goal, pp.sq_weights, pp.first, pp.second, pp.root_weights,
-                    pp.goal_pairs, np.ascontiguousarray(pp.fixed_first),
-                    np.ascontiguousarray(pp.fixed_second), pp.fixed_goal,
+                    pp.goal_pairs, plain(pp.fixed_first, np.int64),
+                    plain(pp.fixed_second, np.int64), pp.fixed_goal,
                     float(pp.max_sq_weight), _LAPACK)
 
 
@@ -403,7 +403,7 @@ def _constants(point_problem):
 
 def stationarity(point_problem, points):
     """Return :meth:`PointProblem.stationarity` at ``points`` (n, r), compiled."""
-    return float(_stationarity(np.ascontiguousarray(points, dtype=float),
+    return float(_stationarity(plain(points),
                                _problem(point_problem)))
 
 
@@ -414,7 +414,7 @@ def refine(point_problem, points, tol, max_steps, stationarity, feasible):
     ``stationarity``: that of ``points``; ``feasible``: the violation a kept step may
     leave. Returns the points kept, their stationarity and the Newton steps taken.
     """
-    x, reached, steps = _refine(np.ascontiguousarray(points, dtype=float),
+    x, reached, steps = _refine(plain(points),
                                 _problem(point_problem), float(tol), int(max_steps),
                                 float(stationarity), float(feasible),
                                 _constants(point_problem))

@@ -36,7 +36,7 @@ while its worker fits.
 import math
 
 from epp_ros.core.model.compiled_nlos import link_loss, loss_terms
-from epp_ros.core.solvers.compiled import compiled
+from epp_ros.core.solvers.compiled import compiled, plain
 from epp_ros.core.solvers.levenberg_marquardt import FALL, GROWTH, INITIAL_DAMPING, MAX_DAMPING
 import numpy as np
 
@@ -348,18 +348,13 @@ def _cost(x, geometry, rows, measured, sigma, terms, ground, motion):
 
 def _problem(model, residuals, terms, lowest_joint, ground_sigma, motion):
     """Return a frame's arguments of :func:`_fit` and :func:`_cost`, after the start."""
-    geometry = (_array(model.arm_lengths), _array(model.base).reshape(1, 3),
-                _array(model.anchors))
+    geometry = (plain(model.arm_lengths), plain(model.base).reshape(1, 3),
+                plain(model.anchors))
     ground = np.array([model.pivot_offset, lowest_joint, ground_sigma], dtype=float)
     if motion is None:
         motion = (np.zeros(model.n_sections), np.zeros(0), np.zeros((0, 0)))
-    return (geometry, residuals.layout, _array(residuals.measured), _array(residuals.sigma),
-            _array(terms), ground, tuple(_array(part) for part in motion))
-
-
-def _array(values):
-    """Return ``values`` as the array type :func:`_fit` is compiled for (else it recompiles)."""
-    return np.require(values, dtype=float, requirements=['C', 'W'])
+    return (geometry, residuals.layout, plain(residuals.measured), plain(residuals.sigma),
+            plain(terms), ground, tuple(plain(part) for part in motion))
 
 
 def compile_now():
