@@ -16,9 +16,11 @@
 """
 ``python3 dev.py bench speed``: CPU time per frame of the estimators, as issue #30 states it.
 
-CPU time (``time.process_time``) around ``PostureEstimator.update``, one BLAS thread as the
-nodes run, on the simulated truck pump's working cycle at sigma 0.1 m after 30 warm-up
-frames. Rows: each method's median, p90, p99 and max per frame; frames published; the
+CPU time (``time.process_time``) around ``PostureEstimator.update`` and the ``settle`` after
+it (what the frame teaches the learners), one BLAS thread as the nodes run, on the
+simulated truck pump's working cycle at sigma 0.1 m after 30 warm-up frames. Rows: each
+method's median, p90, p99 and max per frame, and of the ``update`` alone (the frame's
+answer, what a node publishes after); frames published; the
 chain's update against scipy's bare ``least_squares`` fit of the same frames; refused frames
 (``lowest_joint`` 10 m: every frame refused; uniform garbage 0-80 m) against good ones; and
 the growth with anchors and sections, with the exponent of a log-log fit.
@@ -59,17 +61,26 @@ def frames_of(model, count, seed):
     return frames, np.c_[motion.slew[:count], motion.pitches[:count]]
 
 
-def frame_times(model, method, frames, **options):
-    """Return CPU milliseconds per frame after the warm-up, and how many were published."""
+def frame_times(model, method, frames, answers=None, **options):
+    """
+    Return CPU milliseconds per frame after the warm-up, and how many were published.
+
+    A frame's time is its ``update`` and what it teaches (``settle``); ``answers``, a list,
+    is given the ``update``'s alone: what stands between the ranges and the posture.
+    """
     estimator = PostureEstimator(model, method, **options)
     times, published = [], 0
     for k, frame in enumerate(frames):
         began = time.process_time()
         estimator.update(**frame)
+        answered = time.process_time()
+        estimator.settle()
         spent = time.process_time() - began
         if k >= WARM_UP:
             times.append(1e3 * spent)
             published += bool(estimator.last_diagnostics.valid)
+            if answers is not None:
+                answers.append(1e3 * (answered - began))
     return np.array(times), published
 
 
@@ -144,13 +155,16 @@ def run(methods, frames, seed, growth_frames=20):
                 'stamp': frame['stamp']} for frame in good]
     rows = {}
     for method in methods:
-        times, published = frame_times(model, method, good)
+        answers = []
+        times, published = frame_times(model, method, good, answers)
         low, _ = frame_times(model, method, good, lowest_joint=10.0)
         junk, _ = frame_times(model, method, garbage)
         rows[method] = {**percentiles(times), 'published': published,
                         'refused_median': float(np.median(low)),
                         'garbage_median': float(np.median(junk)),
-                        'garbage_p99': float(np.percentile(junk, 99))}
+                        'garbage_p99': float(np.percentile(junk, 99)),
+                        'answer_median': float(np.median(answers)),
+                        'answer_p99': float(np.percentile(answers, 99))}
     growth, exponents = growth_rows([m for m in ('chain', 'cepp') if m in methods],
                                     growth_frames, seed) if growth_frames else ([], {})
     return SpeedReport(frames, rows, scipy_fit_ms(model, good, angles), growth, exponents)

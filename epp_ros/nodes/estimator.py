@@ -262,6 +262,8 @@ class PostureEstimatorNode(Node):
     def _solve_frame(self, message):
         try:
             self._on_ranges(message)
+            # What the frame teaches changes only later frames: learned once it is out.
+            self.estimator.settle()
         except Exception as exc:  # noqa: BLE001 - one bad frame must not stop the node
             self.counts['errors'] += 1
             self.estimator.reset()

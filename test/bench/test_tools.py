@@ -371,6 +371,9 @@ def test_bench_speed_prints_times_ratios_and_growth(capsys):
         assert 0.0 < row['median'] <= row['p90'] <= row['p99'] <= row['max']
         assert 0 <= row['published'] <= report['frames'] == 10
         assert np.isfinite([row['refused_median'], row['garbage_median']]).all()
+        # The answer is the frame's update without what it teaches: never more.
+        assert 0.0 < row['answer_median'] <= row['median']
+        assert row['answer_p99'] <= row['p99']
     assert set(report['exponents']) == {'sections', 'anchors'}
     assert all(np.isfinite(list(fitted.values())).all()
                for fitted in report['exponents'].values())

@@ -21,9 +21,10 @@ from the listener and holds a frame open by blocking the estimator's update on a
 import threading
 
 from builtin_interfaces.msg import Time
-from epp_ros.app.contract import RANGES
+from epp_ros.app.contract import POSTURE, RANGES
 from epp_ros.app.pipeline import Step
-from epp_ros.nodes.messages import RANGES_QOS
+from epp_ros.nodes.messages import POSTURE_QOS, RANGES_QOS
+from geometry_msgs.msg import PoseArray
 import pytest
 from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter, parameter_dict_from_yaml_file
@@ -93,4 +94,51 @@ def test_a_change_is_answered_while_a_frame_is_solved_and_applies_from_the_next(
     assert listener.spin_until(lambda: len(seen) == 2, TIMEOUT)
     assert seen == [('cepp', True), ('chain', False)]
     assert node.counts['method_changes'] == 1
+    listener.destroy_publisher(ranges)
+
+
+def test_a_frame_is_published_before_what_it_teaches_is_learned(listener, estimator_in_process):
+    """The learners' work waits until the posture is out: it is not in the frame's latency."""
+    node = estimator_in_process
+    estimator, solve = node.estimator, node.pipeline.step
+    events, learning, release = [], threading.Event(), threading.Event()
+    settle = estimator.settle
+
+    def step(*args, **kwargs):
+        events.append('step')
+        result = solve(*args, **kwargs)
+        events.append('published' if result.joints is not None else 'refused')
+        return result
+
+    def settle_after_the_frame():
+        if events and events[-1] == 'published' and not release.is_set():
+            learning.set()                          # the node's, after a published frame
+            assert release.wait(TIMEOUT)
+        events.append('settled')
+        settle()
+
+    node.pipeline.step, estimator.settle = step, settle_after_the_frame
+    postures = []
+    listener.create_subscription(PoseArray, f'{NAMESPACE}/{POSTURE.name}', postures.append,
+                                 POSTURE_QOS)
+    ranges = listener.create_publisher(JointState, f'{NAMESPACE}/{RANGES.name}', RANGES_QOS)
+    model = node.model
+    distances = model.ranges(model.forward_kinematics(0.4, [0.6, 0.2, -0.1, -0.3, -0.5]))
+
+    def judged(count):                              # frames judged and settled after
+        outcomes = [event for event in events if event in ('published', 'refused')]
+        return learning.is_set() or (len(outcomes) == count and events[-1] == 'settled')
+
+    for k in range(1, 31):                          # one frame at a time, until one is out
+        ranges.publish(JointState(header=Header(stamp=Time(sec=k)), name=node.config.link_names,
+                                  position=distances.ravel().tolist()))
+        assert listener.spin_until(lambda: judged(k), TIMEOUT)
+        if learning.is_set():
+            break
+    assert learning.is_set(), f'no posture published in 30 exact frames: {events}'
+    # The posture arrives while the estimator has yet to learn from its frame.
+    assert listener.spin_until(lambda: postures, TIMEOUT)
+    assert not release.is_set() and events[-1] == 'published'
+    release.set()
+    assert listener.spin_until(lambda: events[-1:] == ['settled'], TIMEOUT)
     listener.destroy_publisher(ranges)

@@ -32,7 +32,7 @@ positions (p, 3), keeping the previous estimate as the warm start. Methods:
 from dataclasses import asdict, fields
 import numbers
 import time
-from typing import NamedTuple
+from typing import NamedTuple, Optional
 
 from epp_ros.core.estimation.integrity import ERROR, Integrity, IntegrityLimits, OK, Thresholds
 from epp_ros.core.estimation.learned_errors import LearnedErrors, told_noise
@@ -108,6 +108,19 @@ class _Accepted(NamedTuple):
     turn_std: np.ndarray        #: (p,) rad: each section's direction, ``reach_turn_std``
 
 
+class _Lesson(NamedTuple):
+    """What a judged frame teaches the noise and bias learners, kept until :meth:`settle`."""
+
+    timed: np.ndarray           #: (p, 3) m: each joint when its tag ranged
+    measurements: Measurements  #: the frame, bias taken off
+    dof: int                    #: parameters its fit spent
+    noise: bool                 #: whether its residuals teach the noise (a possible fit)
+    bias: bool                  #: whether they teach the bias (published, or only unsure)
+    kept: np.ndarray            #: (p, m) bool: links measured and judged line-of-sight
+    rows: Optional[np.ndarray]  #: the judge's Jacobian rows of those links, if it has them
+    angles: tuple               #: (slew, pitches (p,)) rad, as judged
+
+
 class PostureEstimator:
     """
     Frame-by-frame boom posture from UWB ranges (and, for some methods, angle sensors).
@@ -136,8 +149,9 @@ class PostureEstimator:
         Learn the range noise (``sigma``, ``eta``, ``nlos_fraction``, ``nlos_gamma``) from
         the residuals while running (``core.noise_learning``), starting from the told
         values, and the range bias common to all links (``core.bias_learning``), starting
-        from none; the solver and the integrity checks then use what was learned. False:
-        the told values stay (benchmarks that tell the truth).
+        from none; the solver and the integrity checks then use what was learned, from the
+        frame after (a frame is learned from once answered: :meth:`settle`). False: the
+        told values stay (benchmarks that tell the truth).
     learn_anchors : bool
         Also learn how far each of ``moving_anchors`` stands from where configured, with
         the common bias (``learn_noise``). False (the default): the shifts are only counted
@@ -197,7 +211,7 @@ class PostureEstimator:
         ``nlos_links`` and ``outlier_links`` (p, m), ``predicted_rmse`` (m), ``joint_std`` (p,),
         ``ambiguous_joints``, ``rival_margin``: nats by which the likeliest other position
         of a joint is less likely than the estimate's), the method's ``estimate`` (p, 3)
-        whether valid or not, ``noise`` (the range noise in use,
+        whether valid or not, ``noise`` (the range noise the frame was judged with,
         :class:`RangeNoiseEstimate`), and solver details (``converged``, ...; track:
         ``rates`` (p + 1,), ``hypotheses``, ``manoeuvre``).
 
@@ -213,6 +227,7 @@ class PostureEstimator:
         self.method = method
         self._settings = {}
         self._learned = None            # LearnedErrors, with learn_noise
+        self._lesson = None             # _Lesson: the last frame's, not yet learned
         self._reacquisition = None
         self.last_diagnostics = None
         self._configure(integrity=integrity, thresholds=thresholds,
@@ -237,6 +252,7 @@ class PostureEstimator:
                    'learn_anchors': learn_anchors}
         settings = {**self._settings, **{k: v for k, v in changes.items() if v is not None}}
         settings['options'] = {**self._settings['options'], **options}
+        self.settle()                   # the frames before were learned from as they were
         self._configure(**settings)
 
     def _configure(self, integrity, thresholds, reset_after_failures, learn_noise,
@@ -257,7 +273,7 @@ class PostureEstimator:
         told = _told(options)
         checks = _integrity(self.model, told, integrity, thresholds, self.moving_anchors)
         solver = make_method(self.model, method, {**options, **told})
-        self.integrity, self._solver = checks, solver
+        self._checks, self._solver = checks, solver
         if self._reacquisition is None:
             self._reacquisition = Reacquisition()
         self._reacquisition.reset_after_failures = int(reset_after_failures)
@@ -280,9 +296,34 @@ class PostureEstimator:
         """Return the failures in a row after which the warm start is dropped."""
         return self._reacquisition.reset_after_failures
 
+    def settle(self):
+        """
+        Learn what the last frame teaches now: its residuals' noise and bias.
+
+        They change only the frames after it, so :meth:`update` hands its posture over
+        first and leaves them (a tenth of a frame's time, and a learning round's several
+        milliseconds every few frames) to the next :meth:`update`, to this call, or to
+        whatever reads what is learned (:attr:`noise`, :attr:`range_bias`,
+        :attr:`anchor_shifts`, :attr:`seen_anchor_shifts`, :attr:`integrity`), each of
+        which calls it. A node calls it once the frame's posture is published, while it
+        waits for the next. Every frame is estimated and judged as if each frame before it
+        had been learned from at once.
+        """
+        lesson, self._lesson = self._lesson, None
+        if lesson is not None:
+            self._learn(lesson)
+            self._learn_bias(lesson)
+
+    @property
+    def integrity(self):
+        """Return the :class:`Integrity` that judges the next frame (the noise learned)."""
+        self.settle()
+        return self._checks
+
     @property
     def noise(self):
         """Return the range noise in use (:class:`RangeNoiseEstimate`): learned or told."""
+        self.settle()
         return told_noise(self._told) if self._learned is None else self._learned.noise
 
     def _use_noise(self, estimate):
@@ -290,8 +331,8 @@ class PostureEstimator:
         told = {**self._told, **estimate.as_options()}
         if self._settings['options'].get('tag_sigma') is None:
             told['tag_sigma'] = estimate.sigma          # tag-tag ranges are UWB ranges too
-        self.integrity = _integrity(self.model, told, self._settings['integrity'],
-                                    self._settings['thresholds'], self.moving_anchors)
+        self._checks = _integrity(self.model, told, self._settings['integrity'],
+                                  self._settings['thresholds'], self.moving_anchors)
         self._share_bias()
         if hasattr(self._solver, 'tune'):
             self._solver.tune(**estimate.as_options())
@@ -299,16 +340,18 @@ class PostureEstimator:
     def _share_bias(self):
         """Tell the integrity checks what is still unknown of the learned common bias."""
         if self._learned is not None:
-            self.integrity.common_covariance = self._learned.bias_covariance()
+            self._checks.common_covariance = self._learned.bias_covariance()
 
     @property
     def range_bias(self):
         """Return the common range bias taken off (offset m, slope m/m at 20 m), or zeros."""
+        self.settle()
         return np.zeros(2) if self._learned is None else self._learned.range_bias
 
     @property
     def anchor_shifts(self):
         """Return how far each of ``moving_anchors`` stands from where configured (n, 3), m."""
+        self.settle()
         if self._learned is None:
             return np.zeros((len(self.moving_anchors), 3))
         return self._learned.anchor_shifts
@@ -321,6 +364,7 @@ class PostureEstimator:
         :attr:`anchor_shifts` when learned (``learn_anchors``); otherwise what the frames
         show while the shifts are only counted: taken off nothing, a cue to calibrate.
         """
+        self.settle()
         if self._learned is None:
             return np.zeros((len(self.moving_anchors), 3))
         return self._learned.seen_shifts
@@ -336,36 +380,32 @@ class PostureEstimator:
             return measurements             # nothing learned yet: no directions to compute
         warm = None if self._provisional else self._warm
         return self._learned.unbiased(
-            measurements, None if warm is None else self.integrity.anchor_directions(warm))
+            measurements, None if warm is None else self._checks.anchor_directions(warm))
 
-    def _learn_bias(self, joints, info, measurements, verdict):
+    def _learn_bias(self, lesson):
         """
         Add a frame's line-of-sight residuals to the common bias learned.
 
         From frames published, and from those refused only as too uncertain: the prior on
         the bias alone can make the first frames so, and only frames can shrink it. Each
         tag is where it was when it ranged (``timed_joints``), for a method that knows. The
-        fit's Jacobian over those links is the one ``verdict`` judged it with, when it has one.
+        fit's Jacobian over those links is the one its verdict judged it with, when it has one.
         """
-        if self._learned is None or verdict.status not in ('ok', 'unobservable'):
+        if not lesson.bias:
             return
-        kept = np.isfinite(measurements.ranges)
-        for set_aside in ('nlos_links', 'outlier_links'):
-            if verdict.values.get(set_aside) is not None:
-                kept &= ~np.asarray(verdict.values[set_aside], dtype=bool)
-        sigma = self.integrity.link_sigma(measurements)
-        rows = verdict.los_rows
+        measurements, kept, timed = lesson.measurements, lesson.kept, lesson.timed
+        sigma = self._checks.link_sigma(measurements)
+        rows = lesson.rows
         if rows is None:        # a method not held to the chain: not in its judgement
             residuals = Residuals(self.model, Measurements.ranges_only(
                 np.where(kept, measurements.ranges, np.nan)), SensorNoise(sigma))
-            rows = residuals.rows(np.r_[verdict.angles[0], verdict.angles[1]])
-        timed = info.get('timed_joints', joints)
+            rows = residuals.rows(np.r_[lesson.angles[0], lesson.angles[1]])
         fitted = self.model.ranges(timed)[kept]
         scaled = (fitted - measurements.ranges[kept]) / sigma[kept]
         # Scaled by the noise now in use, which learning may have changed since the judgement.
         if self._learned.observe_bias(rows / sigma[kept][:, None], sigma[kept], scaled,
                                       fitted, np.flatnonzero(kept),
-                                      self.integrity.anchor_directions(timed)[kept]):
+                                      self._checks.anchor_directions(timed)[kept]):
             self._share_bias()
 
     def reset(self, joints=None):
@@ -380,6 +420,7 @@ class PostureEstimator:
             decide whether what follows from it is valid. The noise learned is kept.
 
         """
+        self.settle()
         seed = None
         if joints is not None:
             seed = np.array(joints, dtype=float)
@@ -433,6 +474,7 @@ class PostureEstimator:
             valid estimate, and ``last_diagnostics["valid"]`` is False.
 
         """
+        self.settle()                   # the last frame's lesson, if not learned yet
         start = time.perf_counter()
         stamp = self._frame_time(stamp)
         p, m = self.model.n_sections, self.model.n_anchors
@@ -473,9 +515,8 @@ class PostureEstimator:
         if self._learned is not None and not self._learned.settled:
             solved, verdict = self._bootstrap_noise(measurements, stamp, solved, verdict)
         joints, info = solved
-        self._learn(joints, info, measurements, verdict)
-        self._learn_bias(joints, info, measurements, verdict)
-        diagnostics.update(info, noise=self.noise)       # as learned from this frame
+        lesson = self._lesson_of(joints, info, measurements, verdict)
+        diagnostics.update(info, noise=self.noise)       # as the frame was judged with
         if not verdict.lost and self._has_state:
             self._solver.accept(info)       # a motion model takes the fit as its state
         slew, pitches = verdict.angles
@@ -484,12 +525,15 @@ class PostureEstimator:
         if not verdict.lost:            # it fits the frame: the next frame's start
             self._warm, self._provisional = joints.copy(), False
         if not verdict.valid:
-            return self._reject(verdict.status, diagnostics, measurements, start, joints)
-        # A fold about as likely widens what later frames allow (Integrity.fold_spread).
-        self._previous = _Accepted(joints.copy(), stamp, verdict.values['reach_std'],
-                                   verdict.values['reach_turn_std'])
-        self._reacquisition.succeeded()
-        return self._finish(joints, 'ok', diagnostics, measurements, start)
+            returned = self._reject(verdict.status, diagnostics, measurements, start, joints)
+        else:
+            # A fold about as likely widens what later frames allow (Integrity.fold_spread).
+            self._previous = _Accepted(joints.copy(), stamp, verdict.values['reach_std'],
+                                       verdict.values['reach_turn_std'])
+            self._reacquisition.succeeded()
+            returned = self._finish(joints, 'ok', diagnostics, measurements, start)
+        self._lesson = lesson           # learned after the posture is handed over: settle()
+        return returned
 
     def _excess(self, joints, measurements):
         """Return measured minus fitted tag-anchor ranges and the fitted ones, (n,) each."""
@@ -536,20 +580,36 @@ class PostureEstimator:
             solved, verdict = again, self._judge(again, measurements, stamp)
         return solved, verdict
 
-    def _learn(self, joints, info, measurements, verdict):
+    def _lesson_of(self, joints, info, measurements, verdict):
+        """Return what a judged frame teaches (:class:`_Lesson`), or None (nothing learned)."""
+        if self._learned is None:
+            return None
+        kept = np.isfinite(measurements.ranges)
+        for set_aside in ('nlos_links', 'outlier_links'):
+            if verdict.values.get(set_aside) is not None:
+                kept &= ~np.asarray(verdict.values[set_aside], dtype=bool)
+        # Copies: what the caller is handed may be changed before the lesson is learned.
+        slew, pitches = verdict.angles
+        return _Lesson(np.array(info.get('timed_joints', joints), dtype=float), measurements,
+                       self._dof(info), verdict.status != 'implausible',
+                       verdict.status in ('ok', 'unobservable'), kept,
+                       None if verdict.los_rows is None else verdict.los_rows.copy(),
+                       (slew, np.array(pitches, dtype=float)))
+
+    def _learn(self, lesson):
         """Add the frame's residuals to the noise learned, unless its fit is impossible."""
-        if self._learned is None or verdict.status == 'implausible':
+        if not lesson.noise:
             return
-        excess, fitted = self._excess(info.get('timed_joints', joints), measurements)
-        if self._learned.observe_noise(excess, fitted, self._dof(info)):
+        excess, fitted = self._excess(lesson.timed, lesson.measurements)
+        if self._learned.observe_noise(excess, fitted, lesson.dof):
             self._use_noise(self._learned.noise)
 
     def _frame_time(self, stamp):
         """Return the frame's time, seconds: the stamp, or one frame period after the last."""
         if stamp is None:
-            previous = -self.integrity.limits.frame_period if self._stamp is None \
+            previous = -self._checks.limits.frame_period if self._stamp is None \
                 else self._stamp
-            stamp = previous + self.integrity.limits.frame_period
+            stamp = previous + self._checks.limits.frame_period
         self._stamp = float(stamp)
         return self._stamp
 
@@ -559,11 +619,11 @@ class PostureEstimator:
                  'chain': getattr(self._solver, 'holds_chain', True),
                  'timed_joints': info.get('timed_joints'), 'rivals': info.get('rivals', ())}
         if self._previous is None:
-            return self.integrity.judge(joints, measurements, **known)
+            return self._checks.judge(joints, measurements, **known)
         last = self._previous
-        return self.integrity.judge(joints, measurements, last.joints,
-                                    max(stamp - last.stamp, 0.0), last.joint_std,
-                                    reference_turn_std=last.turn_std, **known)
+        return self._checks.judge(joints, measurements, last.joints,
+                                  max(stamp - last.stamp, 0.0), last.joint_std,
+                                  reference_turn_std=last.turn_std, **known)
 
     def _reconsider(self, solved, verdict, measurements, stamp, diagnostics):
         """
@@ -673,7 +733,7 @@ class PostureEstimator:
         The other joins the likelier's alternatives, with its own. Not to a posture the boom
         cannot be in (beyond its reach since the last one).
         """
-        costs = self.integrity.posture_cost(np.array([solved[0], fresh[0]]), measurements)
+        costs = self._checks.posture_cost(np.array([solved[0], fresh[0]]), measurements)
         moved = bool(costs[1] < costs[0]) and \
             self._judge(fresh, measurements, stamp).status != 'implausible'
         best, other = (fresh, solved) if moved else (solved, fresh)

@@ -90,7 +90,7 @@ class FrameResult(Mapping):
     method: str
     cold_start: bool            #: solved without a previous posture
     reacquired: bool            #: a fresh solve replaced a lost warm one
-    noise: RangeNoiseEstimate   #: the range noise in use (learned or told)
+    noise: RangeNoiseEstimate   #: the range noise the frame was judged with
     estimate: Optional[np.ndarray] = None   #: (p, 3) the method's answer, valid or not
     #: (slew, pitches (p,)) radians: the chain nearest ``estimate``, as judged
     angles: Optional[tuple] = None

@@ -86,6 +86,7 @@ def test_each_links_own_bias_is_a_floor_under_what_frames_tell():
     frames = biased_frames(0.2, 0.0, seconds=40.0, link_offset=0.1)
     estimator = PostureEstimator(MODEL, 'chain', sigma=0.05, link_bias_std=0.1)
     run(estimator, frames)
+    estimator.settle()                      # the last frame learned, as the learner is read
     learner = estimator._learned.bias_learner
     assert learner.floor()[0, 0] > 0
     assert np.all(np.diag(estimator.integrity.common_covariance) >= np.diag(learner.floor()))
