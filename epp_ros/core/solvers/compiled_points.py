@@ -34,7 +34,8 @@ import ctypes
 from typing import NamedTuple
 
 from epp_ros.core.solvers.compiled import compiled, plain
-from epp_ros.core.solvers.levenberg_marquardt import FALL, GROWTH, INITIAL_DAMPING, MAX_DAMPING
+from epp_ros.core.solvers.levenberg_marquardt import (DAMPING_FLOOR, FALL, GROWTH,
+                                                      INITIAL_DAMPING, MAX_DAMPING)
 from epp_ros.core.solvers.point_newton import PointProblem
 import numba
 import numpy as np
@@ -43,8 +44,6 @@ __all__ = ['compile_now', 'refine', 'stationarity']
 
 #: The least-squares rank cut, as ``point_newton._least_squares``'s ``dgelsy``.
 _RCOND = 1e-13
-#: The damping falls no lower (``levenberg_marquardt``'s default).
-_DAMPING_FLOOR = 1e-9
 
 
 class _Lapack(NamedTuple):
@@ -359,7 +358,7 @@ def _refine(points, problem, tol, max_steps, reached, feasible, constants):
             return x, reached, iteration
         stalled = cost - trial_cost <= 0.0
         x, cost = trial, trial_cost
-        damping = max(damping / FALL, _DAMPING_FLOOR)
+        damping = max(damping / FALL, DAMPING_FLOOR)
         reached = _stationarity(x, problem)
         if reached <= tol or stalled or _largest(step) <= 0.0:
             return x, reached, iteration

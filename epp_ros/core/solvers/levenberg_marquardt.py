@@ -44,6 +44,10 @@ FALL = 3.0
 MAX_DAMPING = 1e10
 #: Converged when an accepted step lowered the cost by at most this fraction of it.
 STALL = 1e-6
+#: The damping falls no lower after accepted steps.
+DAMPING_FLOOR = 1e-9
+#: Added to the damped diagonal: a parameter no residual sees is held, not stepped by rounding.
+RIDGE = 1e-9
 
 
 @dataclass(frozen=True)
@@ -73,7 +77,7 @@ class LevenbergMarquardtResult:
     converged: bool
 
 
-def marquardt_step(ridge=1e-9):
+def marquardt_step(ridge=RIDGE):
     """
     Return Marquardt's damped step for normal equations given as ``(normal, gradient)``.
 
@@ -88,7 +92,7 @@ def marquardt_step(ridge=1e-9):
 
 
 def levenberg_marquardt(x, evaluate, normal_equations, *, max_iter, tol, step=None, stall=STALL,
-                        damping_floor=1e-9, refine=None, done=None):
+                        damping_floor=DAMPING_FLOOR, refine=None, done=None):
     """
     Minimise a cost by Levenberg–Marquardt from ``x``.
 
@@ -149,8 +153,8 @@ def levenberg_marquardt(x, evaluate, normal_equations, *, max_iter, tol, step=No
     return LevenbergMarquardtResult(x, cost, state, max_iter, False)
 
 
-def levenberg_marquardt_batch(x, evaluate, normal_equations, *, rounds, ridge=1e-9,
-                              damping_floor=1e-9):
+def levenberg_marquardt_batch(x, evaluate, normal_equations, *, rounds, ridge=RIDGE,
+                              damping_floor=DAMPING_FLOOR):
     """
     Minimise many costs of the same size side by side, ``rounds`` trial steps each.
 

@@ -37,14 +37,11 @@ import math
 
 from epp_ros.core.model.compiled_nlos import link_loss, loss_terms
 from epp_ros.core.solvers.compiled import compiled, plain
-from epp_ros.core.solvers.levenberg_marquardt import FALL, GROWTH, INITIAL_DAMPING, MAX_DAMPING
+from epp_ros.core.solvers.levenberg_marquardt import (DAMPING_FLOOR, FALL, GROWTH,
+                                                      INITIAL_DAMPING, MAX_DAMPING, RIDGE)
 import numpy as np
 
 __all__ = ['compile_now', 'cost', 'fit', 'loss_terms']
-
-#: Ridge on the damped diagonal, as ``marquardt_step``'s default.
-_RIDGE = 1e-9
-
 
 @compiled
 def _joints(psi, arm_lengths, base, pivot_offset, joints):
@@ -230,7 +227,7 @@ def _damped_step(normal, gradient, damping, step):
     n = gradient.size
     system = normal.copy()
     for q in range(n):
-        system[q, q] += damping * (normal[q, q] + _RIDGE)
+        system[q, q] += damping * (normal[q, q] + RIDGE)
     step[:] = -gradient
     for col in range(n):
         pivot = col + np.argmax(np.abs(system[col:, col]))
@@ -290,7 +287,7 @@ def _fit(start, geometry, rows, measured, sigma, terms, ground, motion, limits):
 
 
 def fit(start, model, residuals, terms, lowest_joint, ground_sigma, max_iter, tol, stall,
-        damping_floor=1e-9, motion=None):
+        damping_floor=DAMPING_FLOOR, motion=None):
     """
     Fit a frame's chain by Levenberg–Marquardt from ``start``, compiled.
 
