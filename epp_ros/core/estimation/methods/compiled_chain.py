@@ -43,6 +43,7 @@ import numpy as np
 
 __all__ = ['compile_now', 'cost', 'fit', 'loss_terms']
 
+
 @compiled
 def _joints(psi, arm_lengths, base, pivot_offset, joints):
     """Fill ``joints`` (p, 3) at angles ``psi``: ``BoomModel.forward_kinematics``."""
