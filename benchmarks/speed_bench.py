@@ -61,15 +61,15 @@ def frames_of(model, count, seed):
     return frames, np.c_[motion.slew[:count], motion.pitches[:count]]
 
 
-def frame_times(model, method, frames, answers=None, **options):
+def frame_times(model, method, frames, **options):
     """
-    Return CPU milliseconds per frame after the warm-up, and how many were published.
+    Return CPU milliseconds per frame after the warm-up, how many were published, and the answers.
 
-    A frame's time is its ``update`` and what it teaches (``settle``); ``answers``, a list,
-    is given the ``update``'s alone: what stands between the ranges and the posture.
+    A frame's time is its ``update`` and what it teaches (``settle``); its answer's, the
+    ``update``'s alone: what stands between the ranges and the posture.
     """
     estimator = PostureEstimator(model, method, **options)
-    times, published = [], 0
+    times, published, answers = [], 0, []
     for k, frame in enumerate(frames):
         began = time.process_time()
         estimator.update(**frame)
@@ -79,9 +79,8 @@ def frame_times(model, method, frames, answers=None, **options):
         if k >= WARM_UP:
             times.append(1e3 * spent)
             published += bool(estimator.last_diagnostics.valid)
-            if answers is not None:
-                answers.append(1e3 * (answered - began))
-    return np.array(times), published
+            answers.append(1e3 * (answered - began))
+    return np.array(times), published, np.array(answers)
 
 
 def percentiles(times):
@@ -155,10 +154,9 @@ def run(methods, frames, seed, growth_frames=20):
                 'stamp': frame['stamp']} for frame in good]
     rows = {}
     for method in methods:
-        answers = []
-        times, published = frame_times(model, method, good, answers)
-        low, _ = frame_times(model, method, good, lowest_joint=10.0)
-        junk, _ = frame_times(model, method, garbage)
+        times, published, answers = frame_times(model, method, good)
+        low = frame_times(model, method, good, lowest_joint=10.0)[0]
+        junk = frame_times(model, method, garbage)[0]
         rows[method] = {**percentiles(times), 'published': published,
                         'refused_median': float(np.median(low)),
                         'garbage_median': float(np.median(junk)),

@@ -114,8 +114,7 @@ class _Lesson(NamedTuple):
     timed: np.ndarray           #: (p, 3) m: each joint when its tag ranged
     measurements: Measurements  #: the frame, bias taken off
     dof: int                    #: parameters its fit spent
-    noise: bool                 #: whether its residuals teach the noise (a possible fit)
-    bias: bool                  #: whether they teach the bias (published, or only unsure)
+    status: str                 #: its verdict's
     kept: np.ndarray            #: (p, m) bool: links measured and judged line-of-sight
     rows: Optional[np.ndarray]  #: the judge's Jacobian rows of those links, if it has them
     angles: tuple               #: (slew, pitches (p,)) rad, as judged
@@ -391,7 +390,7 @@ class PostureEstimator:
         tag is where it was when it ranged (``timed_joints``), for a method that knows. The
         fit's Jacobian over those links is the one its verdict judged it with, when it has one.
         """
-        if not lesson.bias:
+        if lesson.status not in ('ok', 'unobservable'):
             return
         measurements, kept, timed = lesson.measurements, lesson.kept, lesson.timed
         sigma = self._checks.link_sigma(measurements)
@@ -591,14 +590,13 @@ class PostureEstimator:
         # Copies: what the caller is handed may be changed before the lesson is learned.
         slew, pitches = verdict.angles
         return _Lesson(np.array(info.get('timed_joints', joints), dtype=float), measurements,
-                       self._dof(info), verdict.status != 'implausible',
-                       verdict.status in ('ok', 'unobservable'), kept,
+                       self._dof(info), verdict.status, kept,
                        None if verdict.los_rows is None else verdict.los_rows.copy(),
                        (slew, np.array(pitches, dtype=float)))
 
     def _learn(self, lesson):
         """Add the frame's residuals to the noise learned, unless its fit is impossible."""
-        if not lesson.noise:
+        if lesson.status == 'implausible':
             return
         excess, fitted = self._excess(lesson.timed, lesson.measurements)
         if self._learned.observe_noise(excess, fitted, lesson.dof):
