@@ -188,6 +188,8 @@ def report(diagnostics, lengths):
     if diagnostics.chi_square is not None:
         values['range chi-square'] = (f'{diagnostics.chi_square:.1f} (limit '
                                       f'{diagnostics.chi_square_limit:.1f})')
+    if diagnostics.variance_factor is not None:     # > 1: the predicted stds were widened
+        values['variance factor'] = f'{diagnostics.variance_factor:.2f}'
     if diagnostics.ambiguous_joints:
         values['ambiguous joints'] = ' '.join(map(str, diagnostics.ambiguous_joints))
     for k, (estimate, configured) in enumerate(zip(estimated, lengths), start=1):

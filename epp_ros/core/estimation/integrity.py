@@ -403,7 +403,8 @@ class Integrity:
             failures.append('ranges of joint(s) ' + ', '.join(str(k + 1) for k in bad_tags)
                             + ' not explained by the noise')
         los_metres = (links * sigma)[kept]
-        values = {'chi_square': statistic, 'chi_square_limit': limit, 'links': n_links,
+        values = {'chi_square': statistic, 'chi_square_limit': limit, 'chi_square_dof': dof,
+                  'links': n_links,
                   'nlos_links': blocked, 'nlos_tag_links': tag_blocked,
                   'outlier_links': outlying, 'outlier_tag_links': tag_outlying,
                   'tag_chi_square': tag_statistic,
@@ -797,13 +798,16 @@ class Integrity:
         kept = self._consistency(joints if timed_joints is None else timed_joints,
                                  measurements, checks, values)
         los_rows = None
+        # Residuals larger than their noise say: the a-posteriori unit variance, never < 1.
+        values['variance_factor'] = max(1.0, values['chi_square'] / values['chi_square_dof'])
+        scale = math.sqrt(values['variance_factor'])
         if chain:
             random, total, los_rows = self._bounds(joints, measurements, kept, angles)
-            joint_std, total_std = random.joint_std, total.joint_std
-            turn_std = total.direction_std(angles[1])
+            joint_std, total_std = random.joint_std * scale, total.joint_std * scale
+            turn_std = total.direction_std(angles[1]) * scale
         else:
-            joint_std = self.point_bound(joints, measurements, kept)
-            total_std = self.point_bound(joints, measurements, kept, biased=True)
+            joint_std = self.point_bound(joints, measurements, kept) * scale
+            total_std = self.point_bound(joints, measurements, kept, biased=True) * scale
             turn_std = self._direction_std(total_std)
         # Postures are weighed where each tag was when it ranged (a moving boom, TDMA).
         seen = np.array(joints if timed_joints is None else timed_joints, dtype=float)

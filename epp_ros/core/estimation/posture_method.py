@@ -115,6 +115,10 @@ class FrameResult(Mapping):
     outlier_links: Optional[np.ndarray] = None   #: (p, m) bool, links judged outliers
     chi_square: Optional[float] = None      #: the ranges' consistency statistic
     chi_square_limit: Optional[float] = None   #: its limit at the integrity's alpha
+    chi_square_dof: Optional[int] = None    #: its degrees of freedom
+    #: max(1, chi_square / dof): the residuals' a-posteriori unit variance; the predicted
+    #: stds are the bound times its square root
+    variance_factor: Optional[float] = None
     ambiguous_joints: Optional[list] = None    #: joints (1-based) with another fit as good
     details: dict = field(default_factory=dict)   #: the method's and the checks' extras
 

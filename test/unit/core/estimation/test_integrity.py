@@ -533,3 +533,26 @@ def test_a_frames_link_sigmas_are_its_own_and_read_only():
         assert integrity.link_sigma(measurements) is sigma
         with pytest.raises(ValueError):
             sigma[0, 0] = 1.0
+
+
+def test_residuals_larger_than_their_noise_widen_the_predicted_std_by_their_variance():
+    """The a-posteriori unit variance chi2 / dof scales the bound; it never shrinks it."""
+    slew, pitches, joints = random_posture(MODEL, np.random.default_rng(10))
+    integrity = Integrity(MODEL, SensorNoise(0.1), NlosMixture(0.0, 1.0))
+    bound = crlb(MODEL, slew, pitches, 0.1)
+    for sigma, seed in ((0.0, 11), (0.3, 12), (0.6, 13)):
+        rng = np.random.default_rng(seed)
+        ranges = RangeNoise(sigma=sigma).apply(MODEL.ranges(joints), rng)[0]
+        verdict = integrity.judge(joints, Measurements.clean(MODEL, ranges)[0])
+        values = verdict.values
+        factor = max(1.0, values['chi_square'] / values['chi_square_dof'])
+        assert values['variance_factor'] == factor
+        p, m = MODEL.n_sections, MODEL.n_anchors
+        assert values['chi_square_dof'] == p * m - (p + 1)
+        np.testing.assert_allclose(values['joint_std'], bound.joint_std * np.sqrt(factor),
+                                   rtol=1e-9)
+        assert values['predicted_rmse'] == pytest.approx(bound.rmse * np.sqrt(factor), rel=1e-9)
+        if sigma == 0.0:
+            assert factor == 1.0                    # exact ranges: the bound as it is
+        if sigma >= 0.3:
+            assert factor > 3.0                     # 9x the variance told, within its spread

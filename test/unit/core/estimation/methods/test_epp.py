@@ -366,8 +366,9 @@ def test_a_cold_search_hands_the_checks_the_other_peaks_its_chains_climb_to():
     Every slew's chain climbs the likelihood: its other peaks are weighed as rivals.
 
     CEPP solves from a few starts; the frame of ``xie3dim_far_frame.yaml`` was then
-    published 4 m off at a predicted RMSE of 1.2 m, no rival in sight. With the peaks the
-    beam's chains climb to, one within the ambiguity odds makes it refused.
+    published 4 m off at a predicted RMSE of 1.2 m (1.7 m now that the residuals' variance
+    factor widens it), no rival in sight. With the peaks the beam's chains climb to, one
+    within the ambiguity odds makes it refused.
     """
     model, truth = xie3dim()
     ranges = np.array(yaml.safe_load((DATA / 'xie3dim_far_frame.yaml').read_text())['ranges'])
@@ -375,7 +376,7 @@ def test_a_cold_search_hands_the_checks_the_other_peaks_its_chains_climb_to():
     estimator.update(ranges)
     diagnostics = estimator.last_diagnostics
     error = np.sqrt(np.mean(np.sum((diagnostics['estimate'] - truth) ** 2, axis=1)))
-    assert error > 3.0 * diagnostics['predicted_rmse']
+    assert error > 2.0 * diagnostics['predicted_rmse']
     assert not diagnostics.valid and diagnostics['status'] == 'ambiguous'
     blind = PostureEstimator(model, 'cepp', sigma=1.0, learn_noise=False)
     blind._solver._screened_peaks = lambda *args: []
