@@ -16,7 +16,7 @@
 from epp_ros.core.calibration.fit import calibrate, CalibrationResult
 from epp_ros.core.calibration.survey import survey_anchors, SurveyResult
 from epp_ros.core.estimation.estimators import PostureEstimator
-from epp_ros.core.estimation.methods.chain import compile_fit
+from epp_ros.core.estimation.methods.kernels import compile_fit
 from epp_ros.core.estimation.methods.registry import METHODS, RANGE_METHODS
 from epp_ros.core.model.boom import BoomModel
 from epp_ros.core.solvers.nedm import nearest_edm

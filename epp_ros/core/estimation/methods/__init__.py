@@ -14,10 +14,11 @@
 
 """The posture methods: the paper's EPP1/EPP2/CEPP, our FieldCEPP, chain, track, baselines."""
 from .baselines import SDPMethod, SRLSMethod, TPSMMethod
-from .chain import (angles_from_joints, canonical_angles, ChainMethod, compile_fit, Fit,
-                    grow_chains, SearchExhausted)
+from .chain import (angles_from_joints, canonical_angles, ChainMethod, Fit, grow_chains,
+                    SearchExhausted)
 from .epp import CEPP, EPP1, EPP2
 from .field_cepp import FieldCEPP
+from .kernels import compile_fit
 from .registry import make_method, method_options, METHODS, RANGE_METHODS
 from .track import constant_velocity, Hypothesis, TrackMethod
 

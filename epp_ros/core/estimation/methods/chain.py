@@ -39,13 +39,11 @@ from dataclasses import replace
 from functools import lru_cache
 from typing import NamedTuple
 
-from epp_ros.core.model import nlos, plane
 from epp_ros.core.model.folds import folded_angles, tip_circle, tip_minima
 from epp_ros.core.model.measurements import Residuals, SensorNoise, wrap_angle
 from epp_ros.core.model.nlos import NlosMixture, OUTLIER_FRACTION, range_excess
 from epp_ros.core.model.noise import DEFAULT_NOISE, fitted_link_bias
 from epp_ros.core.model.plane import fit_slew, to_plane
-from epp_ros.core.solvers import point_newton
 from epp_ros.core.solvers.compiled import kernel
 from epp_ros.core.solvers.levenberg_marquardt import levenberg_marquardt, \
     levenberg_marquardt_batch, LevenbergMarquardtResult, STALL
@@ -53,7 +51,7 @@ import numpy as np
 from scipy.special import bdtrc
 
 __all__ = ['ChainMethod', 'Fit', 'SearchExhausted', 'angles_from_joints', 'canonical_angles',
-           'compile_fit', 'grow_chains']
+           'grow_chains']
 
 #: A screening fit leaning on more of its ranges (blocked or outliers by the judge) than
 #: the judge's shares give this chance has a sigma told too small (``_screened``).
@@ -62,22 +60,6 @@ LEANING_TAIL = 1e-3
 
 #: The chain's and the tracker's compiled fit (``core.solvers.compiled``).
 KERNEL = 'epp_ros.core.estimation.methods.compiled_chain'
-
-
-def compile_fit():
-    """
-    Compile the fits now where they run compiled (``compiled.COMPILED``); return whether.
-
-    The chain's and the tracker's fit, CEPP's plane prediction and Newton finish in the
-    points, and the NLOS loss of candidate positions (``LinkLoss.at_points``). The first
-    compile on a machine takes about a minute; numba then loads them from its disk cache
-    (a second or two). Called before the first frame where that frame's time matters.
-    """
-    for module in (KERNEL, point_newton.KERNEL, plane.KERNEL, nlos.KERNEL):
-        if kernel(module) is None:
-            return False
-        kernel(module).compile_now()
-    return True
 
 
 def angles_from_joints(model, joints):
