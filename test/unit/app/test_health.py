@@ -48,6 +48,18 @@ def test_chain_reports_its_predicted_uncertainty_and_nlos():
     assert 'joint 5 predicted std [m]' in values and values['NLOS links'] == '1'
 
 
+def test_the_variance_factor_that_widened_the_stds_is_reported():
+    exact = diagnostics_of('chain', MODEL.ranges(JOINTS), sigma=0.1)
+    assert assess(exact, MODEL.arm_lengths)[2]['variance factor'] == '1.00'
+    # Every range 0.3 m off at random, told 0.1 m: larger residuals than the noise told.
+    ranges = RangeNoise(sigma=0.3).apply(MODEL.ranges(JOINTS), np.random.default_rng(3))[0]
+    noisy = diagnostics_of('chain', ranges, sigma=0.1, learn_noise=False, **UNBIASED)
+    values = assess(noisy, MODEL.arm_lengths)[2]
+    assert float(values['variance factor']) == pytest.approx(
+        noisy.chi_square / noisy.chi_square_dof, abs=0.005)
+    assert float(values['variance factor']) > 2.0
+
+
 def test_the_links_judged_nlos_are_named_joint_then_anchor():
     ranges = MODEL.ranges(JOINTS)
     ranges[4, 1] += 5.0                         # joint 5's tag to anchor 2
