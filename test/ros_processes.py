@@ -13,6 +13,7 @@
 # limitations under the License.
 
 """Helpers of the multi-process tests: installed executables, a listening node, emulators."""
+from dataclasses import replace
 from pathlib import Path
 import signal
 import subprocess
@@ -20,8 +21,9 @@ import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
+from epp_ros.app import contract
 from epp_ros.app.config import load_pump_config
-from epp_ros.nodes.messages import POSTURE_QOS, RANGES_QOS, to_seconds, TRUTH_QOS
+from epp_ros.nodes.messages import qos, to_seconds
 from geometry_msgs.msg import PoseArray
 import numpy as np
 import pytest
@@ -66,16 +68,25 @@ def script(name):
     return str(path)
 
 
+def everything(topic):
+    """Return ``topic``'s QoS profile keeping all messages (the reader's history only)."""
+    return qos(replace(topic, depth=None))
+
+
 class Listener(Node):
     """Collects what a pump's nodes publish (topics relative to ``namespace``)."""
 
     def __init__(self, name='test_listener', namespace=''):
         super().__init__(name, namespace=namespace)
         self.ranges, self.truth, self.diagnostics, self.postures = [], [], [], []
-        self.create_subscription(JointState, 'uwb/ranges', self.ranges.append, RANGES_QOS)
+        # The contract's profiles, but every message kept until taken: a test process
+        # stalled on a loaded machine must not lose what a fast node published meanwhile.
+        self.create_subscription(JointState, 'uwb/ranges', self.ranges.append,
+                                 everything(contract.RANGES))
         self.create_subscription(PoseArray, 'arm_posture/ground_truth', self.truth.append,
-                                 TRUTH_QOS)
-        self.create_subscription(PoseArray, 'arm_posture', self.postures.append, POSTURE_QOS)
+                                 everything(contract.TRUTH))
+        self.create_subscription(PoseArray, 'arm_posture', self.postures.append,
+                                 everything(contract.POSTURE))
         self.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append, 10)
 
     def spin_until(self, condition, timeout):

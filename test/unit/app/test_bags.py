@@ -194,7 +194,6 @@ def test_play_into_the_live_estimator_equals_eval(settings, tmp_path, listener, 
     processes([script('posture_estimator'), '--ros-args', '--params-file', str(config)])
     # The listener subscribes too: wait for the estimator as the second subscriber.
     assert listener.spin_until(lambda: listener.count_subscribers('/uwb/ranges') >= 2, 60)
-    # Keep spinning while the bag plays: the listener's queue is only 10 deep.
     # The player must match the estimator, not only the listener, before it starts.
     player = processes([script('epp_bag'), 'play', str(bag), '--fast', '--topics',
                         bags.RANGES, '--subscribers', '2'])
