@@ -99,7 +99,8 @@ def joint_stds(values, joints):
     Each joint's standard deviation from the values of :func:`report`, metres.
 
     A motion model's own (``tracked``) where the method has one, else the Cramér–Rao
-    bound at the estimate (``predicted``); NaN where neither is given.
+    bound at the estimate, widened by the residuals' variance factor (``predicted``); NaN
+    where neither is given.
 
     Parameters
     ----------
@@ -163,7 +164,7 @@ def report(diagnostics, lengths):
               'missing links': _or_blank(diagnostics.missing_links),
               'iterations': _or_blank(diagnostics.iterations),
               'solve time [ms]': f'{1e3 * _or_nan(diagnostics.solve_time):.2f}'}
-    if diagnostics.predicted_rmse is not None:        # the Cramér–Rao bound at the estimate
+    if diagnostics.predicted_rmse is not None:        # the bound at the estimate, widened
         values['predicted RMSE [m]'] = f'{diagnostics.predicted_rmse:.4f}'
         for k, std in enumerate(diagnostics.joint_std, start=1):
             values[_joint_std_key(k, False)] = f'{std:.4f}'

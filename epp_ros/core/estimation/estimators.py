@@ -207,6 +207,8 @@ class PostureEstimator:
         ``range_residual_rms`` (m), ``missing_links`` (including ``implausible_links``,
         those dropped as longer than the geometry allows), ``iterations``, ``solve_time``
         (s), the integrity's statistics (``chi_square``, ``chi_square_limit``,
+        ``chi_square_dof``, ``variance_factor``: max(1, chi-square / dof), by whose root
+        the predicted stds are widened,
         ``nlos_links`` and ``outlier_links`` (p, m), ``predicted_rmse`` (m), ``joint_std`` (p,),
         ``ambiguous_joints``, ``rival_margin``: nats by which the likeliest other position
         of a joint is less likely than the estimate's), the method's ``estimate`` (p, 3)

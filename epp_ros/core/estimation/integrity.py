@@ -24,7 +24,8 @@ judged here on what its frame can show, so that the node and ``epp_bag eval`` ag
   more likely blocked than not are set aside; the rest must pass a chi-square test, overall
   and tag by tag (and their RMS the ``residual_*`` thresholds); how many were set aside a
   binomial test, and how long they are a gamma test;
-- observability: the Cramér–Rao bound at the estimate, from the links kept, must be finite
+- observability: the Cramér–Rao bound at the estimate, from the links kept and widened
+  by the residuals' variance factor where they exceed their noise, must be finite
   and small, and no joint may have another position that fits about as well (a fold, the
   tip at another pitch, the whole boom mirrored, another fit the method's search found,
   the frame fitted without one tag's ranges), unless the boom could not have got there
@@ -373,6 +374,8 @@ class Integrity:
         tag_kept = tag_measured & ~tag_blocked & ~tag_outlying
         p = self.model.n_sections
         statistic = float(np.sum(links[kept] ** 2) + np.sum(tag_links[tag_kept] ** 2))
+        # The chain's p + 1 angles, whatever the method fitted: a point method's 3p free
+        # coordinates leave fewer, a tracker's motion prior more (its own ``fitted_dof``).
         dof = max(int(kept.sum() + tag_kept.sum()) - (p + 1), 1)
         limit = float(_chi_square_limit(alpha, dof))
         n_links = int(measured.sum() + tag_measured.sum())

@@ -108,9 +108,10 @@ class FrameResult(Mapping):
     range_residual_rms: Optional[float] = None   #: m, fitted minus measured ranges
     section_lengths: Optional[np.ndarray] = None   #: (p,) m, of the answer
     arm_length_error: Optional[np.ndarray] = None  #: (p,) m, against the model's
-    predicted_rmse: Optional[float] = None  #: m, the bound at the answer, biases included
+    #: m, the bound at the answer, biases included, times the root of ``variance_factor``
+    predicted_rmse: Optional[float] = None
     joint_std: Optional[np.ndarray] = None  #: (p,) m, each joint's predicted std
-    noise_rmse: Optional[float] = None      #: m, the bound without the common bias
+    noise_rmse: Optional[float] = None      #: m, the same without the common bias
     nlos_links: Optional[np.ndarray] = None   #: (p, m) bool, links judged NLOS
     outlier_links: Optional[np.ndarray] = None   #: (p, m) bool, links judged outliers
     chi_square: Optional[float] = None      #: the ranges' consistency statistic

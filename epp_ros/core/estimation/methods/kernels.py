@@ -30,10 +30,9 @@ def compile_fit():
     """
     Compile the fits now where they run compiled (``compiled.COMPILED``); return whether.
 
-    The chain's and the tracker's fit, CEPP's plane prediction and Newton finish in the
-    points, and the NLOS loss of candidate positions (``LinkLoss.at_points``). The first
-    compile on a machine takes about a minute; numba then loads them from its disk cache
-    (a second or two). Called before the first frame where that frame's time matters.
+    Those of :data:`KERNELS`. The first compile on a machine takes about a minute; numba
+    then loads them from its disk cache (a second or two). Called before the first frame
+    where that frame's time matters.
     """
     for module in KERNELS:
         if kernel(module) is None:

@@ -543,8 +543,8 @@ def test_residuals_larger_than_their_noise_widen_the_predicted_std_by_their_vari
     for sigma, seed in ((0.0, 11), (0.3, 12), (0.6, 13)):
         rng = np.random.default_rng(seed)
         ranges = RangeNoise(sigma=sigma).apply(MODEL.ranges(joints), rng)[0]
-        verdict = integrity.judge(joints, Measurements.clean(MODEL, ranges)[0])
-        values = verdict.values
+        frame = Measurements.clean(MODEL, ranges)[0]
+        values = integrity.judge(joints, frame).values
         factor = max(1.0, values['chi_square'] / values['chi_square_dof'])
         assert values['variance_factor'] == factor
         p, m = MODEL.n_sections, MODEL.n_anchors
@@ -554,5 +554,11 @@ def test_residuals_larger_than_their_noise_widen_the_predicted_std_by_their_vari
         assert values['predicted_rmse'] == pytest.approx(bound.rmse * np.sqrt(factor), rel=1e-9)
         if sigma == 0.0:
             assert factor == 1.0                    # exact ranges: the bound as it is
-        if sigma >= 0.3:
-            assert factor > 3.0                     # 9x the variance told, within its spread
+        else:   # at the truth: (sigma / 0.1)^2 chi2(30) over the fit's 24 dof, 1e-4 each side
+            spread = (sigma / 0.1) ** 2 * chi2.ppf([1e-4, 1.0 - 1e-4], p * m) / (p * m - p - 1)
+            assert spread[0] < factor < spread[1]
+        # A method that does not hold the boom to its angles: its own bound, as widened.
+        every_link = (np.ones((p, m), dtype=bool), np.zeros((p, p), dtype=bool))
+        np.testing.assert_allclose(
+            integrity.judge(joints, frame, chain=False).values['joint_std'],
+            integrity.point_bound(joints, frame, every_link) * np.sqrt(factor), rtol=1e-9)
