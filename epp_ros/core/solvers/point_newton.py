@@ -159,6 +159,10 @@ class PointProblem:
         size = 4.0 * self.max_sq_weight * np.linalg.norm(centred)
         return max(float(np.linalg.norm(gradient) / size) if size > 0 else 0.0, infeasible)
 
+    def onto_fixed(self, points):
+        """Return ``points`` (n, r) moved the least onto the fixed distances."""
+        return self._restored(points)[0]
+
     def _restored(self, points):
         """
         Return ``points`` moved the least onto the fixed distances (Gauss-Newton).

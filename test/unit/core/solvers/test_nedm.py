@@ -69,6 +69,28 @@ def test_noisy_input_gives_a_low_rank_edm_with_fixed_entries_held():
     assert result.objective == pytest.approx(0.5 * np.sum((d - noisy) ** 2), rel=1e-9)
 
 
+def test_a_start_within_tolerance_still_holds_the_fixed_distances_exactly():
+    """
+    A warm start close enough to be stationary is returned: with its fixed entries exact.
+
+    EPP2 on ranges off by a few micrometres started from its prior's distances, which was
+    stationary within ``tol`` already, and returned the prior's arm lengths, 5e-5 m off
+    (a property test found it): a fixed distance is known, not estimated.
+    """
+    rng = np.random.default_rng(9)
+    edm, _ = noisy_edm(rng, 10, 3, 0.0)
+    fixed = np.zeros_like(edm, bool)
+    fixed[[0, 1, 2], [1, 2, 3]] = fixed[[1, 2, 3], [0, 1, 2]] = True
+    points = classical_mds(edm, 3)
+    # EPP2's set-up: the target is the start's distances with the lengths put in.
+    start = squared_distances(points + 1e-5 * rng.standard_normal(points.shape))
+    target = np.where(fixed, edm, start)
+    assert np.abs(start - edm)[fixed].max() > 1e-7 * edm.max()
+    result = nearest_edm(target, rank=3, fixed=fixed, initial=start, tol=1e-6)
+    assert result.converged
+    np.testing.assert_allclose(squared_distances(result.points)[fixed], edm[fixed], rtol=1e-9)
+
+
 def test_nearest_edm_beats_truncated_classical_mds():
     rng = np.random.default_rng(9)
     _, noisy = noisy_edm(rng, 9, 3, 20.0)
