@@ -42,7 +42,8 @@ from typing import NamedTuple, Optional
 from epp_ros.core.estimation.bias_learning import bias_design
 from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMethod
 from epp_ros.core.model.bounds import (bias_covariance, bound_from_covariance,
-                                       bound_from_information, RangeBiasPrior)
+                                       bound_from_information, RangeBiasPrior,
+                                       uncontrolled_covariance)
 from epp_ros.core.model.folds import fold_alternatives, tip_circle
 from epp_ros.core.model.measurements import Measurements, Residuals, wrap_angle
 from epp_ros.core.model.vectors import norms
@@ -245,7 +246,8 @@ class Integrity:
         direction its residuals barely see: it adds to each joint's predicted standard
         deviation (``joint_std``, ``predicted_rmse``, judged by the observability
         thresholds) only; the checks of ambiguity and of jumps leave it out (a bias
-        constant over frames neither folds a joint nor makes it jump).
+        constant over frames neither folds a joint nor makes it jump). So does the error
+        a link the others barely check could hide (``uncontrolled_covariance``).
 
     """
 
@@ -453,15 +455,19 @@ class Integrity:
         random = bound_from_information(self.model, slew, pitches, jacobian.T @ jacobian,
                                         joint_jacobian)
         n_links = np.count_nonzero(residuals.link_mask)
-        if not self.common_covariance.any() or not math.isfinite(random.rmse):
+        if not math.isfinite(random.rmse):
             return random, random, rows[:n_links]
-        links = np.arange(residuals.size) < n_links
-        tags, anchors = np.nonzero(residuals.link_mask)
-        directions = self.anchor_directions(joints)[tags, anchors]
-        common = (bias_design(residuals.measured[links], directions, anchors, self.bias.moving),
-                  self.common_covariance)
-        added = bias_covariance(jacobian, residuals.sigma, links, random.parameter_covariance,
-                                common=common)
+        added = uncontrolled_covariance(jacobian[:n_links], random.parameter_covariance)
+        if self.common_covariance.any():
+            links = np.arange(residuals.size) < n_links
+            tags, anchors = np.nonzero(residuals.link_mask)
+            directions = self.anchor_directions(joints)[tags, anchors]
+            common = (bias_design(residuals.measured[links], directions, anchors,
+                                  self.bias.moving), self.common_covariance)
+            added = added + bias_covariance(jacobian, residuals.sigma, links,
+                                            random.parameter_covariance, common=common)
+        if not added.any():
+            return random, random, rows[:n_links]
         return random, bound_from_covariance(self.model, slew, pitches,
                                              random.parameter_covariance + added,
                                              joint_jacobian), rows[:n_links]

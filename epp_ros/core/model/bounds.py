@@ -53,7 +53,8 @@ import numpy as np
 
 __all__ = ['fisher_information', 'Bound', 'crlb', 'bound_from_information',
            'bound_from_covariance', 'RangeBiasPrior', 'bias_covariance',
-           'posterior_information', 'posterior_crlb']
+           'uncontrolled_covariance', 'POORLY_CONTROLLED', 'posterior_information',
+           'posterior_crlb']
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,6 +112,44 @@ class RangeBiasPrior:
         """
         anchors = [self.anchor_std ** 2] * (3 * len(self.moving))
         return np.diag([self.common_std ** 2, self.slope_std ** 2, *anchors])
+
+
+#: Redundancy number (the share of a link's error its residual shows) under which the
+#: other measurements barely check it: geodesy's "poorly controlled" observation.
+POORLY_CONTROLLED = 0.3
+
+
+def uncontrolled_covariance(jacobian, information_inverse, floor=POORLY_CONTROLLED):
+    """
+    Return the covariance (p + 1, p + 1) the poorly controlled links' possible errors add.
+
+    A link whose redundancy number ``r = 1 - a F^-1 a^T`` is under ``floor`` hides most
+    of any error of its own in the fit (a blocked link taken in whole, a bias of the
+    pair): the other measurements barely check it. For each, what leaving it out would
+    add to the fit's covariance, ``F^-1 a^T a F^-1 / r``, is added: the bound then holds
+    whichever of them is wrong, and the more so the less they are checked.
+
+    Parameters
+    ----------
+    jacobian : ndarray, shape (n, p + 1)
+        The scaled rows (divided by their sigma) of the links in question.
+    information_inverse : ndarray, shape (p + 1, p + 1)
+        ``F^-1`` of every row of the fit, those included.
+    floor : float
+        Redundancy numbers under this count.
+
+    Returns
+    -------
+    ndarray, shape (p + 1, p + 1)
+
+    """
+    through = jacobian @ information_inverse                                  # (n, q)
+    redundancy = 1.0 - np.einsum('iq,iq->i', through, jacobian)
+    poor = redundancy < floor
+    if not poor.any():
+        return np.zeros_like(information_inverse)
+    shares = np.maximum(redundancy[poor], 1e-12)
+    return (through[poor].T / shares) @ through[poor]
 
 
 def bias_covariance(jacobian, sigma, links, information_inverse, link_std=0.0, common=None):

@@ -562,3 +562,29 @@ def test_residuals_larger_than_their_noise_widen_the_predicted_std_by_their_vari
         np.testing.assert_allclose(
             integrity.judge(joints, frame, chain=False).values['joint_std'],
             integrity.point_bound(joints, frame, every_link) * np.sqrt(factor), rtol=1e-9)
+
+
+def test_a_long_range_the_other_links_barely_check_widens_the_bound_to_cover_it():
+    """
+    A 2-section pump on 4 anchors: its tip's range to one anchor 0.88 m long.
+
+    The fit takes it in whole (chi-square 3.0 on 5 dof) and lands 2.2 m off, and the plain
+    bound said 0.59 m. The link's redundancy number is under 0.3 (geodesy's poorly
+    controlled observation): what leaving it out would add is added, and the predicted
+    RMSE covers a third of the error. The frame is the 485th of
+    ``/tmp/exp/spread35.py``'s draws (docs/benchmarks.md, "One long range").
+    """
+    model = truck_pump(arm_lengths=(8.0, 7.0), base_height=3.0, n_anchors=4)
+    rng = np.random.default_rng(1)
+    for _ in range(485):
+        joints = random_posture(model, rng)[2]
+        ranges = RangeNoise(sigma=0.1).apply(model.ranges(joints), rng)[0]
+        anchor, extra = rng.integers(model.n_anchors), rng.uniform(0.8, 2.5)
+    ranges[-1, anchor] += extra
+    for method in ('chain', 'cepp'):
+        estimator = PostureEstimator(model, method, sigma=0.1, learn_noise=False)
+        estimator.update(ranges)
+        result = estimator.last_diagnostics
+        error = np.sqrt(np.mean(np.sum((result.estimate - joints) ** 2, axis=1)))
+        assert error > 2.0 and result.chi_square < result.chi_square_limit
+        assert not result.valid or result.predicted_rmse >= error / 3.0

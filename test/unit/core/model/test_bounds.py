@@ -13,8 +13,10 @@
 # limitations under the License.
 
 """The posterior Cramér–Rao bound of a motion model."""
-from epp_ros.core.model.bounds import (bias_covariance, crlb, fisher_information, posterior_crlb,
-                                       posterior_information, RangeBiasPrior)
+from epp_ros.core.model.bounds import (bias_covariance, crlb, fisher_information,
+                                       POORLY_CONTROLLED, posterior_crlb,
+                                       posterior_information, RangeBiasPrior,
+                                       uncontrolled_covariance)
 from epp_ros.core.model.measurements import Measurements, Residuals, SensorNoise
 from epp_ros.core.simulation.simulate import truck_pump, working_cycle
 import numpy as np
@@ -289,6 +291,26 @@ def test_range_biases_add_the_covariance_they_give_a_weighted_fit(link_std, comm
     # Variances of 400 draws: relative standard error sqrt(2 / 400) = 7 %.
     np.testing.assert_allclose(np.diag(measured), np.diag(expected),
                                rtol=5 * np.sqrt(2 / trials))
+
+
+def test_a_poorly_controlled_link_adds_what_leaving_it_out_would():
+    """Each link the others barely check widens the bound to its leave-one-out bound."""
+    rng = np.random.default_rng(4)
+    jacobian = rng.standard_normal((12, 3))
+    jacobian[11] *= 30.0        # one link carries most of what the frame knows
+    information_inverse = np.linalg.inv(jacobian.T @ jacobian)
+    hat = np.einsum('iq,qr,ir->i', jacobian, information_inverse, jacobian)
+    assert hat[11] > 1.0 - POORLY_CONTROLLED and np.all(hat[:11] < 1.0 - POORLY_CONTROLLED)
+    added = uncontrolled_covariance(jacobian, information_inverse)
+    without = np.linalg.inv(jacobian[:11].T @ jacobian[:11])
+    np.testing.assert_allclose(information_inverse + added, without, rtol=1e-9)
+    # Links all checked by the others add nothing; at a floor of 1 every one counts.
+    np.testing.assert_array_equal(uncontrolled_covariance(jacobian[:11], without), 0.0)
+    every = uncontrolled_covariance(jacobian, information_inverse, floor=1.0)
+    expected = sum(np.linalg.inv(np.delete(jacobian, i, axis=0).T
+                                 @ np.delete(jacobian, i, axis=0)) - information_inverse
+                   for i in range(12))
+    np.testing.assert_allclose(every, expected, rtol=1e-9, atol=1e-15)
 
 
 def test_range_bias_prior_validates():
