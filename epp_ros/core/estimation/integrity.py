@@ -245,9 +245,10 @@ class Integrity:
         every check (:meth:`link_sigma`). The part common to all links moves a fit in a
         direction its residuals barely see: it adds to each joint's predicted standard
         deviation (``joint_std``, ``predicted_rmse``, judged by the observability
-        thresholds) only; the checks of ambiguity and of jumps leave it out (a bias
-        constant over frames neither folds a joint nor makes it jump). So does the error
-        a link the others barely check could hide (``uncontrolled_covariance``).
+        thresholds) and to the turn a section may make between frames; the checks of
+        ambiguity and the reach leave it out (a bias constant over frames neither folds a
+        joint nor moves it). So does what a link the others barely check could hide
+        (``uncontrolled_covariance``), for the methods that hold the chain.
 
     """
 
@@ -431,8 +432,9 @@ class Integrity:
         """
         Return :meth:`bound`, and that bound with the unknown common range bias added.
 
-        Both count each link's own bias in its sigma; the second is the first when no
-        common bias is unknown or the first is infinite.
+        Both count each link's own bias in its sigma; the second adds what the links the
+        others barely check could hide (``uncontrolled_covariance``) too, and is the first
+        when neither adds anything or the first is infinite.
         """
         return self._bounds(joints, measurements, kept, angles)[:2]
 

@@ -126,8 +126,11 @@ def uncontrolled_covariance(jacobian, information_inverse, floor=POORLY_CONTROLL
     A link whose redundancy number ``r = 1 - a F^-1 a^T`` is under ``floor`` hides most
     of any error of its own in the fit (a blocked link taken in whole, a bias of the
     pair): the other measurements barely check it. For each, what leaving it out would
-    add to the fit's covariance, ``F^-1 a^T a F^-1 / r``, is added: the bound then holds
-    whichever of them is wrong, and the more so the less they are checked.
+    add to the fit's covariance, ``F^-1 a^T a F^-1 / r`` (Sherman–Morrison: exactly the
+    leave-one-out increase), is added. One such link wrong at a time: the sum is at least
+    each one's increase, not the covariance of leaving several out. It covers where the
+    fit would go without the link, not an error of any size. A link nothing else checks
+    (``r`` near 0) makes it as large as the fit cannot see (a frame then unobservable).
 
     Parameters
     ----------
@@ -141,6 +144,7 @@ def uncontrolled_covariance(jacobian, information_inverse, floor=POORLY_CONTROLL
     Returns
     -------
     ndarray, shape (p + 1, p + 1)
+        Added to ``F^-1``, rad^2: zero where no link is under ``floor``.
 
     """
     through = jacobian @ information_inverse                                  # (n, q)

@@ -622,10 +622,11 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
     solver = _PenaltySolver(goal, weights, fixed, rank, tau, inner_tol)
     iterate, duals, c = _start(solver, known, initial, scale, penalty_parameter)
     outcome = _penalty_iterations(solver, iterate, duals, c, tol, rank_tol, max_iter)
-    if outcome.iterations == outcome.newton_steps == 0 and solver.fixed_pairs.size:
-        # A start stationary within tol is returned as it came: its fixed distances off by
-        # up to tol. They are known, so it is moved the least onto them.
+    if (outcome.status == _CONVERGED and outcome.iterations == outcome.newton_steps == 0
+            and solver.fixed_pairs.size):
+        # A start stationary within tol came back as it was, its fixed distances off by up
+        # to tol: they are known. Moved the least onto them, it is judged again.
         points = solver.points.onto_fixed(classical_mds(outcome.iterate.edm, solver.rank))
-        outcome = outcome._replace(iterate=solver.iterate(squared_distances(points)),
-                                   stationarity=solver.points.stationarity(points))
+        outcome = _penalty_iterations(solver, solver.iterate(squared_distances(points)),
+                                      outcome.duals, c, tol, rank_tol, max_iter)
     return _result(solver, outcome, scale, {'tol': tol, 'rank_tol': rank_tol})
