@@ -571,8 +571,8 @@ def test_a_long_range_the_other_links_barely_check_widens_the_bound_to_cover_it(
     The fit takes it in whole (chi-square 3.0 on 5 dof) and lands 2.2 m off, and the plain
     bound said 0.59 m. The link's redundancy number is under 0.3 (geodesy's poorly
     controlled observation): what leaving it out would add is added, and the predicted
-    RMSE covers a third of the error. The frame is the 485th of
-    ``/tmp/exp/spread35.py``'s draws (docs/benchmarks.md, "One long range").
+    RMSE covers a third of the error. The frame is the 485th of the draws below
+    (docs/benchmarks.md, "One long range on a pump with little to spare").
     """
     model = truck_pump(arm_lengths=(8.0, 7.0), base_height=3.0, n_anchors=4)
     rng = np.random.default_rng(1)
