@@ -617,7 +617,8 @@ class PostureEstimator:
         joints, info = solved
         known = {'alternatives': info.get('alternatives', ()),
                  'chain': getattr(self._solver, 'holds_chain', True),
-                 'timed_joints': info.get('timed_joints'), 'rivals': info.get('rivals', ())}
+                 'timed_joints': info.get('timed_joints'), 'rivals': info.get('rivals', ()),
+                 'fitted_dof': self._dof(info)}
         if self._previous is None:
             return self._checks.judge(joints, measurements, **known)
         last = self._previous

@@ -354,9 +354,15 @@ class Integrity:
             total = total + np.where(seen, 0.5 * (error / self.noise.pitch_sigma) ** 2, 0.0)
         return total
 
-    def consistency(self, joints, measurements):
+    def consistency(self, joints, measurements, fitted_dof=None):
         """
         Chi-square and binomial tests of the residuals; (failures, values, kept links).
+
+        ``fitted_dof``: how many parameters the estimate spent on the frame, which its
+        residuals then lack: the chain's p + 1 angles by default, 3 per joint for a
+        method that places each joint on its own, fewer for a tracker whose prediction
+        supplied part (its own count). The chi-square's degrees of freedom are the links
+        kept less these, at least 1.
 
         Returns
         -------
@@ -377,9 +383,8 @@ class Integrity:
         tag_kept = tag_measured & ~tag_blocked & ~tag_outlying
         p = self.model.n_sections
         statistic = float(np.sum(links[kept] ** 2) + np.sum(tag_links[tag_kept] ** 2))
-        # The chain's p + 1 angles, whatever the method fitted: a point method's 3p free
-        # coordinates leave fewer, a tracker's motion prior more (its own ``fitted_dof``).
-        dof = max(int(kept.sum() + tag_kept.sum()) - (p + 1), 1)
+        spent = p + 1 if fitted_dof is None else fitted_dof
+        dof = max(int(kept.sum() + tag_kept.sum()) - spent, 1)
         limit = float(_chi_square_limit(alpha, dof))
         n_links = int(measured.sum() + tag_measured.sum())
         n_blocked = int(blocked.sum() + tag_blocked.sum())
@@ -721,7 +726,7 @@ class Integrity:
     # -- the verdict ----------------------------------------------------------------------
     def judge(self, joints, measurements, reference=None, elapsed=None, reference_std=None,
               alternatives=(), chain=True, timed_joints=None, rivals=(),
-              reference_turn_std=None):
+              reference_turn_std=None, fitted_dof=None):
         """
         Return the :class:`Verdict` on an estimate of one frame.
 
@@ -755,6 +760,9 @@ class Integrity:
         reference_turn_std : ndarray, shape (p,), optional
             Standard deviation of each of ``reference``'s sections' direction, radians
             (its verdict's ``reach_turn_std``); by default bounded by ``reference_std``.
+        fitted_dof : float, optional
+            Parameters the method spent on the frame (:meth:`consistency`); the chain's
+            p + 1 angles by default.
 
         Returns
         -------
@@ -762,7 +770,7 @@ class Integrity:
 
         """
         assessed = self._assessed(joints, measurements, reference, elapsed, reference_std,
-                                  chain, timed_joints, reference_turn_std)
+                                  chain, timed_joints, reference_turn_std, fitted_dof)
         checks, values = list(assessed.checks), dict(assessed.values)
         alternatives = list(alternatives) + assessed.separated
         found, joint_std, seen, reach = (assessed.found, assessed.joint_std, assessed.seen,
@@ -784,7 +792,7 @@ class Integrity:
         return verdict
 
     def _assessed(self, joints, measurements, reference, elapsed, reference_std, chain,
-                  timed_joints, reference_turn_std):
+                  timed_joints, reference_turn_std, fitted_dof):
         """
         Return :meth:`judge`'s :class:`_Assessment` of an estimate.
 
@@ -797,7 +805,7 @@ class Integrity:
         """
         key = _AssessmentKey.of(joints, measurements, reference, elapsed, reference_std,
                                 chain, timed_joints, self.common_covariance,
-                                reference_turn_std)
+                                reference_turn_std, fitted_dof)
         for known, assessment in self._assessments:
             if known == key:
                 return assessment
@@ -807,7 +815,7 @@ class Integrity:
         angles = angles_from_joints(self.model, joints)
         self._plausibility(joints, angles[0], reach, elapsed, checks, values)
         kept = self._consistency(joints if timed_joints is None else timed_joints,
-                                 measurements, checks, values)
+                                 measurements, fitted_dof, checks, values)
         los_rows = None
         # Residuals larger than their noise say: the a-posteriori unit variance, never < 1.
         values['variance_factor'] = max(1.0, values['chi_square'] / values['chi_square_dof'])
@@ -841,9 +849,9 @@ class Integrity:
         self._assessments = [(key, assessment)] + self._assessments[:self.ASSESSMENTS_KEPT - 1]
         return assessment
 
-    def _consistency(self, joints, measurements, checks, values):
+    def _consistency(self, joints, measurements, fitted_dof, checks, values):
         """Append the residual checks to ``checks``; return the links judged clear."""
-        failures, found, kept = self.consistency(joints, measurements)
+        failures, found, kept = self.consistency(joints, measurements, fitted_dof)
         values.update(found)
         if failures:
             checks.append((ERROR, 'inconsistent', '; '.join(failures)))
@@ -968,13 +976,13 @@ class _AssessmentKey:
 
     @classmethod
     def of(cls, joints, measurements, reference, elapsed, reference_std, chain, timed_joints,
-           common_covariance, reference_turn_std):
+           common_covariance, reference_turn_std, fitted_dof):
         """Return the key of :meth:`Integrity._assessed`'s arguments."""
         def exact(values):
             return None if values is None else np.asarray(values, dtype=float)
         return cls(measurements, exact(joints), exact(reference), elapsed,
                    exact(reference_std), bool(chain), exact(timed_joints),
-                   exact(common_covariance), exact(reference_turn_std))
+                   exact(common_covariance), exact(reference_turn_std), fitted_dof)
 
     def __eq__(self, other):
         if not isinstance(other, _AssessmentKey):

@@ -116,7 +116,7 @@ class FrameResult(Mapping):
     outlier_links: Optional[np.ndarray] = None   #: (p, m) bool, links judged outliers
     chi_square: Optional[float] = None      #: the ranges' consistency statistic
     chi_square_limit: Optional[float] = None   #: its limit at the integrity's alpha
-    chi_square_dof: Optional[int] = None    #: its degrees of freedom
+    chi_square_dof: Optional[float] = None  #: its degrees of freedom (links less fitted)
     #: max(1, chi_square / dof): the residuals' a-posteriori unit variance; the predicted
     #: stds are the bound times its square root
     variance_factor: Optional[float] = None

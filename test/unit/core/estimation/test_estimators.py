@@ -291,6 +291,32 @@ def test_diagnostics_content():
     assert diagnostics['range_residual_rms'] < 1e-6
 
 
+@pytest.mark.parametrize('method', ['srls', 'chain'])
+def test_chi_square_counts_what_the_method_fitted(method):
+    """
+    Its mean is its degrees of freedom: the links less 3 per tag placed alone, or p + 1.
+
+    The noise told right and no bias prior, one cold frame at a time. Until session 36 a
+    per-tag method was judged with the chain's p + 1: its chi-square averaged 0.65 of
+    the dof then, and the residual test and the variance factor were that much lenient.
+    """
+    model = truck_pump()
+    p, m = model.n_sections, model.n_anchors
+    dof = p * m - (3 * p if method == 'srls' else p + 1)
+    estimator = PostureEstimator(model, method, sigma=0.1, learn_noise=False, **UNBIASED)
+    rng = np.random.default_rng(3)
+    statistics = []
+    for _ in range(60):
+        joints = random_posture(model, rng)[2]
+        estimator.reset()
+        estimator.update(RangeNoise(sigma=0.1).apply(model.ranges(joints), rng)[0])
+        if estimator.last_diagnostics.chi_square_dof == dof:     # no link set aside
+            statistics.append(estimator.last_diagnostics.chi_square)
+    assert len(statistics) >= 50
+    # The mean of n chi-square(dof) over dof: sd sqrt(2 / (n dof)), within 4 of it.
+    assert abs(np.mean(statistics) / dof - 1.0) < 4.0 * np.sqrt(2.0 / (len(statistics) * dof))
+
+
 def test_impossibly_long_ranges_are_dropped_and_counted():
     model = truck_pump()
     joints = random_posture(model, np.random.default_rng(13))[2]
