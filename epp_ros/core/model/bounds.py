@@ -277,8 +277,7 @@ def bound_from_information(model, slew, pitches, information, joint_jacobian=Non
     except np.linalg.LinAlgError:
         eigenvalues = np.zeros(p + 1)
     if not np.all(np.isfinite(eigenvalues)) or eigenvalues[0] <= 1e-14 * eigenvalues[-1]:
-        infinite = np.full((p + 1, p + 1), np.inf)
-        return Bound(infinite, np.full((p, 3, 3), np.inf), float('inf'))
+        return _unbounded(p)
     return bound_from_covariance(model, slew, pitches, (vectors / eigenvalues) @ vectors.T,
                                  joint_jacobian)
 
@@ -287,14 +286,23 @@ def bound_from_covariance(model, slew, pitches, covariance, joint_jacobian=None)
     """
     Return the :class:`Bound` at a posture of psi's covariance (p + 1, p + 1), rad^2.
 
-    ``joint_jacobian`` as in :func:`bound_from_information`.
+    ``joint_jacobian`` as in :func:`bound_from_information`. Infinite where a joint's
+    variance comes out negative or NaN: the covariance is then so large in some direction
+    (a link nothing checks, :func:`uncontrolled_covariance`) that its rounding exceeds
+    what it says of that joint, and it says nothing.
     """
     jacobian = model.joint_jacobian(slew, pitches) if joint_jacobian is None \
         else joint_jacobian
     joint_covariance = np.einsum('kcq,qr,kdr->kcd', jacobian, covariance, jacobian)
-    rmse = float(np.sqrt(np.trace(joint_covariance, axis1=-2, axis2=-1).sum()
-                         / model.n_sections))
-    return Bound(covariance, joint_covariance, rmse)
+    variances = np.trace(joint_covariance, axis1=-2, axis2=-1)
+    if not np.all(variances >= 0.0):
+        return _unbounded(model.n_sections)
+    return Bound(covariance, joint_covariance, float(np.sqrt(variances.sum() / model.n_sections)))
+
+
+def _unbounded(p):
+    """Return the :class:`Bound` of a posture the measurements do not determine."""
+    return Bound(np.full((p + 1, p + 1), np.inf), np.full((p, 3, 3), np.inf), float('inf'))
 
 
 def _square_matrix(value, name, size=None):
