@@ -65,6 +65,12 @@ Suites:
             of working cycle at 10 Hz: median, p90, p99, max, against issue #30's targets;
             the chain against scipy's bare fit; refused and garbage frames against good
             ones; the growth with sections and anchors (exponents). Not default.
+  compare   This checkout against the commit --base (default HEAD: the uncommitted
+            changes): the same frames (working cycle, field cases, garbage; --seconds
+            each) through both trees' estimators (--methods, default chain, cepp, track):
+            frames whose status or validity differ, the largest estimate and predicted-RMSE
+            differences, and CPU per frame in --rounds alternating rounds of fresh
+            processes with their ratios. Not default.
 Every table ends with the commit it was measured on. ``--option KEY=VALUE`` passes an
 option to the estimators (e.g. ``anchor_weight=inf``, ``predict_slew=false``).
 """
@@ -73,8 +79,8 @@ from pathlib import Path
 import sys
 from typing import Callable, NamedTuple
 
-from benchmarks import (calibration_bench, driver_bench, experiments, field_bench, fuzz_bench,
-                        integrity_bench, soak_bench, speed_bench)
+from benchmarks import (calibration_bench, compare_bench, driver_bench, experiments,
+                        field_bench, fuzz_bench, integrity_bench, soak_bench, speed_bench)
 from benchmarks.reports import bench_json, CalibrationReport, commit, markdown
 from epp_ros.app.threads import single_blas_thread
 from epp_ros.cli.arguments import integer, number, Parser
@@ -166,6 +172,11 @@ def _speed(args):
                            args.seed)
 
 
+def _compare(args):
+    return compare_bench.run(args.base, args.methods or ['chain', 'cepp', 'track'],
+                             args.seconds, args.seed, args.rounds)
+
+
 def _calibration(args):
     return CalibrationReport(calibration_bench.run(args.seconds, args.seeds, args.seed))
 
@@ -195,6 +206,7 @@ SUITES = {
     'family': Suite(_family),
     'calibration': Suite(_calibration),
     'speed': Suite(_speed),
+    'compare': Suite(_compare),
 }
 
 
@@ -234,6 +246,10 @@ def parser():
     result.add_argument('--lag-seconds', type=number(0, 3600), default=30.0,
                         help='soak: seconds the live estimator is stopped while frames flow '
                              '(default 30; 0: no lag phase)')
+    result.add_argument('--base', default='HEAD',
+                        help='compare: the commit to compare this checkout with (default HEAD)')
+    result.add_argument('--rounds', type=integer(1, 100), default=4,
+                        help='compare: alternating rounds of the two trees (default 4)')
     result.add_argument('--inputs', type=integer(1, 10 ** 9), default=100_000,
                         help='fuzz: inputs per protocol and per configuration field')
     return result

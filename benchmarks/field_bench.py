@@ -52,7 +52,7 @@ from epp_ros.core.simulation import (FIELD_EFFECTS, field_effects, FieldEffects,
 import numpy as np
 from scipy.optimize import least_squares
 
-__all__ = ['CASES', 'FAMILY', 'FamilyReport', 'FieldReport', 'run', 'run_family']
+__all__ = ['CASES', 'case_frames', 'FAMILY', 'FamilyReport', 'FieldReport', 'run', 'run_family']
 
 RATE = 10.0                     #: frames per second
 WARM_UP_S = 5.0                 #: seconds not scored: a cold start, the noise being learned
@@ -200,8 +200,13 @@ def truth_decides(model, frame, effects, ambiguous_joints):
     return True
 
 
-def run_case(name, seconds, seed):
-    """Return per method (squared errors, valid count) and the bounds of one case."""
+def case_frames(name, seconds, seed):
+    """
+    Return the frames of case ``name`` (``CASES``, ``FAMILY`` or a motion), the pump, its effects.
+
+    On the truck pump at ``RATE``; a list of ``FieldFrame``, the ``BoomModel`` as
+    configured and the ``FieldEffects`` drawn.
+    """
     spec, motion_name = CASES.get(name) or FAMILY.get(name) or ('', name)
     model = truck_pump()
     rng = np.random.default_rng([seed, sum(map(ord, name))])
@@ -210,7 +215,12 @@ def run_case(name, seconds, seed):
     if effects.moving_anchors is None:      # the body's anchors stay on the body
         effects = replace(effects, moving_anchors=truck_outriggers(model))
     motion = _motion(motion_name, model, seconds, rng)
-    frames = simulate_field(model, motion, seconds, effects, rng, 1.0 / RATE)
+    return simulate_field(model, motion, seconds, effects, rng, 1.0 / RATE), model, effects
+
+
+def run_case(name, seconds, seed):
+    """Return per method (squared errors, valid count) and the bounds of one case."""
+    frames, model, effects = case_frames(name, seconds, seed)
     scored = [frame.stamp >= WARM_UP_S for frame in frames]
     bounds = np.array([_clean_bound(model, f, effects) for f in frames])[scored]
     results = {}

@@ -29,8 +29,8 @@ import math
 from pathlib import Path
 import subprocess
 
-from benchmarks import (calibration_bench, driver_bench, field_bench, fuzz_bench, integrity_bench,
-                        soak_bench, speed_bench)
+from benchmarks import (calibration_bench, compare_bench, driver_bench, field_bench,
+                        fuzz_bench, integrity_bench, soak_bench, speed_bench)
 from benchmarks.experiments import (BagsReport, ControllerReport, LatencyReport,
                                     OTHER_POSTURE, PAPER_TABLE1, PAPER_TABLE3, PaperReport,
                                     PUBLISHED_NAMES, TABLE1_ETA, TrackingReport, Xie3dimReport)
@@ -739,6 +739,45 @@ def speed_markdown(report):
     return '\n'.join(lines)
 
 
+def _compare_row(row):
+    estimate = f'{row["estimate"]:.1e}' + (f' ({row["estimate_nan"]} NaN)' if row['estimate_nan']
+                                           else '')
+    predicted = f'{row["predicted"]:.1e}' + (f' ({row["predicted_finite"]} finite)'
+                                             if row['predicted_finite'] else '')
+    return (f'| {row["stream"]} | {row["method"]} | {row["status"]} | {row["valid"]} | '
+            f'{row["published"][0]}, {row["published"][1]} | {estimate} | {predicted} |')
+
+
+def _rounds(values):
+    return ', '.join(f'{value:.2f}' for value in values)
+
+
+def compare_markdown(report):
+    """Return the comparison's tables: what differs per stream and method, and the speed."""
+    lines = [f'### {report.head} against {report.base}: the same {report.frames} frames a '
+             'stream', '',
+             '| stream | method | status differs | valid differs | published: base, head | '
+             'max estimate difference [m] | max predicted RMSE difference (relative) |',
+             '|---|---|---|---|---|---|---|',
+             *[_compare_row(row) for row in report.rows], '',
+             'CPU ms per frame on the working cycle after the warm-up, the median of each '
+             'round (rounds alternate which tree runs first); the frame: update and settle, '
+             'the answer: update:', '',
+             '| method | base: frame | head: frame | head / base, median | base: answer | '
+             'head: answer | head / base, median |', '|---|---|---|---|---|---|---|']
+    for method, row in report.speed.items():
+        frame = np.array(row['head']) / np.array(row['base'])
+        answer = np.array(row['head_answer']) / np.array(row['base_answer'])
+        lines.append(f'| {method} | {_rounds(row["base"])} | {_rounds(row["head"])} | '
+                     f'{np.median(frame):.3f} ({frame.min():.2f}-{frame.max():.2f}) | '
+                     f'{_rounds(row["base_answer"])} | {_rounds(row["head_answer"])} | '
+                     f'{np.median(answer):.3f} ({answer.min():.2f}-{answer.max():.2f}) |')
+    lines += ['', 'Every round of each tree gave the same statuses and estimates.'
+              if report.repeatable else
+              '**A tree gave different statuses or estimates from one round to the next.**']
+    return '\n'.join(lines)
+
+
 MARKDOWN = {
     Xie3dimReport: xie3dim_markdown,
     TrackingReport: tracking_markdown,
@@ -754,6 +793,7 @@ MARKDOWN = {
     driver_bench.DriverReport: driver_markdown,
     CalibrationReport: lambda report: calibration_bench.markdown(report.fields),
     speed_bench.SpeedReport: speed_markdown,
+    compare_bench.CompareReport: compare_markdown,
 }
 
 

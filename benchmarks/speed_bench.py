@@ -35,7 +35,7 @@ from epp_ros.core.model.measurements import Measurements, Residuals, SensorNoise
 from epp_ros.core.simulation import observe, RangeNoise, truck_pump, working_cycle
 import numpy as np
 
-__all__ = ['SpeedReport', 'run', 'TARGETS']
+__all__ = ['frames_of', 'garbage_frames', 'SpeedReport', 'run', 'TARGETS']
 
 WARM_UP = 30
 RATE = 10.0
@@ -59,6 +59,13 @@ def frames_of(model, count, seed):
         frame['stamp'] = k / RATE
         frames.append(frame)
     return frames, np.c_[motion.slew[:count], motion.pitches[:count]]
+
+
+def garbage_frames(frames, seed):
+    """Return ``frames`` with every range drawn uniformly from 0-80 m (the hostile case)."""
+    rng = np.random.default_rng(seed + 2)
+    return [{'ranges': rng.uniform(0.0, 80.0, frame['ranges'].shape), 'stamp': frame['stamp']}
+            for frame in frames]
 
 
 def frame_times(model, method, frames, **options):
@@ -149,9 +156,7 @@ def run(methods, frames, seed, growth_frames=20):
     """Run the speed suite: ``frames`` measured frames per method and case."""
     model = truck_pump()
     good, angles = frames_of(model, WARM_UP + frames, seed)
-    rng = np.random.default_rng(seed + 2)
-    garbage = [{'ranges': rng.uniform(0.0, 80.0, frame['ranges'].shape),
-                'stamp': frame['stamp']} for frame in good]
+    garbage = garbage_frames(good, seed)
     rows = {}
     for method in methods:
         times, published, answers = frame_times(model, method, good)

@@ -21,7 +21,7 @@ from pathlib import Path
 import subprocess
 import sys
 
-from benchmarks import bench, experiments, field_bench, reports
+from benchmarks import bench, compare_bench, experiments, field_bench, reports
 from epp_ros.cli import demo
 from epp_ros.core.simulation import (FIELD_EFFECTS, field_effects, FieldEffects, RangeNoise,
                                      simulate_field, truck_pump, working_cycle, WorkingMotion)
@@ -377,6 +377,45 @@ def test_bench_speed_prints_times_ratios_and_growth(capsys):
     assert set(report['exponents']) == {'sections', 'anchors'}
     assert all(np.isfinite(list(fitted.values())).all()
                for fitted in report['exponents'].values())
+
+
+def test_bench_compare_runs_both_trees_on_the_same_frames(tmp_path, capsys, monkeypatch):
+    """
+    This checkout against its own HEAD, unpacked and run in fresh processes: what CI has.
+
+    Where the checkout has uncommitted changes the figures may differ; the table and the
+    report's shape hold either way, and a clean checkout's trees agree to the last bit.
+    """
+    monkeypatch.setattr(compare_bench, 'STREAMS', ('working', 'garbage'))
+    report = compare_bench.run('HEAD', ('chain',), seconds=4.0, rounds=2, cache=tmp_path)
+    assert (tmp_path / compare_bench.unpacked('HEAD', tmp_path)[0] / 'epp_ros').is_dir()
+    assert report.frames == 40 and report.repeatable
+    assert [(row['stream'], row['method']) for row in report.rows] == [
+        ('working', 'chain'), ('garbage', 'chain')]
+    assert len(report.speed['chain']['base']) == len(report.speed['chain']['head']) == 2
+    assert all(value > 0.0 for values in report.speed['chain'].values() for value in values)
+    if not report.head.endswith('changes'):
+        for row in report.rows:
+            assert row['status'] == row['valid'] == row['estimate_nan'] == 0
+            assert row['estimate'] == row['predicted'] == 0.0
+    print(reports.markdown(report))
+    assert 'head / base' in capsys.readouterr().out
+
+
+def test_compare_counts_what_differs_between_two_trees():
+    """Statuses, validity, estimates (NaN where one has none) and predicted RMSEs."""
+    def results(status, valid, estimate, predicted):
+        return {'working': {'chain': {'status': np.array(status), 'valid': np.array(valid),
+                                      'estimate': np.array(estimate, dtype=float),
+                                      'predicted': np.array(predicted, dtype=float)}}}
+    old = results(['ok', 'ok', 'ambiguous'], [True, True, False],
+                  [[[0.0, 0.0, 1.0]], [[1.0, 0.0, 1.0]], [[2.0, 0.0, 1.0]]], [0.1, 0.2, np.inf])
+    new = results(['ok', 'inconsistent', 'ambiguous'], [True, False, False],
+                  [[[0.0, 0.0, 1.0]], [[1.0, 0.5, 1.0]], [[np.nan, 0.0, 1.0]]], [0.1, 0.3, 0.4])
+    row, = compare_bench.differences(old, new)
+    assert (row['status'], row['valid'], row['published']) == (1, 1, (2, 1))
+    assert row['estimate'] == 0.5 and row['estimate_nan'] == 1
+    assert row['predicted'] == pytest.approx(0.5) and row['predicted_finite'] == 1
 
 
 def test_bench_controller_runs_the_node_on_one_shared_core(capsys, monkeypatch):

@@ -1,0 +1,192 @@
+# Copyright 2026 epp_ros developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+``python3 dev.py bench compare --base REV``: this checkout against another commit, side by side.
+
+Issue #30 asks for speed with the same estimates and the same integrity decisions, and
+this machine is shared: a change is measured against its parent in one run, the two trees
+in turn. The same frames go through both trees' estimators (the working cycle, three field
+cases and uniform garbage, generated here once): per stream and method, the frames whose
+status or validity differ, the largest difference of the estimates (metres) and of the
+predicted RMSEs (relative); and each tree's CPU per frame on the working cycle, in
+alternating rounds of fresh processes: the medians per round, their ratio, the median ratio.
+
+The other commit is unpacked with ``git archive`` into a folder of the system's temporary
+directory named by its hash, and kept (its kernels compile once, about a minute); this
+checkout is compared as it is, uncommitted changes included. Each tree runs this tree's
+``compare_worker.py`` with that tree first on ``sys.path``.
+"""
+from dataclasses import dataclass
+from pathlib import Path
+import pickle
+import shutil
+import subprocess
+import sys
+import tempfile
+
+from benchmarks import field_bench, speed_bench
+from epp_ros.core.simulation import truck_pump
+from epp_ros.core.simulation.simulate import truck_outriggers
+import numpy as np
+
+__all__ = ['CompareReport', 'run', 'STREAMS']
+
+ROOT = Path(__file__).resolve().parents[1]
+WORKER = Path(__file__).resolve().with_name('compare_worker.py')
+#: The field cases compared beside the working cycle and the garbage.
+FIELD_CASES = ('real_uwb', 'all', 'joystick')
+STREAMS = ('working',) + FIELD_CASES + ('garbage',)
+
+
+@dataclass
+class CompareReport:
+    """The report of ``python3 dev.py bench compare`` (see :func:`run`)."""
+
+    base: str                   #: the other commit
+    head: str                   #: this checkout's commit, "+ changes" when uncommitted
+    frames: int                 #: per stream
+    rows: list                  #: per stream and method: what differs
+    speed: dict                 #: method -> {base, head: CPU ms medians per round}
+    repeatable: bool            #: every round of a tree gave the same statuses and estimates
+    suite: str = 'compare'
+
+
+def streams(seconds, seed):
+    """Return the streams the trees run: per name, the pump, the options and the frames."""
+    model = truck_pump()
+    count = int(round(seconds * speed_bench.RATE))
+    working = speed_bench.frames_of(model, count, seed)[0]
+    frames = {'working': working, 'garbage': speed_bench.garbage_frames(working, seed)}
+    for name in FIELD_CASES:
+        case = field_bench.case_frames(name, seconds, seed)[0]
+        frames[name] = [frame.inputs() for frame in case]
+    # As the field bench runs them: the outriggers may stand elsewhere than configured.
+    options = {'moving_anchors': [int(j) for j in truck_outriggers(model)]}
+    geometry = (model.arm_lengths, model.base, model.anchors, model.pivot_offset)
+    return {name: {'model': geometry, 'options': options, 'frames': frames[name]}
+            for name in STREAMS}
+
+
+def unpacked(revision, cache=None):
+    """
+    Return the commit hash of ``revision`` and a folder holding its tree, kept for reuse.
+
+    In ``cache``, by default ``epp_ros_compare`` in the system's temporary directory.
+    """
+    sha = _git('rev-parse', '--verify', f'{revision}^{{commit}}').decode().strip()
+    folder = Path(cache or Path(tempfile.gettempdir()) / 'epp_ros_compare') / sha
+    if not (folder / 'epp_ros').is_dir():
+        partial = folder.with_name(sha + '.partial')
+        shutil.rmtree(partial, ignore_errors=True)
+        partial.mkdir(parents=True)
+        subprocess.run(['tar', '-x', '-C', str(partial)], input=_git('archive', sha),
+                       check=True)
+        shutil.rmtree(folder, ignore_errors=True)
+        partial.rename(folder)
+    return sha, folder
+
+
+def _git(*arguments):
+    return subprocess.run(['git', *arguments], cwd=ROOT, capture_output=True,
+                          check=True).stdout
+
+
+def _head():
+    """Return this checkout's short hash, and "+ changes" when files differ from it."""
+    sha = _git('rev-parse', '--short', 'HEAD').decode().strip()
+    changed = _git('status', '--porcelain', '--untracked-files=no').strip()
+    return sha + (' + changes' if changed else '')
+
+
+def _worker(tree, inputs, scratch, label):
+    """Run ``compare_worker.py`` on ``tree`` in a fresh process; return its results."""
+    outputs = scratch / f'{label}.pickle'
+    subprocess.run([sys.executable, str(WORKER), str(tree), str(inputs), str(outputs)],
+                   check=True)
+    with open(outputs, 'rb') as stream:
+        return pickle.load(stream)
+
+
+def differences(base, head):
+    """Return per stream and method what differs between two trees' results."""
+    rows = []
+    for stream, methods in base.items():
+        for method, old in methods.items():
+            new = head[stream][method]
+            moved = np.abs(old['estimate'] - new['estimate'])
+            finite = np.isfinite(old['predicted']) & np.isfinite(new['predicted'])
+            relative = np.abs(old['predicted'] - new['predicted'])[finite] / np.maximum(
+                np.abs(old['predicted'][finite]), np.finfo(float).tiny)
+            rows.append({
+                'stream': stream, 'method': method, 'frames': len(old['status']),
+                'status': int(np.sum(old['status'] != new['status'])),
+                'valid': int(np.sum(old['valid'] != new['valid'])),
+                'published': (int(old['valid'].sum()), int(new['valid'].sum())),
+                'estimate': float(np.max(moved, initial=0.0, where=np.isfinite(moved))),
+                'estimate_nan': int(np.sum(np.isnan(old['estimate'])
+                                           != np.isnan(new['estimate']))),
+                'predicted': float(np.max(relative, initial=0.0)),
+                'predicted_finite': int(np.sum(np.isfinite(old['predicted'])
+                                               != np.isfinite(new['predicted'])))})
+    return rows
+
+
+def _same(first, again):
+    """Whether two runs of one tree gave the same statuses and estimates."""
+    return all(np.array_equal(first[s][m]['status'], again[s][m]['status'])
+               and np.array_equal(first[s][m]['estimate'], again[s][m]['estimate'],
+                                  equal_nan=True)
+               for s in first for m in first[s])
+
+
+def _medians(results, key):
+    """CPU ms per frame on the working cycle after the warm-up, the median, per method."""
+    return {method: float(np.median(columns[key][speed_bench.WARM_UP:]))
+            for method, columns in results['working'].items()}
+
+
+def run(base='HEAD', methods=('chain', 'cepp', 'track'), seconds=30.0, seed=0, rounds=4,
+        cache=None):
+    """
+    Compare this checkout with ``base``: ``rounds`` alternating rounds, ``seconds`` a stream.
+
+    ``cache``: where the other tree is unpacked (:func:`unpacked`).
+
+    Returns
+    -------
+    CompareReport
+
+    """
+    sha, tree = unpacked(base, cache)
+    with tempfile.TemporaryDirectory(prefix='epp_ros_compare_') as scratch:
+        scratch = Path(scratch)
+        inputs = scratch / 'streams.pickle'
+        with open(inputs, 'wb') as stream:
+            pickle.dump({'streams': streams(seconds, seed), 'methods': list(methods)}, stream)
+        runs = {'base': [], 'head': []}
+        for index in range(rounds):
+            order = ('base', 'head') if index % 2 == 0 else ('head', 'base')
+            for label in order:
+                runs[label].append(_worker(tree if label == 'base' else ROOT, inputs,
+                                           scratch, f'{label}{index}'))
+    columns = (('', 'frame_ms'), ('_answer', 'answer_ms'))
+    speed = {method: {label + key: [_medians(result, suffix)[method] for result in runs[label]]
+                      for label in runs for key, suffix in columns}
+             for method in methods}
+    repeatable = all(_same(results[0], again) for results in runs.values()
+                     for again in results[1:])
+    frames = len(runs['base'][0]['working'][methods[0]]['status'])
+    return CompareReport(sha[:7], _head(), frames, differences(runs['base'][0], runs['head'][0]),
+                         speed, repeatable)
