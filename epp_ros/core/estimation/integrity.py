@@ -41,9 +41,7 @@ from typing import NamedTuple, Optional
 
 from epp_ros.core.estimation.bias_learning import bias_design
 from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMethod
-from epp_ros.core.model.bounds import (bias_covariance, bound_from_covariance,
-                                       bound_from_information, RangeBiasPrior,
-                                       uncontrolled_covariance)
+from epp_ros.core.model.bounds import frame_bounds, RangeBiasPrior
 from epp_ros.core.model.folds import fold_alternatives, tip_circle
 from epp_ros.core.model.measurements import Measurements, Residuals, wrap_angle
 from epp_ros.core.model.vectors import norms
@@ -280,7 +278,7 @@ class Integrity:
         self._peaks = ChainMethod(model, nlos_fraction=nlos.fraction, nlos_gamma=nlos.gamma,
                                   lowest_joint=lowest_joint)
         self._assessments = []          # (_AssessmentKey, _Assessment), the latest first
-        self._link_sigma = (None, None)     # (Measurements, their link_sigma)
+        self._link_sigma = (None, None, None)   # (Measurements, link_sigma, noise with it)
 
     # -- the pieces -----------------------------------------------------------------------
     def link_sigma(self, measurements):
@@ -292,13 +290,20 @@ class Integrity:
         if self._link_sigma[0] is not measurements:
             sigma = np.broadcast_to(np.asarray(self.noise.range_sigma, dtype=float),
                                     measurements.ranges.shape)
-            if self.eta:
+            noise = self.noise
+            if self.eta or np.any(self.bias.link_std):
                 sigma = np.hypot(sigma, self.eta * np.nan_to_num(measurements.ranges))
-            if np.any(self.bias.link_std):
                 sigma = np.hypot(sigma, self.bias.link_std)
+                noise = type(noise)(sigma, noise.tag_sigma, noise.pitch_sigma,
+                                    noise.slew_sigma)
             sigma.flags.writeable = False
-            self._link_sigma = (measurements, sigma)
+            self._link_sigma = (measurements, sigma, noise)
         return self._link_sigma[1]
+
+    def _link_noise(self, measurements):
+        """Return :attr:`noise` with :meth:`link_sigma` as the ranges' sigma (p, m)."""
+        self.link_sigma(measurements)
+        return self._link_sigma[2]
 
     def _excess(self, joints, measurements):
         """Range excesses in sigmas: tag-anchor (p, m) and tag-tag (p, p), NaN unmeasured."""
@@ -445,39 +450,18 @@ class Integrity:
 
     def _bounds(self, joints, measurements, kept, angles):
         """Return :meth:`bounds`' two and the unscaled Jacobian rows (n, p + 1) of the links."""
-        slew, pitches = angles
         ranges, tag_ranges = kept
         used = Measurements(np.where(ranges, measurements.ranges, np.nan),
                             np.where(tag_ranges, measurements.tag_ranges, np.nan),
                             measurements.pitches, measurements.slew)
-        noise = self.noise
-        if self.eta or np.any(self.bias.link_std):
-            noise = type(noise)(self.link_sigma(measurements), noise.tag_sigma,
-                                noise.pitch_sigma, noise.slew_sigma)
-        residuals = Residuals(self.model, used, noise)
-        # One joint Jacobian serves the rows and both bounds.
-        joint_jacobian = self.model.joint_jacobian(slew, pitches)
-        rows = residuals.rows(np.r_[slew, pitches], joint_jacobian=joint_jacobian)
-        jacobian = rows / residuals.sigma[:, None]
-        random = bound_from_information(self.model, slew, pitches, jacobian.T @ jacobian,
-                                        joint_jacobian)
-        n_links = np.count_nonzero(residuals.link_mask)
-        if not math.isfinite(random.rmse):
-            return random, random, rows[:n_links]
-        added = uncontrolled_covariance(jacobian[:n_links], random.parameter_covariance)
+        residuals = Residuals(self.model, used, self._link_noise(measurements))
+        common = None
         if self.common_covariance.any():
-            links = np.arange(residuals.size) < n_links
             tags, anchors = np.nonzero(residuals.link_mask)
             directions = self.anchor_directions(joints)[tags, anchors]
-            common = (bias_design(residuals.measured[links], directions, anchors,
+            common = (bias_design(residuals.measured[:tags.size], directions, anchors,
                                   self.bias.moving), self.common_covariance)
-            added = added + bias_covariance(jacobian, residuals.sigma, links,
-                                            random.parameter_covariance, common=common)
-        if not added.any():
-            return random, random, rows[:n_links]
-        return random, bound_from_covariance(self.model, slew, pitches,
-                                             random.parameter_covariance + added,
-                                             joint_jacobian), rows[:n_links]
+        return frame_bounds(self.model, residuals, np.r_[angles[0], angles[1]], common)
 
     def reach(self, reference, elapsed, reference_std):
         """

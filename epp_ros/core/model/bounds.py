@@ -47,11 +47,13 @@ own part is one more independent error per range (``B = l^2 I`` only widens sigm
 common part is what a fit absorbs.
 """
 from dataclasses import dataclass
+import math
 
 from epp_ros.core.model.measurements import Measurements, Residuals, SensorNoise
+from epp_ros.core.solvers.compiled import kernel
 import numpy as np
 
-__all__ = ['fisher_information', 'Bound', 'crlb', 'bound_from_information',
+__all__ = ['fisher_information', 'Bound', 'crlb', 'bound_from_information', 'frame_bounds',
            'bound_from_covariance', 'RangeBiasPrior', 'bias_covariance',
            'uncontrolled_covariance', 'POORLY_CONTROLLED', 'posterior_information',
            'posterior_crlb']
@@ -114,6 +116,8 @@ class RangeBiasPrior:
         return np.diag([self.common_std ** 2, self.slope_std ** 2, *anchors])
 
 
+#: The compiled twin of :func:`frame_bounds` (``solvers.compiled``).
+KERNEL = 'epp_ros.core.model.compiled_bounds'
 #: Redundancy number (the share of a link's error its residual shows) under which the
 #: other measurements barely check it: geodesy's "poorly controlled" observation.
 POORLY_CONTROLLED = 0.3
@@ -297,6 +301,79 @@ def bound_from_covariance(model, slew, pitches, covariance, joint_jacobian=None)
     variances = np.trace(joint_covariance, axis1=-2, axis2=-1)
     if not np.all(variances >= 0.0):
         return _unbounded(model.n_sections)
+    return Bound(covariance, joint_covariance, float(np.sqrt(variances.sum() / model.n_sections)))
+
+
+def frame_bounds(model, residuals, psi, common=None, floor=POORLY_CONTROLLED):
+    """
+    Return a fit's bound, the bound widened by what its links may hide, and the link rows.
+
+    The Cramér–Rao bound at ``psi`` from every row of ``residuals``; then that bound with
+    what the poorly controlled links could hide (:func:`uncontrolled_covariance` at
+    ``floor``) and the common bias could add (:func:`bias_covariance`) added: the same
+    :class:`Bound` object when nothing is added or the first is infinite.
+
+    Parameters
+    ----------
+    model : BoomModel
+        The boom and the anchors.
+    residuals : Residuals
+        The rows counted: the frame's links taken as line-of-sight, and its angle sensors.
+    psi : ndarray, shape (p + 1,)
+        The estimate's slew and pitches, radians.
+    common : (ndarray, ndarray), optional
+        The common bias: its directions over the tag-anchor rows (n_links, k) and its
+        covariance (k, k), as :func:`bias_covariance`'s ``common``.
+    floor : float
+        :func:`uncontrolled_covariance`'s.
+
+    Returns
+    -------
+    random, total : Bound
+    rows : ndarray, shape (n_links, p + 1)
+        The tag-anchor rows of the Jacobian, unscaled (``Residuals.rows``).
+
+    """
+    compiled = kernel(KERNEL)
+    if compiled is not None:
+        return _from_kernel(model, compiled,
+                            *compiled.frame_bounds(model, residuals, psi, common, floor))
+    joint_jacobian = model.joint_jacobian(psi[0], psi[1:])
+    rows = residuals.rows(psi, joint_jacobian=joint_jacobian)
+    jacobian = rows / residuals.sigma[:, None]
+    random = bound_from_information(model, psi[0], psi[1:], jacobian.T @ jacobian,
+                                    joint_jacobian)
+    n_links = np.count_nonzero(residuals.link_mask)
+    if not math.isfinite(random.rmse):
+        return random, random, rows[:n_links]
+    added = uncontrolled_covariance(jacobian[:n_links], random.parameter_covariance, floor)
+    if common is not None:
+        links = np.arange(residuals.size) < n_links
+        added = added + bias_covariance(jacobian, residuals.sigma, links,
+                                        random.parameter_covariance, common=common)
+    if not added.any():
+        return random, random, rows[:n_links]
+    return random, bound_from_covariance(model, psi[0], psi[1:],
+                                         random.parameter_covariance + added,
+                                         joint_jacobian), rows[:n_links]
+
+
+def _from_kernel(model, compiled, state, random, random_joint, total, total_joint, rows):
+    """Return :func:`frame_bounds`' answer from its kernel's, ``compiled``'s."""
+    p = model.n_sections
+    if state == compiled.UNBOUNDED:
+        unbounded = _unbounded(p)
+        return unbounded, unbounded, rows
+    first = _bound(model, random, random_joint)
+    if state == compiled.RANDOM_ONLY:
+        return first, first, rows
+    widened = _bound(model, total, total_joint) if state == compiled.WIDENED else _unbounded(p)
+    return first, widened, rows
+
+
+def _bound(model, covariance, joint_covariance):
+    """Return the :class:`Bound` of psi's and the joints' covariances."""
+    variances = np.trace(joint_covariance, axis1=-2, axis2=-1)
     return Bound(covariance, joint_covariance, float(np.sqrt(variances.sum() / model.n_sections)))
 
 

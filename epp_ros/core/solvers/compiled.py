@@ -15,11 +15,13 @@
 """
 The switch for the compiled kernels, and how they are compiled.
 
-Four hot loops have a numba-compiled twin of their numpy code: the chain's and the
+Five hot paths have a numba-compiled twin of their numpy code: the chain's and the
 tracker's fit (``estimation.methods.compiled_chain``), Newton's method in the points
 that finishes CEPP (``solvers.compiled_points``), the plane CEPP solves in
-(``model.compiled_plane``) and the NLOS loss of candidate positions, which the fold
-searches and the integrity checks score (``model.compiled_nlos``). The numpy code stays
+(``model.compiled_plane``), the NLOS loss of candidate positions, which the fold
+searches and the integrity checks score (``model.compiled_nlos``), and the bounds the
+integrity checks judge a frame by (``model.compiled_bounds``); the boom's geometry they
+share is ``model.compiled_boom``. The numpy code stays
 the reference and the path taken where numba is not installed or ``EPP_ROS_COMPILED=0``
 is in the environment. A kernel module (and numba, about 0.4 s) is imported at its
 first use only.

@@ -18,10 +18,10 @@ The chain's and the tracker's Levenberg–Marquardt fit, compiled: the same cost
 A frame's fit is a few dozen residuals in p + 1 unknowns (the tracker's: 2 (p + 1)). In
 numpy each step is some forty array operations on arrays that small, and their calls, not
 their arithmetic, are the time (issue #30). This module does the same arithmetic in one
-function compiled by numba, from the same inputs: the boom's geometry
-(``BoomModel.forward_kinematics`` and ``joint_jacobian``), the rows of ``Residuals``, the
-constants of the NLOS loss (``LinkLoss``, whose formulas ``compiled_nlos.link_loss`` repeats) and
-the damping schedule of ``core.solvers.levenberg_marquardt``, whose constants it imports.
+function compiled by numba, from the same inputs: the boom's geometry (compiled in
+``core.model.compiled_boom``), the rows of ``Residuals``, the constants of the NLOS loss
+(``LinkLoss``, whose formulas ``compiled_nlos.link_loss`` repeats) and the damping schedule
+of ``core.solvers.levenberg_marquardt``, whose constants it imports.
 
 The tracker's update is the same fit in the angles and their rates, each tag's ranges at
 the time it ranged, under the prediction's Gaussian prior (``TrackMethod._evaluate``).
@@ -35,6 +35,7 @@ while its worker fits.
 """
 import math
 
+from epp_ros.core.model.compiled_boom import joint_jacobian_at, joints_at, range_row
 from epp_ros.core.model.compiled_nlos import link_loss, loss_terms
 from epp_ros.core.solvers.compiled import compiled, plain
 from epp_ros.core.solvers.levenberg_marquardt import (DAMPING_FLOOR, FALL, GROWTH,
@@ -42,39 +43,6 @@ from epp_ros.core.solvers.levenberg_marquardt import (DAMPING_FLOOR, FALL, GROWT
 import numpy as np
 
 __all__ = ['compile_now', 'cost', 'fit', 'loss_terms']
-
-
-@compiled
-def _joints(psi, arm_lengths, base, pivot_offset, joints):
-    """Fill ``joints`` (p, 3) at angles ``psi``: ``BoomModel.forward_kinematics``."""
-    cos_slew, sin_slew = math.cos(psi[0]), math.sin(psi[0])
-    along, height = 0.0, 0.0
-    for k in range(arm_lengths.size):
-        along += arm_lengths[k] * math.cos(psi[1 + k])
-        height += arm_lengths[k] * math.sin(psi[1 + k])
-        reach = pivot_offset + along
-        joints[k, 0] = base[0] + reach * cos_slew
-        joints[k, 1] = base[1] + reach * sin_slew
-        joints[k, 2] = base[2] + height
-
-
-@compiled
-def _joint_jacobian(psi, arm_lengths, pivot_offset, jacobian):
-    """Fill ``jacobian`` (p, 3, p + 1) at ``psi``: ``BoomModel.joint_jacobian``."""
-    p = arm_lengths.size
-    cos_slew, sin_slew = math.cos(psi[0]), math.sin(psi[0])
-    jacobian[:] = 0.0
-    along = 0.0
-    for i in range(p):
-        along += arm_lengths[i] * math.cos(psi[1 + i])
-        reach = pivot_offset + along
-        jacobian[i, 0, 0] = -reach * sin_slew
-        jacobian[i, 1, 0] = reach * cos_slew
-        rise = arm_lengths[i] * math.sin(psi[1 + i])
-        for k in range(i, p):      # joint k moves with sections i <= k
-            jacobian[k, 0, 1 + i] = -rise * cos_slew
-            jacobian[k, 1, 1 + i] = -rise * sin_slew
-            jacobian[k, 2, 1 + i] = arm_lengths[i] * math.cos(psi[1 + i])
 
 
 @compiled
@@ -89,8 +57,8 @@ def _boom_at_tags(x, geometry, ground, motion, joints, boom):
     n = geometry[0].size + 1
     for k in range(n - 1):
         if x.size > n:
-            _joints(x[:n] + motion[0][k] * x[n:], geometry[0], geometry[1][0], ground[0],
-                    boom[k])
+            joints_at(x[:n] + motion[0][k] * x[n:], geometry[0], geometry[1][0], ground[0],
+                      boom[k])
         else:                               # no rates: every tag ranged at the stamp
             boom[k] = joints
 
@@ -110,7 +78,7 @@ def _evaluate(x, geometry, rows, measured, sigma, terms, ground, motion, joints,
     lowest_joint, ground_sigma = ground[1], ground[2]
     scaled, slope, weights, depth = state[0], state[1], state[2], state[3]
     p = arm_lengths.size
-    _joints(x[:p + 1], arm_lengths, geometry[1][0], ground[0], joints)
+    joints_at(x[:p + 1], arm_lengths, geometry[1][0], ground[0], joints)
     boom = np.empty((p, p, 3))
     _boom_at_tags(x, geometry, ground, motion, joints, boom)
     n_links, n_tags = tag.size, near.size
@@ -166,7 +134,7 @@ def _normal_equations(x, geometry, rows, sigma, ground, motion, joints, state, n
                       gradient):
     """Fill the IRLS ``normal`` matrix and ``gradient`` at ``x`` (the methods' own)."""
     arm_lengths, anchors = geometry[0], geometry[2]
-    tag, anchor, near, far, angle_index = rows[0], rows[1], rows[2], rows[3], rows[4]
+    tag, near, angle_index = rows[0], rows[2], rows[4]
     pivot_offset, ground_sigma = ground[0], ground[2]
     slope, weights, depth = state[1], state[2], state[3]
     size, p = x.size, arm_lengths.size
@@ -175,11 +143,11 @@ def _normal_equations(x, geometry, rows, sigma, ground, motion, joints, state, n
     _boom_at_tags(x, geometry, ground, motion, joints, boom)
     jacobian = np.empty((p, p, 3, n))        # tag k's time: every joint's
     stamp = np.empty((p, 3, n))
-    _joint_jacobian(x[:n], arm_lengths, pivot_offset, stamp)
+    joint_jacobian_at(x[:n], arm_lengths, pivot_offset, stamp)
     for k in range(p):
         if size > n:
-            _joint_jacobian(x[:n] + motion[0][k] * x[n:], arm_lengths, pivot_offset,
-                            jacobian[k])
+            joint_jacobian_at(x[:n] + motion[0][k] * x[n:], arm_lengths, pivot_offset,
+                              jacobian[k])
         else:                               # one time for every tag
             jacobian[k] = stamp
     normal[:] = 0.0
@@ -189,20 +157,8 @@ def _normal_equations(x, geometry, rows, sigma, ground, motion, joints, state, n
     for r in range(sigma.size):
         row[:] = 0.0
         if r < n_links + n_tags:
-            if r < n_links:
-                k, other, b = tag[r], -1, anchors[anchor[r]]
-            else:
-                k, other = near[r - n_links], far[r - n_links]
-                b = boom[k, other]
-            a = boom[k, k]
-            distance = max(math.sqrt((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2
-                                     + (a[2] - b[2]) ** 2), 1e-12)
-            for c in range(3):
-                unit = (a[c] - b[c]) / distance / sigma[r]
-                for q in range(n):
-                    moved = jacobian[k, k, c, q] - (jacobian[k, other, c, q] if other >= 0
-                                                    else 0.0)
-                    row[q] += unit * moved
+            k = tag[r] if r < n_links else near[r - n_links]     # each tag at its time
+            range_row(r, rows, anchors, boom[k], jacobian[k], sigma[r], row[:n])
             if size > n:
                 row[n:] = row[:n] * motion[0][k]
         else:

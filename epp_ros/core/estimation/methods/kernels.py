@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """Every compiled kernel the methods run, compiled at once before the first frame."""
-from epp_ros.core.model import nlos, plane
+from epp_ros.core.model import bounds, nlos, plane
 from epp_ros.core.solvers import point_newton
 from epp_ros.core.solvers.compiled import kernel
 
@@ -22,8 +22,9 @@ from . import chain
 __all__ = ['compile_fit', 'KERNELS']
 
 #: The kernels' modules: the chain's and the tracker's fit, CEPP's Newton finish in the
-#: points and its plane prediction, and the NLOS loss of candidate positions.
-KERNELS = (chain.KERNEL, point_newton.KERNEL, plane.KERNEL, nlos.KERNEL)
+#: points and its plane prediction, the NLOS loss of candidate positions, and the bounds
+#: the integrity checks judge a frame by.
+KERNELS = (chain.KERNEL, point_newton.KERNEL, plane.KERNEL, nlos.KERNEL, bounds.KERNEL)
 
 
 def compile_fit():

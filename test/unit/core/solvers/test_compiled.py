@@ -86,6 +86,8 @@ def test_the_switch_on_imports_every_kernel():
     assert report['switch'] and report['compiled'] and report['numba']
     assert report['statuses'] == ['ok'] * 3
     assert report['kernels'] == ['epp_ros.core.estimation.methods.compiled_chain',
+                                 'epp_ros.core.model.compiled_boom',
+                                 'epp_ros.core.model.compiled_bounds',
                                  'epp_ros.core.model.compiled_nlos',
                                  'epp_ros.core.model.compiled_plane',
                                  'epp_ros.core.solvers.compiled_points']
