@@ -396,25 +396,31 @@ class Integrity:
         failures = []
         if statistic > limit:
             failures.append(f'range residuals chi-square {statistic:.1f} > {limit:.1f}')
-        if _binomial_tail(n_blocked, n_links, self.nlos.fraction) < alpha:
-            failures.append(f'{n_blocked} of {n_links} links look blocked')
         n_outlying = int(outlying.sum() + tag_outlying.sum())
-        if _binomial_tail(n_outlying, n_links, self.nlos.outliers) < alpha:
+        # With no link set aside every tail below is 1 (most frames): not computed.
+        if n_blocked and _binomial_tail(n_blocked, n_links, self.nlos.fraction) < alpha:
+            failures.append(f'{n_blocked} of {n_links} links look blocked')
+        if n_outlying and _binomial_tail(n_outlying, n_links, self.nlos.outliers) < alpha:
             failures.append(f'{n_outlying} of {n_links} ranges look like outliers')
         # Blocked links: as many, and as long, as the NLOS prior makes believable.
         metres = np.where(blocked, _zero_nan(links) * sigma, 0.0)
-        tag_metres = np.where(tag_blocked, _zero_nan(tag_links) * self.noise.tag_sigma, 0.0)
-        total = float(metres.sum() + tag_metres.sum())
-        if _excess_tail(total, n_blocked, self.nlos.gamma) < alpha:
-            failures.append(f'blocked links {total:.1f} m too long in all')
+        if n_blocked:
+            tag_metres = np.where(tag_blocked, _zero_nan(tag_links) * self.noise.tag_sigma, 0.0)
+            total = float(metres.sum() + tag_metres.sum())
+            if _excess_tail(total, n_blocked, self.nlos.gamma) < alpha:
+                failures.append(f'blocked links {total:.1f} m too long in all')
         tag_statistic = np.sum(np.where(kept, links, 0.0) ** 2, axis=1)
         tag_limit = _chi_square_limit(alpha / p, np.maximum(kept.sum(axis=1), 1))
-        blocked_count = blocked.sum(axis=1)
-        tag_tail = np.minimum.reduce([
-            _binomial_tail(blocked_count, measured.sum(axis=1), self.nlos.fraction),
-            _excess_tail(metres.sum(axis=1), blocked_count, self.nlos.gamma),
-            _binomial_tail(outlying.sum(axis=1), measured.sum(axis=1), self.nlos.outliers)])
-        bad_tags = np.flatnonzero((tag_statistic > tag_limit) | (tag_tail < alpha / p))
+        bad = tag_statistic > tag_limit
+        if blocked.any() or outlying.any():
+            blocked_count = blocked.sum(axis=1)
+            tag_tail = np.minimum.reduce([
+                _binomial_tail(blocked_count, measured.sum(axis=1), self.nlos.fraction),
+                _excess_tail(metres.sum(axis=1), blocked_count, self.nlos.gamma),
+                _binomial_tail(outlying.sum(axis=1), measured.sum(axis=1),
+                               self.nlos.outliers)])
+            bad |= tag_tail < alpha / p
+        bad_tags = np.flatnonzero(bad)
         if bad_tags.size:
             failures.append('ranges of joint(s) ' + ', '.join(str(k + 1) for k in bad_tags)
                             + ' not explained by the noise')
@@ -461,7 +467,8 @@ class Integrity:
             directions = self.anchor_directions(joints)[tags, anchors]
             common = (bias_design(residuals.measured[:tags.size], directions, anchors,
                                   self.bias.moving), self.common_covariance)
-        return frame_bounds(self.model, residuals, np.r_[angles[0], angles[1]], common)
+        psi = np.concatenate([[angles[0]], angles[1]])
+        return frame_bounds(self.model, residuals, psi, common)
 
     def reach(self, reference, elapsed, reference_std):
         """
@@ -612,7 +619,7 @@ class Integrity:
         p = self.model.n_sections
         tip = self._tip_circle(joints, slew)
         positions = np.vstack([fold_alternatives(self.model, joints), tip])
-        which = np.r_[np.arange(p - 1), np.full(len(tip), p - 1)]
+        which = np.concatenate([np.arange(p - 1), np.full(len(tip), p - 1)])
         keep = norms(positions - joints[which]) > near[which]
         if reach is not None:
             keep &= norms(positions - reach[0][which]) <= reach[1][which]
@@ -621,7 +628,8 @@ class Integrity:
     def _margins(self, joints, measurements, slew, positions, which):
         """Return how much costlier joint ``which[i]`` is at ``positions[i]``, shape (n,)."""
         p = self.model.n_sections
-        costs = self._joint_cost(np.r_[np.arange(p), which], np.vstack([joints, positions]),
+        costs = self._joint_cost(np.concatenate([np.arange(p), which]),
+                                 np.vstack([joints, positions]),
                                  measurements, joints, slew)
         return costs[p:] - costs[which]
 
@@ -910,7 +918,7 @@ class Integrity:
         Their sum across the section's length: the most two joints' errors can turn it,
         however correlated (a method not held to the chain, or a joint's other fold).
         """
-        ends = np.r_[0.0, np.asarray(joint_std, dtype=float)]
+        ends = np.concatenate([[0.0], np.asarray(joint_std, dtype=float)])
         return (ends[:-1] + ends[1:]) / self.model.arm_lengths
 
     def _turns(self, joints, turn_std, reference, reference_turn_std, elapsed, checks,

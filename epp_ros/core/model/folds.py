@@ -22,6 +22,8 @@ estimate. Every search for them reads this module: the chain's and the tracker's
 (in angles), the field CEPP's (in joints), and the integrity checks that ask whether one
 fits about as well as the estimate.
 """
+from functools import lru_cache
+
 from epp_ros.core.model.measurements import wrap_angle
 import numpy as np
 
@@ -110,11 +112,20 @@ def tip_circle(model, hinge, slew, pitches=TIP_PITCHES):
         The tip there, metres.
 
     """
-    grid = np.linspace(-np.pi, np.pi, pitches, endpoint=False)
+    grid, cos, sin = _circle(pitches)
     ends = hinge + model.arm_lengths[-1] * (
-        np.cos(grid)[:, None] * [np.cos(slew), np.sin(slew), 0.0]
-        + np.sin(grid)[:, None] * [0.0, 0.0, 1.0])
+        cos * [np.cos(slew), np.sin(slew), 0.0] + sin * [0.0, 0.0, 1.0])
     return grid, ends
+
+
+@lru_cache(maxsize=None)
+def _circle(pitches):
+    """Return ``pitches`` angles evenly from -pi, their cosines and sines (k, 1); read-only."""
+    grid = np.linspace(-np.pi, np.pi, pitches, endpoint=False)
+    parts = (grid, np.cos(grid)[:, None], np.sin(grid)[:, None])
+    for part in parts:
+        part.flags.writeable = False
+    return parts
 
 
 def tip_minima(loss, away):
