@@ -20,8 +20,11 @@ this machine is shared: a change is measured against its parent in one run, the 
 in turn. The same frames go through both trees' estimators (the working cycle, three field
 cases and uniform garbage, generated here once): per stream and method, the frames whose
 status or validity differ, the largest difference of the estimates (metres) and of the
-predicted RMSEs (relative); and each tree's CPU per frame on the working cycle, in
-alternating rounds of fresh processes: the medians per round, their ratio, the median ratio.
+predicted RMSEs (relative), and what each tree's user gets (frames published, their joint
+RMSE against the truth, those more than 1 m off and of those the ones whose predicted
+RMSE is under a third of the error: confidently wrong); and each tree's CPU per frame on
+the working cycle, in alternating rounds of fresh processes: the medians per round, their
+ratio, the median ratio.
 
 The other commit is unpacked with ``git archive`` into a folder of the system's temporary
 directory named by its hash, and kept (its kernels compile once, about a minute); this
@@ -64,19 +67,27 @@ class CompareReport:
 
 
 def streams(seconds, seed):
-    """Return the streams the trees run: per name, the pump, the options and the frames."""
+    """
+    Return the streams the trees run, and the truth of each.
+
+    Per name: the pump, the estimator's options and the frames (what the workers get);
+    and the true joints of each frame (n, p, 3), metres.
+    """
     model = truck_pump()
     count = int(round(seconds * speed_bench.RATE))
-    working = speed_bench.frames_of(model, count, seed)[0]
+    working, angles = speed_bench.frames_of(model, count, seed)
     frames = {'working': working, 'garbage': speed_bench.garbage_frames(working, seed)}
+    truth = {'working': model.forward_kinematics(angles[:, 0], angles[:, 1:])}
+    truth['garbage'] = truth['working']
     for name in FIELD_CASES:
         case = field_bench.case_frames(name, seconds, seed)[0]
         frames[name] = [frame.inputs() for frame in case]
+        truth[name] = np.array([frame.joints for frame in case])
     # As the field bench runs them: the outriggers may stand elsewhere than configured.
     options = {'moving_anchors': [int(j) for j in truck_outriggers(model)]}
     geometry = (model.arm_lengths, model.base, model.anchors, model.pivot_offset)
-    return {name: {'model': geometry, 'options': options, 'frames': frames[name]}
-            for name in STREAMS}
+    return ({name: {'model': geometry, 'options': options, 'frames': frames[name]}
+             for name in STREAMS}, {name: truth[name] for name in STREAMS})
 
 
 def unpacked(revision, cache=None):
@@ -119,8 +130,25 @@ def _worker(tree, inputs, scratch, label):
         return pickle.load(stream)
 
 
-def differences(base, head):
-    """Return per stream and method what differs between two trees' results."""
+def scored(results, truth):
+    """
+    Return what a user of one tree got on one stream: published, RMSE, > 1 m off, confidently.
+
+    Over the frames published as valid: their joint RMSE against ``truth`` (n, p, 3),
+    metres; how many are more than 1 m off (RMS over the joints); of those, how many with
+    a predicted RMSE under a third of the error.
+    """
+    valid = results['valid']
+    error = np.sqrt(np.mean(np.sum((results['estimate'] - truth) ** 2, axis=-1), axis=-1))
+    wrong = valid & (error > 1.0)
+    return {'published': int(valid.sum()),
+            'rmse': float(np.sqrt(np.mean(error[valid] ** 2))) if valid.any() else np.nan,
+            'wrong': int(wrong.sum()),
+            'confidently': int(np.sum(wrong & ~(results['predicted'] >= error / 3.0)))}
+
+
+def differences(base, head, truth):
+    """Return per stream and method what differs between two trees' results, and each's score."""
     rows = []
     for stream, methods in base.items():
         for method, old in methods.items():
@@ -133,7 +161,7 @@ def differences(base, head):
                 'stream': stream, 'method': method, 'frames': len(old['status']),
                 'status': int(np.sum(old['status'] != new['status'])),
                 'valid': int(np.sum(old['valid'] != new['valid'])),
-                'published': (int(old['valid'].sum()), int(new['valid'].sum())),
+                'scores': (scored(old, truth[stream]), scored(new, truth[stream])),
                 'estimate': float(np.max(moved, initial=0.0, where=np.isfinite(moved))),
                 'estimate_nan': int(np.sum(np.isnan(old['estimate'])
                                            != np.isnan(new['estimate']))),
@@ -173,8 +201,9 @@ def run(base='HEAD', methods=('chain', 'cepp', 'track'), seconds=30.0, seed=0, r
     with tempfile.TemporaryDirectory(prefix='epp_ros_compare_') as scratch:
         scratch = Path(scratch)
         inputs = scratch / 'streams.pickle'
+        work, truth = streams(seconds, seed)
         with open(inputs, 'wb') as stream:
-            pickle.dump({'streams': streams(seconds, seed), 'methods': list(methods)}, stream)
+            pickle.dump({'streams': work, 'methods': list(methods)}, stream)
         runs = {'base': [], 'head': []}
         for index in range(rounds):
             order = ('base', 'head') if index % 2 == 0 else ('head', 'base')
@@ -188,5 +217,5 @@ def run(base='HEAD', methods=('chain', 'cepp', 'track'), seconds=30.0, seed=0, r
     repeatable = all(_same(results[0], again) for results in runs.values()
                      for again in results[1:])
     frames = len(runs['base'][0]['working'][methods[0]]['status'])
-    return CompareReport(sha[:7], _head(), frames, differences(runs['base'][0], runs['head'][0]),
-                         speed, repeatable)
+    rows = differences(runs['base'][0], runs['head'][0], truth)
+    return CompareReport(sha[:7], _head(), frames, rows, speed, repeatable)

@@ -394,10 +394,16 @@ def test_bench_compare_runs_both_trees_on_the_same_frames(tmp_path, capsys, monk
         ('working', 'chain'), ('garbage', 'chain')]
     assert len(report.speed['chain']['base']) == len(report.speed['chain']['head']) == 2
     assert all(value > 0.0 for values in report.speed['chain'].values() for value in values)
+    working, garbage = (dict(zip(('base', 'head'), row['scores'])) for row in report.rows)
+    for score in working.values():          # the clean cycle: every frame, near the truth
+        assert score['published'] == 40 and score['rmse'] < 0.5 and score['wrong'] == 0
+    for score in garbage.values():          # garbage: nothing published
+        assert score['published'] == score['wrong'] == 0 and np.isnan(score['rmse'])
     if not report.head.endswith('changes'):
         for row in report.rows:
             assert row['status'] == row['valid'] == row['estimate_nan'] == 0
             assert row['estimate'] == row['predicted'] == 0.0
+            assert row['scores'][0] == row['scores'][1]
     print(reports.markdown(report))
     assert 'head / base' in capsys.readouterr().out
 
@@ -412,10 +418,15 @@ def test_compare_counts_what_differs_between_two_trees():
                   [[[0.0, 0.0, 1.0]], [[1.0, 0.0, 1.0]], [[2.0, 0.0, 1.0]]], [0.1, 0.2, np.inf])
     new = results(['ok', 'inconsistent', 'ambiguous'], [True, False, False],
                   [[[0.0, 0.0, 1.0]], [[1.0, 0.5, 1.0]], [[np.nan, 0.0, 1.0]]], [0.1, 0.3, 0.4])
-    row, = compare_bench.differences(old, new)
-    assert (row['status'], row['valid'], row['published']) == (1, 1, (2, 1))
+    truth = {'working': np.array([[[0.0, 0.0, 1.0]], [[1.0, 2.0, 1.0]], [[2.0, 0.0, 1.0]]])}
+    row, = compare_bench.differences(old, new, truth)
+    assert (row['status'], row['valid']) == (1, 1)
     assert row['estimate'] == 0.5 and row['estimate_nan'] == 1
     assert row['predicted'] == pytest.approx(0.5) and row['predicted_finite'] == 1
+    # Published: the first two (base: the second 2 m off at 0.2 predicted) / the first.
+    assert row['scores'][0] == {'published': 2, 'rmse': pytest.approx(np.sqrt(2.0)),
+                                'wrong': 1, 'confidently': 1}
+    assert row['scores'][1] == {'published': 1, 'rmse': 0.0, 'wrong': 0, 'confidently': 0}
 
 
 def test_bench_controller_runs_the_node_on_one_shared_core(capsys, monkeypatch):
