@@ -28,10 +28,12 @@ ratio, the median ratio.
 
 The other commit is unpacked with ``git archive`` into a folder of the system's temporary
 directory named by its hash, and kept (its kernels compile once, about a minute); this
-checkout is compared as it is, uncommitted changes included. Each tree runs this tree's
-``compare_worker.py`` with that tree first on ``sys.path``.
+checkout is compared as it is, uncommitted changes to tracked files included (the
+heading says "+ changes"; new files not yet added are not counted). Each tree runs this
+tree's ``compare_worker.py`` with that tree first on ``sys.path``.
 """
 from dataclasses import dataclass
+import os
 from pathlib import Path
 import pickle
 import shutil
@@ -94,18 +96,22 @@ def unpacked(revision, cache=None):
     """
     Return the commit hash of ``revision`` and a folder holding its tree, kept for reuse.
 
-    In ``cache``, by default ``epp_ros_compare`` in the system's temporary directory.
+    In ``cache``, by default ``epp_ros_compare-UID`` in the system's temporary directory
+    (the user's own). Unpacked beside it and renamed into place, so that a comparison
+    running at the same time never sees a tree half there, nor loses one.
     """
     sha = _git('rev-parse', '--verify', f'{revision}^{{commit}}').decode().strip()
-    folder = Path(cache or Path(tempfile.gettempdir()) / 'epp_ros_compare') / sha
-    if not (folder / 'epp_ros').is_dir():
-        partial = folder.with_name(sha + '.partial')
-        shutil.rmtree(partial, ignore_errors=True)
-        partial.mkdir(parents=True)
+    cache = Path(cache or Path(tempfile.gettempdir()) / f'epp_ros_compare-{os.getuid()}')
+    folder = cache / sha
+    if not folder.is_dir():
+        cache.mkdir(mode=0o700, parents=True, exist_ok=True)
+        partial = Path(tempfile.mkdtemp(prefix=sha + '.', dir=cache))
         subprocess.run(['tar', '-x', '-C', str(partial)], input=_git('archive', sha),
                        check=True)
-        shutil.rmtree(folder, ignore_errors=True)
-        partial.rename(folder)
+        try:
+            partial.rename(folder)
+        except OSError:                     # another comparison put it there first
+            shutil.rmtree(partial, ignore_errors=True)
     return sha, folder
 
 
@@ -136,7 +142,7 @@ def scored(results, truth):
 
     Over the frames published as valid: their joint RMSE against ``truth`` (n, p, 3),
     metres; how many are more than 1 m off (RMS over the joints); of those, how many with
-    a predicted RMSE under a third of the error.
+    a predicted RMSE under a third of the error, or none.
     """
     valid = results['valid']
     error = np.sqrt(np.mean(np.sum((results['estimate'] - truth) ** 2, axis=-1), axis=-1))
@@ -155,7 +161,7 @@ def differences(base, head, truth):
             new = head[stream][method]
             moved = np.abs(old['estimate'] - new['estimate'])
             finite = np.isfinite(old['predicted']) & np.isfinite(new['predicted'])
-            relative = np.abs(old['predicted'] - new['predicted'])[finite] / np.maximum(
+            relative = np.abs(old['predicted'][finite] - new['predicted'][finite]) / np.maximum(
                 np.abs(old['predicted'][finite]), np.finfo(float).tiny)
             rows.append({
                 'stream': stream, 'method': method, 'frames': len(old['status']),
@@ -163,8 +169,8 @@ def differences(base, head, truth):
                 'valid': int(np.sum(old['valid'] != new['valid'])),
                 'scores': (scored(old, truth[stream]), scored(new, truth[stream])),
                 'estimate': float(np.max(moved, initial=0.0, where=np.isfinite(moved))),
-                'estimate_nan': int(np.sum(np.isnan(old['estimate'])
-                                           != np.isnan(new['estimate']))),
+                'estimate_nan': int(np.sum(np.any(np.isnan(old['estimate'])
+                                                  != np.isnan(new['estimate']), axis=(1, 2)))),
                 'predicted': float(np.max(relative, initial=0.0)),
                 'predicted_finite': int(np.sum(np.isfinite(old['predicted'])
                                                != np.isfinite(new['predicted'])))})
@@ -181,8 +187,9 @@ def _same(first, again):
 
 def _medians(results, key):
     """CPU ms per frame on the working cycle after the warm-up, the median, per method."""
-    return {method: float(np.median(columns[key][speed_bench.WARM_UP:]))
-            for method, columns in results['working'].items()}
+    def median(times):
+        return float(np.median(times[min(speed_bench.WARM_UP, len(times) // 2):]))
+    return {method: median(columns[key]) for method, columns in results['working'].items()}
 
 
 def run(base='HEAD', methods=('chain', 'cepp', 'track'), seconds=30.0, seed=0, rounds=4,

@@ -740,11 +740,11 @@ def speed_markdown(report):
 
 
 def _compare_row(row):
-    estimate = f'{row["estimate"]:.1e}' + (f' ({row["estimate_nan"]} NaN)' if row['estimate_nan']
-                                           else '')
+    estimate = f'{row["estimate"]:.1e}' + (f' ({row["estimate_nan"]} frames NaN in one)'
+                                           if row['estimate_nan'] else '')
     predicted = f'{row["predicted"]:.1e}' + (f' ({row["predicted_finite"]} finite)'
                                              if row['predicted_finite'] else '')
-    scores = ' | '.join(f'{score["published"]}, {_or_dash(score["rmse"], ".3f")}, '
+    scores = ' | '.join(f'{score["published"]}, {_or_dash(_finite(score["rmse"]), ".3f")}, '
                         f'{score["wrong"]} / {score["confidently"]}'
                         for score in row['scores'])
     return (f'| {row["stream"]} | {row["method"]} | {row["status"]} | {row["valid"]} | '

@@ -385,8 +385,11 @@ def test_bench_compare_runs_both_trees_on_the_same_frames(tmp_path, capsys, monk
 
     Where the checkout has uncommitted changes the figures may differ; the table and the
     report's shape hold either way, and a clean checkout's trees agree to the last bit.
+    The workers run the numpy paths: the unpacked tree's kernels would compile for a
+    minute.
     """
     monkeypatch.setattr(compare_bench, 'STREAMS', ('working', 'garbage'))
+    monkeypatch.setenv('EPP_ROS_COMPILED', '0')
     report = compare_bench.run('HEAD', ('chain',), seconds=4.0, rounds=2, cache=tmp_path)
     assert (tmp_path / compare_bench.unpacked('HEAD', tmp_path)[0] / 'epp_ros').is_dir()
     assert report.frames == 40 and report.repeatable

@@ -544,14 +544,17 @@ class PostureEstimator:
 
     def _dof(self, info=None):
         """
-        Return the parameters the frame's fit spent: the chain's angles, or 3 per joint.
+        Return the parameters the frame's fit spent: the chain's angles, or each joint's own.
 
-        A motion model says how many its prediction did not supply (``fitted_dof``).
+        Those a joint is free in (``free_per_joint``: 3, or 2 with its arm length held). A
+        motion model says how many its prediction did not supply (``fitted_dof``).
         """
         if info is not None and 'fitted_dof' in info:
             return info['fitted_dof']
         p = self.model.n_sections
-        return p + 1 if getattr(self._solver, 'holds_chain', True) else 3 * p
+        if getattr(self._solver, 'holds_chain', True):
+            return p + 1
+        return getattr(self._solver, 'free_per_joint', 3) * p
 
     def _bootstrap_noise(self, measurements, stamp, solved, verdict, attempts=3):
         """

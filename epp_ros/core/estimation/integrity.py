@@ -35,7 +35,7 @@ judged here on what its frame can show, so that the node and ``epp_bag eval`` ag
 
 Levels follow ``diagnostic_msgs``: a frame at ERROR is never published.
 """
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 import math
 from typing import NamedTuple, Optional
 
@@ -294,14 +294,13 @@ class Integrity:
             if self.eta or np.any(self.bias.link_std):
                 sigma = np.hypot(sigma, self.eta * np.nan_to_num(measurements.ranges))
                 sigma = np.hypot(sigma, self.bias.link_std)
-                noise = type(noise)(sigma, noise.tag_sigma, noise.pitch_sigma,
-                                    noise.slew_sigma)
+                noise = replace(noise, range_sigma=sigma)
             sigma.flags.writeable = False
             self._link_sigma = (measurements, sigma, noise)
         return self._link_sigma[1]
 
     def _link_noise(self, measurements):
-        """Return :attr:`noise` with :meth:`link_sigma` as the ranges' sigma (p, m)."""
+        """Return :attr:`noise` with :meth:`link_sigma` as the ranges' sigma (scalar or (p, m))."""
         self.link_sigma(measurements)
         return self._link_sigma[2]
 
@@ -364,10 +363,10 @@ class Integrity:
         Chi-square and binomial tests of the residuals; (failures, values, kept links).
 
         ``fitted_dof``: how many parameters the estimate spent on the frame, which its
-        residuals then lack: the chain's p + 1 angles by default, 3 per joint for a
-        method that places each joint on its own, fewer for a tracker whose prediction
-        supplied part (its own count). The chi-square's degrees of freedom are the links
-        kept less these, at least 1.
+        residuals then lack: the chain's p + 1 angles by default (and where not finite),
+        3 per joint for a method that places each joint on its own (2 with its arm length
+        held), fewer for a tracker whose prediction supplied part (its own count). The
+        chi-square's degrees of freedom are the links kept less these, at least 1.
 
         Returns
         -------
@@ -388,7 +387,7 @@ class Integrity:
         tag_kept = tag_measured & ~tag_blocked & ~tag_outlying
         p = self.model.n_sections
         statistic = float(np.sum(links[kept] ** 2) + np.sum(tag_links[tag_kept] ** 2))
-        spent = p + 1 if fitted_dof is None else fitted_dof
+        spent = fitted_dof if fitted_dof is not None and math.isfinite(fitted_dof) else p + 1
         dof = max(int(kept.sum() + tag_kept.sum()) - spent, 1)
         limit = float(_chi_square_limit(alpha, dof))
         n_links = int(measured.sum() + tag_measured.sum())

@@ -46,6 +46,10 @@ class PostureMethod(Protocol):
     holds_chain : bool
         Whether its answers are always a boom of p + 1 angles (the chain's bound is then
         their uncertainty).
+    free_per_joint : int
+        Of a method that does not hold the chain, the coordinates each joint's fit is
+        free in (3; 2 where its arm length is held): with the chain's, what a frame's
+        residuals lack (the integrity's chi-square). 3 where not said.
 
     Methods that can take the noise learned while running also have
     ``tune(*, sigma, eta, nlos_fraction, nlos_gamma, outlier_fraction)`` (the last the judge's

@@ -118,6 +118,10 @@ class RangeBiasPrior:
 
 #: The compiled twin of :func:`frame_bounds` (``solvers.compiled``).
 KERNEL = 'epp_ros.core.model.compiled_bounds'
+#: The smallest eigenvalue of a Fisher information, over its largest, that determines psi.
+DETERMINED = 1e-14
+#: The redundancy number a poorly controlled link's increase is divided by, at least.
+LEAST_REDUNDANCY = 1e-12
 #: Redundancy number (the share of a link's error its residual shows) under which the
 #: other measurements barely check it: geodesy's "poorly controlled" observation.
 POORLY_CONTROLLED = 0.3
@@ -156,7 +160,7 @@ def uncontrolled_covariance(jacobian, information_inverse, floor=POORLY_CONTROLL
     poor = redundancy < floor
     if not poor.any():
         return np.zeros_like(information_inverse)
-    shares = np.maximum(redundancy[poor], 1e-12)
+    shares = np.maximum(redundancy[poor], LEAST_REDUNDANCY)
     return (through[poor].T / shares) @ through[poor]
 
 
@@ -280,7 +284,7 @@ def bound_from_information(model, slew, pitches, information, joint_jacobian=Non
         eigenvalues, vectors = np.linalg.eigh(information)
     except np.linalg.LinAlgError:
         eigenvalues = np.zeros(p + 1)
-    if not np.all(np.isfinite(eigenvalues)) or eigenvalues[0] <= 1e-14 * eigenvalues[-1]:
+    if not np.all(np.isfinite(eigenvalues)) or eigenvalues[0] <= DETERMINED * eigenvalues[-1]:
         return _unbounded(p)
     return bound_from_covariance(model, slew, pitches, (vectors / eigenvalues) @ vectors.T,
                                  joint_jacobian)
@@ -298,10 +302,7 @@ def bound_from_covariance(model, slew, pitches, covariance, joint_jacobian=None)
     jacobian = model.joint_jacobian(slew, pitches) if joint_jacobian is None \
         else joint_jacobian
     joint_covariance = np.einsum('kcq,qr,kdr->kcd', jacobian, covariance, jacobian)
-    variances = np.trace(joint_covariance, axis1=-2, axis2=-1)
-    if not np.all(variances >= 0.0):
-        return _unbounded(model.n_sections)
-    return Bound(covariance, joint_covariance, float(np.sqrt(variances.sum() / model.n_sections)))
+    return _bound(model, covariance, joint_covariance)
 
 
 def frame_bounds(model, residuals, psi, common=None, floor=POORLY_CONTROLLED):
@@ -336,8 +337,11 @@ def frame_bounds(model, residuals, psi, common=None, floor=POORLY_CONTROLLED):
     """
     compiled = kernel(KERNEL)
     if compiled is not None:
-        return _from_kernel(model, compiled,
-                            *compiled.frame_bounds(model, residuals, psi, common, floor))
+        try:
+            return _from_kernel(model, compiled,
+                                *compiled.frame_bounds(model, residuals, psi, common, floor))
+        except np.linalg.LinAlgError:       # its eigendecomposition failed: numpy's says
+            pass
     joint_jacobian = model.joint_jacobian(psi[0], psi[1:])
     rows = residuals.rows(psi, joint_jacobian=joint_jacobian)
     jacobian = rows / residuals.sigma[:, None]
@@ -372,8 +376,10 @@ def _from_kernel(model, compiled, state, random, random_joint, total, total_join
 
 
 def _bound(model, covariance, joint_covariance):
-    """Return the :class:`Bound` of psi's and the joints' covariances."""
+    """Return the :class:`Bound` of psi's and the joints' covariances; infinite, see above."""
     variances = np.trace(joint_covariance, axis1=-2, axis2=-1)
+    if not np.all(variances >= 0.0):
+        return _unbounded(model.n_sections)
     return Bound(covariance, joint_covariance, float(np.sqrt(variances.sum() / model.n_sections)))
 
 

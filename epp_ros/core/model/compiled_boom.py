@@ -24,7 +24,7 @@ import math
 
 from epp_ros.core.solvers.compiled import compiled
 
-__all__ = ['joint_jacobian_at', 'joints_at']
+__all__ = ['joint_jacobian_at', 'joints_at', 'range_row']
 
 
 @compiled
@@ -67,7 +67,7 @@ def range_row(r, layout, anchors, joints, moved, sigma, row):
 
     ``layout`` as ``Residuals.layout``; ``r`` a tag-anchor or tag-tag range of it;
     ``joints`` (p, 3) and their derivatives ``moved`` (p, 3, p + 1) where the range's tag
-    ranged. Returns the tag.
+    ranged.
     """
     tag, anchor, near, far = layout[0], layout[1], layout[2], layout[3]
     n_links = tag.size
@@ -84,4 +84,3 @@ def range_row(r, layout, anchors, joints, moved, sigma, row):
         for q in range(row.size):
             step = moved[k, c, q] - (moved[other, c, q] if other >= 0 else 0.0)
             row[q] += unit * step
-    return k

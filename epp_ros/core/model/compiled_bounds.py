@@ -22,6 +22,7 @@ increase (``uncontrolled_covariance``) and the common bias's (``bias_covariance`
 some ten numpy calls on arrays of a few dozen elements, whose calls, not their
 arithmetic, were the time (issue #30). Imported at first use only (``solvers.compiled``).
 """
+from epp_ros.core.model.bounds import DETERMINED, LEAST_REDUNDANCY
 from epp_ros.core.model.compiled_boom import joint_jacobian_at, joints_at, range_row
 from epp_ros.core.solvers.compiled import compiled, plain
 import numpy as np
@@ -69,7 +70,7 @@ def _bounds(psi, geometry, pivot_offset, layout, sigma, design, common, floor):
     if not np.all(np.isfinite(information)):
         return UNBOUNDED, random, random_joint, total, total_joint, links
     values, vectors = np.linalg.eigh(information)
-    if not values[0] > 1e-14 * values[-1]:
+    if not values[0] > DETERMINED * values[-1]:
         return UNBOUNDED, random, random_joint, total, total_joint, links
     random = (vectors / values) @ vectors.T
     if not _joint_covariance(moved, random, random_joint):
@@ -82,7 +83,7 @@ def _bounds(psi, geometry, pivot_offset, layout, sigma, design, common, floor):
     for i in range(n_links):
         redundancy = 1.0 - np.dot(through[i], link_scaled[i])
         if redundancy < floor:
-            added += np.outer(through[i], through[i]) / max(redundancy, 1e-12)
+            added += np.outer(through[i], through[i]) / max(redundancy, LEAST_REDUNDANCY)
     if design.shape[0]:                         # the common bias (bias_covariance)
         mapped = random @ (link_scaled / sigma[:n_links].reshape(-1, 1)).T
         shifted = mapped @ design

@@ -107,7 +107,7 @@ def tip_circle(model, hinge, slew, pitches=TIP_PITCHES):
     Returns
     -------
     grid : ndarray, shape (pitches,)
-        The tip section's pitches, radians.
+        The tip section's pitches, radians (read-only: one array for every call).
     ends : ndarray, shape (pitches, 3)
         The tip there, metres.
 

@@ -56,6 +56,9 @@ def compiled(function):
 
     The first compile on a machine takes seconds; numba then loads it from its cache beside
     the module. Without the GIL a node's executor thread runs while its worker fits.
+    numba's cache sees edits to a function's own file only: after editing a kernel that
+    others call from other files (``model.compiled_boom``, ``model.compiled_nlos``'s
+    loss), remove the callers' ``__pycache__`` too.
     """
     import numba
     return numba.njit(cache=True, nogil=True)(function)

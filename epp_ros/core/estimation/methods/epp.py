@@ -395,6 +395,7 @@ class EPP2(EPP1):
     """NEDM posture estimate in 3-D with fixed arm lengths (the paper's EPP2)."""
 
     fix_lengths = True
+    free_per_joint = 2          # its three coordinates, its arm length held
 
 
 class CEPP(_EDMMethod):

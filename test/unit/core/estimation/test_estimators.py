@@ -291,18 +291,19 @@ def test_diagnostics_content():
     assert diagnostics['range_residual_rms'] < 1e-6
 
 
-@pytest.mark.parametrize('method', ['srls', 'chain'])
-def test_chi_square_counts_what_the_method_fitted(method):
+@pytest.mark.parametrize('method, free', [('srls', 3), ('epp2', 2), ('chain', None)])
+def test_chi_square_counts_what_the_method_fitted(method, free):
     """
-    Its mean is its degrees of freedom: the links less 3 per tag placed alone, or p + 1.
+    Its mean is its degrees of freedom: the links less each joint's free coordinates.
 
-    The noise told right and no bias prior, one cold frame at a time. Until session 36 a
-    per-tag method was judged with the chain's p + 1: its chi-square averaged 0.65 of
+    3 for a tag placed alone, 2 with its arm length held (EPP2), or the chain's p + 1.
+    The noise told right and no bias prior, one cold frame at a time. Until session 36
+    every method was judged with the chain's p + 1: SR-LS's chi-square averaged 0.65 of
     the dof then, and the residual test and the variance factor were that much lenient.
     """
     model = truck_pump()
     p, m = model.n_sections, model.n_anchors
-    dof = p * m - (3 * p if method == 'srls' else p + 1)
+    dof = p * m - (p + 1 if free is None else free * p)
     estimator = PostureEstimator(model, method, sigma=0.1, learn_noise=False, **UNBIASED)
     rng = np.random.default_rng(3)
     statistics = []

@@ -549,6 +549,9 @@ def test_residuals_larger_than_their_noise_widen_the_predicted_std_by_their_vari
         assert values['variance_factor'] == factor
         p, m = MODEL.n_sections, MODEL.n_anchors
         assert values['chi_square_dof'] == p * m - (p + 1)
+        for spent in (15, np.nan):              # a count not finite: the chain's
+            dof = integrity.consistency(joints, frame, fitted_dof=spent)[1]['chi_square_dof']
+            assert dof == p * m - (15 if spent == 15 else p + 1)
         np.testing.assert_allclose(values['joint_std'], bound.joint_std * np.sqrt(factor),
                                    rtol=1e-9)
         assert values['predicted_rmse'] == pytest.approx(bound.rmse * np.sqrt(factor), rel=1e-9)

@@ -28,7 +28,9 @@ def _frame(rng, angles):
     """Residuals of a random posture: links dropped, a sigma per link; angle rows if asked."""
     slew, pitches, joints = random_posture(MODEL, rng)
     ranges = RangeNoise(sigma=0.1).apply(MODEL.ranges(joints), rng)[0]
-    ranges[rng.random(ranges.shape) < rng.uniform(0.0, 0.9)] = np.nan
+    # Some links missing, most, or every one (the angle rows alone, or no row at all).
+    ranges[rng.random(ranges.shape) < rng.choice([rng.uniform(0.0, 0.9), 1.0], p=[0.9, 0.1])] \
+        = np.nan
     p = MODEL.n_sections
     tag_ranges = np.full((p, p), np.nan)
     measured = {}
