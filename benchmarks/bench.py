@@ -173,8 +173,11 @@ def _speed(args):
 
 
 def _compare(args):
-    return compare_bench.run(args.base, args.methods or ['chain', 'cepp', 'track'],
-                             args.seconds, args.seed, args.rounds)
+    try:
+        return compare_bench.run(args.base, args.methods or ['chain', 'cepp', 'track'],
+                                 args.seconds, args.seed, args.rounds)
+    except ValueError as error:
+        raise SystemExit(f'python3 dev.py bench compare: {error}') from None
 
 
 def _calibration(args):

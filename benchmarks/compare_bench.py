@@ -98,9 +98,13 @@ def unpacked(revision, cache=None):
 
     In ``cache``, by default ``epp_ros_compare-UID`` in the system's temporary directory
     (the user's own). Unpacked beside it and renamed into place, so that a comparison
-    running at the same time never sees a tree half there, nor loses one.
+    running at the same time never sees a tree half there, nor loses one. ValueError
+    where ``revision`` names no commit.
     """
-    sha = _git('rev-parse', '--verify', f'{revision}^{{commit}}').decode().strip()
+    try:
+        sha = _git('rev-parse', '--verify', f'{revision}^{{commit}}').decode().strip()
+    except subprocess.CalledProcessError:
+        raise ValueError(f'--base {revision!r} names no commit of {ROOT}') from None
     cache = Path(cache or Path(tempfile.gettempdir()) / f'epp_ros_compare-{os.getuid()}')
     folder = cache / sha
     if not folder.is_dir():

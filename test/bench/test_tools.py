@@ -411,6 +411,13 @@ def test_bench_compare_runs_both_trees_on_the_same_frames(tmp_path, capsys, monk
     assert 'head / base' in capsys.readouterr().out
 
 
+def test_bench_compare_refuses_a_commit_that_is_not_there_in_one_line(capsys):
+    with pytest.raises(SystemExit) as stopped:
+        bench.main(['compare', '--base', 'no-such-commit'])
+    assert str(stopped.value).startswith("python3 dev.py bench compare: --base 'no-such-commit'")
+    assert '\n' not in str(stopped.value)
+
+
 def test_compare_counts_what_differs_between_two_trees():
     """Statuses, validity, estimates (NaN where one has none) and predicted RMSEs."""
     def results(status, valid, estimate, predicted):
