@@ -168,14 +168,14 @@ def _family(args):
 
 
 def _speed(args):
-    return speed_bench.run(args.methods or ['chain', 'cepp', 'track'], int(args.seconds * 10),
+    return speed_bench.run(args.methods or speed_bench.METHODS, int(args.seconds * 10),
                            args.seed)
 
 
 def _compare(args):
     try:
-        return compare_bench.run(args.base, args.methods or ['chain', 'cepp', 'track'],
-                                 args.seconds, args.seed, args.rounds)
+        return compare_bench.run(args.base, args.methods or speed_bench.METHODS, args.seconds,
+                                 args.seed, args.rounds)
     except ValueError as error:
         raise SystemExit(f'python3 dev.py bench compare: {error}') from None
 

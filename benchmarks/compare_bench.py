@@ -196,7 +196,7 @@ def _medians(results, key):
     return {method: median(columns[key]) for method, columns in results['working'].items()}
 
 
-def run(base='HEAD', methods=('chain', 'cepp', 'track'), seconds=30.0, seed=0, rounds=4,
+def run(base='HEAD', methods=speed_bench.METHODS, seconds=30.0, seed=0, rounds=4,
         cache=None):
     """
     Compare this checkout with ``base``: ``rounds`` alternating rounds, ``seconds`` a stream.

@@ -369,10 +369,9 @@ def _from_kernel(model, compiled, state, random, random_joint, total, total_join
         unbounded = _unbounded(p)
         return unbounded, unbounded, rows
     first = _bound(model, random, random_joint)
-    if state == compiled.RANDOM_ONLY:
+    if state == compiled.RANDOM_ONLY or not math.isfinite(first.rmse):
         return first, first, rows
-    widened = _bound(model, total, total_joint) if state == compiled.WIDENED else _unbounded(p)
-    return first, widened, rows
+    return first, _bound(model, total, total_joint), rows
 
 
 def _bound(model, covariance, joint_covariance):

@@ -27,22 +27,20 @@ from epp_ros.core.model.compiled_boom import joint_jacobian_at, joints_at, range
 from epp_ros.core.solvers.compiled import compiled, plain
 import numpy as np
 
-__all__ = ['compile_now', 'frame_bounds', 'RANDOM_ONLY', 'UNBOUNDED', 'WIDENED',
-           'WIDENED_UNBOUNDED']
+__all__ = ['compile_now', 'frame_bounds', 'RANDOM_ONLY', 'UNBOUNDED', 'WIDENED']
 
 #: What :func:`frame_bounds` found: no bound; the bound, nothing added; the bound and
-#: a wider one; the bound, and the wider one lost to rounding.
-UNBOUNDED, RANDOM_ONLY, WIDENED, WIDENED_UNBOUNDED = 0, 1, 2, 3
+#: a wider one. (A joint's variance lost to rounding is ``bounds._bound``'s to judge.)
+UNBOUNDED, RANDOM_ONLY, WIDENED = 0, 1, 2
 
 
 @compiled
-def _joint_covariance(moved, covariance, out):
-    """Fill ``out`` (p, 3, 3) with each joint's covariance; return whether all are >= 0."""
+def _joint_covariance(moved, covariance):
+    """Return each joint's covariance (p, 3, 3) from psi's and the joints' derivatives."""
+    out = np.empty((moved.shape[0], 3, 3))
     for k in range(moved.shape[0]):
         out[k] = moved[k] @ covariance @ moved[k].T
-        if not out[k, 0, 0] + out[k, 1, 1] + out[k, 2, 2] >= 0.0:
-            return False
-    return True
+    return out
 
 
 @compiled
@@ -64,18 +62,15 @@ def _bounds(psi, geometry, pivot_offset, layout, sigma, design, common, floor):
             rows[r, angle_index[r - n_ranged]] = 1.0
     scaled = rows / sigma.reshape(-1, 1)
     information = scaled.T @ scaled
-    random, random_joint = np.full((n, n), np.inf), np.full((p, 3, 3), np.inf)
-    total, total_joint = random.copy(), random_joint.copy()
     links = rows[:n_links].copy()
+    unknown, unknown_joint = np.full((n, n), np.inf), np.full((p, 3, 3), np.inf)
     if not np.all(np.isfinite(information)):
-        return UNBOUNDED, random, random_joint, total, total_joint, links
+        return UNBOUNDED, unknown, unknown_joint, unknown, unknown_joint, links
     values, vectors = np.linalg.eigh(information)
     if not values[0] > DETERMINED * values[-1]:
-        return UNBOUNDED, random, random_joint, total, total_joint, links
+        return UNBOUNDED, unknown, unknown_joint, unknown, unknown_joint, links
     random = (vectors / values) @ vectors.T
-    if not _joint_covariance(moved, random, random_joint):
-        return UNBOUNDED, np.full((n, n), np.inf), np.full((p, 3, 3), np.inf), total, \
-            total_joint, links
+    random_joint = _joint_covariance(moved, random)
     # The poorly controlled links: what leaving each out would add (uncontrolled_covariance).
     link_scaled = np.ascontiguousarray(scaled[:n_links])
     through = link_scaled @ random
@@ -91,10 +86,7 @@ def _bounds(psi, geometry, pivot_offset, layout, sigma, design, common, floor):
     if not np.any(added != 0.0):
         return RANDOM_ONLY, random, random_joint, random, random_joint, links
     total = random + added
-    if not _joint_covariance(moved, total, total_joint):
-        return WIDENED_UNBOUNDED, random, random_joint, np.full((n, n), np.inf), \
-            np.full((p, 3, 3), np.inf), links
-    return WIDENED, random, random_joint, total, total_joint, links
+    return WIDENED, random, random_joint, total, _joint_covariance(moved, total), links
 
 
 def frame_bounds(model, residuals, psi, common, floor):
@@ -103,7 +95,7 @@ def frame_bounds(model, residuals, psi, common, floor):
 
     ``(state, random covariance, random joint covariance, total covariance, total joint
     covariance, link rows)``; ``state`` one of :data:`UNBOUNDED`, :data:`RANDOM_ONLY`,
-    :data:`WIDENED`, :data:`WIDENED_UNBOUNDED`.
+    :data:`WIDENED`.
     """
     design, covariance = (np.zeros((0, 0)), np.zeros((0, 0))) if common is None else common
     geometry = (plain(model.arm_lengths), plain(model.base).reshape(1, 3),
