@@ -22,6 +22,7 @@ analytic Jacobian with respect to ``psi = (slew, pitch_1..pitch_p)``: the chain 
 least squares and the Cramér–Rao bound (``core.bounds``) share it.
 """
 from dataclasses import dataclass
+import math
 import warnings
 
 from epp_ros.core.model.noise import DEFAULT_NOISE
@@ -49,9 +50,19 @@ class SensorNoise:
 
     def __post_init__(self):
         for name in ('range_sigma', 'tag_sigma', 'pitch_sigma', 'slew_sigma'):
-            value = np.asarray(getattr(self, name), dtype=float)
-            if not np.all(np.isfinite(value)) or np.any(value <= 0):
+            if not _finite_positive(getattr(self, name)):
                 raise ValueError(f'{name} must be finite and > 0, got {getattr(self, name)!r}')
+
+
+def _finite_positive(value):
+    """Return whether ``value`` is a number or an array of numbers, all finite and > 0."""
+    if isinstance(value, (float, int)):     # most noises: a frame builds several
+        return math.isfinite(value) and value > 0
+    try:
+        value = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    return bool(np.all(np.isfinite(value)) and np.all(value > 0))
 
 
 def _clean(values, shape, field, limit=None):
@@ -277,24 +288,20 @@ class Residuals:
         self._near, self._far = np.nonzero(self.tag_mask)
         self._pitch = np.flatnonzero(self.pitch_mask)
         self.n_ranged = self._tag.size + self._near.size
+        slew = [measurements.slew] if self.slew_measured else []
         self.measured = np.concatenate([
             measurements.ranges[self.link_mask], measurements.tag_ranges[self.tag_mask],
-            measurements.pitches[self.pitch_mask],
-            [measurements.slew] if self.slew_measured else []])
-        range_sigma = np.broadcast_to(np.asarray(noise.range_sigma, dtype=float),
-                                      self.link_mask.shape)
+            measurements.pitches[self.pitch_mask], slew])
+        range_sigma = noise.range_sigma
+        range_sigma = np.broadcast_to(range_sigma, self.link_mask.shape)[self.link_mask] \
+            if np.ndim(range_sigma) else np.full(self._tag.size, float(range_sigma))
         self.sigma = np.concatenate([
-            range_sigma[self.link_mask],
-            np.full(self._near.size, float(noise.tag_sigma)),
+            range_sigma, np.full(self._near.size, float(noise.tag_sigma)),
             np.full(self._pitch.size, float(noise.pitch_sigma)),
             [float(noise.slew_sigma)] if self.slew_measured else []])
-        n_angles = self._pitch.size + int(self.slew_measured)
-        self._angle_rows = np.zeros((n_angles, p + 1))
-        self._angle_rows[np.arange(self._pitch.size), 1 + self._pitch] = 1.0
-        if self.slew_measured:
-            self._angle_rows[-1, 0] = 1.0
-        self._angle_index = np.r_[1 + self._pitch, [0] if self.slew_measured else []]
-        self._angle_index = self._angle_index.astype(int)
+        self._angle_index = np.concatenate([1 + self._pitch, [0] if slew else []]).astype(int)
+        self._angle_rows = np.zeros((self._angle_index.size, p + 1))
+        self._angle_rows[np.arange(self._angle_index.size), self._angle_index] = 1.0
         #: Which rows measure what, int64 each: (tag, anchor) of each tag-anchor range,
         #: (near, far) of each tag-tag range, the angle each angle row reads.
         self.layout = tuple(np.ascontiguousarray(index, dtype=np.int64) for index in (

@@ -90,5 +90,24 @@ def rotation_to_quaternion(rotations):
 
 
 def boom_quaternions(base, joints):
-    """Orientation (x, y, z, w) of the base and of each section, shape (p + 1, 4)."""
-    return rotation_to_quaternion(boom_frames(base, joints))
+    """
+    Orientation (x, y, z, w) of the base and of each section, shape (p + 1, 4), w >= 0.
+
+    The frames of :func:`boom_frames`, written directly: each is a yaw (the section's
+    heading; the slew for the base and a vertical section) after a pitch (its elevation),
+    ``q = q_z(yaw) q_y(-pitch)``: a posture is published every frame, and this is a third
+    of :func:`rotation_to_quaternion`'s work.
+    """
+    base = np.asarray(base, dtype=float)
+    joints = np.asarray(joints, dtype=float)
+    sections = np.diff(np.vstack([base, joints]), axis=0)
+    horizontal = np.hypot(sections[:, 0], sections[:, 1])
+    slew = fit_slew(joints, base) if np.max(np.hypot(*(joints[:, :2] - base[:2]).T)) > 1e-9 \
+        else 0.0
+    yaw = np.concatenate([[slew], np.where(horizontal / np.linalg.norm(sections, axis=1) > 1e-9,
+                                           np.arctan2(sections[:, 1], sections[:, 0]), slew)])
+    pitch = np.concatenate([[0.0], np.arctan2(sections[:, 2], horizontal)])
+    yaw_sin, yaw_cos = np.sin(yaw / 2), np.cos(yaw / 2)
+    pitch_sin, pitch_cos = np.sin(pitch / 2), np.cos(pitch / 2)
+    return np.column_stack([yaw_sin * pitch_sin, -yaw_cos * pitch_sin, yaw_sin * pitch_cos,
+                            yaw_cos * pitch_cos])

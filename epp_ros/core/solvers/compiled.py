@@ -71,4 +71,8 @@ def plain(array, dtype=float):
     A copy only where it is not already. numba compiles a function again (seconds, on a
     frame) for each new type of argument, and read-only or strided arrays are new types.
     """
+    if type(array) is np.ndarray and array.dtype == dtype:     # most: as they are, at once
+        flags = array.flags
+        if flags.c_contiguous and flags.writeable:
+            return array
     return np.require(array, dtype=dtype, requirements='CW')

@@ -80,16 +80,22 @@ def _angles(model, joints_bytes, shape):
     """
     joints = np.frombuffer(joints_bytes, dtype=float).reshape(shape)
     slew = fit_slew(joints, model.base)
-    slews = [slew] if model.pivot_offset == 0.0 else [slew, slew + np.pi]
+    if model.pivot_offset == 0.0:
+        return float(wrap_angle(slew)), _pitches_in_plane(model, joints, slew)
     fits = []
-    for candidate in slews:         # a pivot off the axis: on which side is it?
-        coords = to_plane(np.vstack([model.pivot(candidate), joints]), model.base, candidate)
-        steps = np.diff(coords, axis=0)
-        pitches = np.arctan2(steps[:, 1], steps[:, 0])
+    for candidate in (slew, slew + np.pi):      # a pivot off the axis: on which side is it?
+        pitches = _pitches_in_plane(model, joints, candidate)
         error = np.sum((model.forward_kinematics(candidate, pitches) - joints) ** 2)
         fits.append((error, float(wrap_angle(candidate)), pitches))
     _, slew, pitches = min(fits, key=lambda fit: fit[0])
     return slew, pitches
+
+
+def _pitches_in_plane(model, joints, slew):
+    """Return the pitches (p,) of the sections to the joints (p, 3), in the plane of ``slew``."""
+    coords = to_plane(np.vstack([model.pivot(slew), joints]), model.base, slew)
+    steps = np.diff(coords, axis=0)
+    return np.arctan2(steps[:, 1], steps[:, 0])
 
 
 def canonical_angles(psi, pivot_offset=0.0):

@@ -68,3 +68,20 @@ def test_quaternions_round_trip(seed):
         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
     np.testing.assert_allclose(rebuilt, rotation, atol=1e-12)
     assert w >= 0
+
+
+def test_quaternions_written_directly_are_the_frames():
+    # boom_quaternions writes the frames' quaternions in closed form: the same rotations
+    # as the general conversion, folded, vertical and turned-round booms included.
+    model = truck_pump()
+    rng = np.random.default_rng(3)
+    postures = [random_posture(model, rng)[2] for _ in range(200)] + [
+        model.forward_kinematics(0.4, np.radians([85.0, 120.0, 170.0, -100.0, -60.0])),
+        model.forward_kinematics(0.0, np.full(5, np.pi / 2)),
+        model.forward_kinematics(-2.0, np.full(5, -np.pi / 2)),
+        model.forward_kinematics(np.pi - 1e-3, np.full(5, 0.3))]
+    for joints in postures:
+        general = rotation_to_quaternion(boom_frames(model.base, joints))
+        direct = boom_quaternions(model.base, joints)
+        assert np.all(direct[:, 3] >= 0)
+        np.testing.assert_allclose(direct, general, atol=1e-12)
