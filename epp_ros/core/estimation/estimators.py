@@ -707,8 +707,9 @@ class PostureEstimator:
         frame is ambiguous. A doubt does not end on the rival followed alone: where the
         two fits leave the frame valid, a search is made too and weighed with them (at
         a site with a third of its ranges outliers, the likelier of a warm fit and a
-        followed rival was published 7 m off, where a search found the truth's fold).
-        Returns (joints, info), verdict, and whether the other fit won.
+        followed rival was published 7 m off, where a search found the truth's fold); nor
+        on a search alone: the rival is weighed with it. The doubt lasts while a joint is
+        ambiguous. Returns (joints, info), verdict, and whether the other fit won.
         """
         rival = self._reacquisition.rival_start(stamp)
         fresh = self._solve(measurements, warm=rival is not None, prior=rival)
@@ -717,13 +718,24 @@ class PostureEstimator:
             return solved, verdict, False
         best, other, verdict = self._weighed(solved, fresh, measurements, stamp)
         moved, searched = best is fresh, rival is None
+        followed = self._reacquisition.rival
+        if searched and followed is not None:
+            # The rival followed is weighed with the search's fit, not forgotten for it: a
+            # search can land in the warm fit's basin, and the two agreeing would end the
+            # doubt with the truth last seen in the rival.
+            kept = self._solve(measurements, warm=True, prior=followed)
+            if not isinstance(kept, str):
+                best, loser, verdict = self._weighed(best, kept, measurements, stamp)
+                moved, other = moved or best is kept, kept if best is not kept else loser
         if not searched and verdict.valid:
             searched, found = True, self._solve(measurements, warm=False)
             if not isinstance(found, str):
                 best, loser, verdict = self._weighed(best, found, measurements, stamp)
                 if best is found:       # else the rival stays the one followed
                     moved, other = True, loser
-        ambiguous = verdict.status == 'ambiguous'
+        # In doubt while the other fit makes a joint ambiguous, whatever else refused the
+        # frame: a likelier one beyond the reach of a drifted reference is followed so.
+        ambiguous = bool(verdict.values.get('ambiguous_joints'))
         if searched:
             self._reacquisition.searched(stamp, ambiguous, other[0])
         else:

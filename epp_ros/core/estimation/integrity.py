@@ -692,7 +692,11 @@ class Integrity:
 
         The candidates are the boom's :meth:`mirrors` and the method's own
         ``alternatives`` (other fits its search found, (p, 3) each); the rules are those of
-        :meth:`ambiguous_joints`, and with a ``reach`` every joint must be within it.
+        :meth:`ambiguous_joints`, and with a ``reach`` every joint must be within it, or the
+        frame must make the posture ``ambiguity_odds`` times likelier than the estimate.
+        Beyond the reach of the last accepted posture, a posture the frame prefers that
+        strongly says that the reference (a warm fit drifted with what it published) or
+        the frame is wrong, not that the estimate is right.
         """
         candidates = [self.mirrors(joints, slew)]
         candidates += [np.asarray(a, dtype=float)[None] for a in alternatives]
@@ -700,13 +704,15 @@ class Integrity:
         near = self._near(joint_std)
         far = norms(candidates - joints) > near                               # (n, p)
         keep = far.any(axis=1)
-        if reach is not None:
-            keep &= np.all(norms(candidates - reach[0]) <= reach[1], axis=1)
         if not keep.any():
             return set()
         costs = self.posture_cost(np.concatenate([joints[None], candidates[keep]]),
                                   measurements)
-        rivals = costs[1:] - costs[0] < math.log(self.limits.ambiguity_odds)
+        odds = math.log(self.limits.ambiguity_odds)
+        rivals = costs[1:] - costs[0] < odds
+        if reach is not None:
+            within = np.all(norms(candidates[keep] - reach[0]) <= reach[1], axis=1)
+            rivals &= within | (costs[1:] - costs[0] < -odds)
         return set(np.flatnonzero(far[keep][rivals].any(axis=0)).tolist())
 
     def _tip_circle(self, joints, slew):
