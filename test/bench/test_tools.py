@@ -327,10 +327,12 @@ def test_bench_field_prints_every_case_against_the_bounds(capsys):
 def test_the_real_links_family_is_each_a_real_uwb_variant_and_printed(capsys):
     """Each variant changes the real_uwb preset; a short run of two prints their rows."""
     real = FIELD_EFFECTS['real_uwb']
-    for name, (spec, motion) in field_bench.FAMILY.items():
+    for name, (spec, motion, *pump) in field_bench.FAMILY.items():
         effects = spec if isinstance(spec, FieldEffects) else field_effects(spec)
         assert effects.link_offset > 0 and effects.bias_curve, name
-        assert effects != real or motion != 'working', name
+        assert effects != real or motion != 'working' or pump, name
+    frames, model, _ = field_bench.case_frames('+ tdma, four anchors, joystick', 1.0, 0)
+    assert model.n_anchors == 4 and frames[0].inputs()['ranges'].shape == (5, 4)
     names = ('outliers x10, 3 m', '+ dropouts')
     report = field_bench.run_family(6.0, 1, names)
     assert [row['case'] for row in report.rows] == list(names)
