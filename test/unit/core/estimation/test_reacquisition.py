@@ -24,6 +24,25 @@ from epp_ros.core.simulation.simulate import field_effects, JoystickMotion, rand
 import numpy as np
 
 
+def _run_never_confidently_wrong(estimator, frames, count):
+    """
+    Run ``frames`` through ``estimator``; every valid frame's error within its prediction.
+
+    Within ``WRONG_M``, or a ``COVERED_FRACTION`` of it covered by the predicted RMSE.
+    Returns the sum of ``count(estimator, result)`` over the frames.
+    """
+    counted = 0
+    for frame in frames:
+        estimator.update(**frame.inputs())
+        result = estimator.last_diagnostics
+        counted += count(estimator, result)
+        if result.valid:
+            error = frame_rmse(result.estimate, frame.joints)
+            assert error < max(WRONG_M, result.predicted_rmse / COVERED_FRACTION), \
+                (frame.stamp, error)
+    return counted
+
+
 def test_rejected_frames_are_searched_first_often_then_every_tenth():
     """Across the drop of the warm start too: garbage costs a search per ten frames."""
     policy = Reacquisition(reset_after_failures=10)
@@ -136,15 +155,9 @@ def test_a_method_without_a_state_leaves_a_fold_its_rival_outweighs_to_its_secon
                       moving_anchors=truck_outriggers(model))
     frames = simulate_field(model, WorkingMotion(model, rng), 40.5, effects, rng)
     estimator = PostureEstimator(model, 'chain', moving_anchors=truck_outriggers(model))
-    outweighed = 0
-    for frame in frames:
-        estimator.update(**frame.inputs())
-        result = estimator.last_diagnostics
-        outweighed += result.status == 'ambiguous' and result['rival_margin'] < 0.0
-        if result.valid:
-            error = frame_rmse(result.estimate, frame.joints)
-            assert error < max(WRONG_M, result.predicted_rmse / COVERED_FRACTION), \
-                (frame.stamp, error)
+    outweighed = _run_never_confidently_wrong(
+        estimator, frames,
+        lambda _, result: result.status == 'ambiguous' and result['rival_margin'] < 0.0)
     assert outweighed > 0                           # the frames this is about
 
 
@@ -164,15 +177,8 @@ def test_a_fit_the_frame_prefers_beyond_a_drifted_references_reach_keeps_the_dou
     effects = replace(field_effects('tdma'), moving_anchors=truck_outriggers(model))
     frames = simulate_field(model, JoystickMotion(model, 40.0, rng), 40.0, effects, rng)
     estimator = PostureEstimator(model, 'chain', moving_anchors=truck_outriggers(model))
-    published = 0
-    for frame in frames:
-        estimator.update(**frame.inputs())
-        result = estimator.last_diagnostics
-        if result.valid:
-            published += 1
-            error = frame_rmse(result.estimate, frame.joints)
-            assert error < max(WRONG_M, result.predicted_rmse / COVERED_FRACTION), \
-                (frame.stamp, error)
+    published = _run_never_confidently_wrong(estimator, frames,
+                                             lambda _, result: result.valid)
     assert published > len(frames) / 2
 
 
@@ -191,13 +197,6 @@ def test_a_search_in_doubt_is_weighed_with_the_rival_followed():
                       moving_anchors=truck_outriggers(model))
     frames = simulate_field(model, JoystickMotion(model, 40.0, rng), 40.0, effects, rng)
     estimator = PostureEstimator(model, 'cepp', moving_anchors=truck_outriggers(model))
-    doubted = 0
-    for frame in frames:
-        estimator.update(**frame.inputs())
-        result = estimator.last_diagnostics
-        doubted += estimator._reacquisition.in_doubt
-        if result.valid:
-            error = frame_rmse(result.estimate, frame.joints)
-            assert error < max(WRONG_M, result.predicted_rmse / COVERED_FRACTION), \
-                (frame.stamp, error)
+    doubted = _run_never_confidently_wrong(
+        estimator, frames, lambda estimator, _: estimator._reacquisition.in_doubt)
     assert doubted > 0                              # the frames this is about
