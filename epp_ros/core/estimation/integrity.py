@@ -189,6 +189,10 @@ class Verdict:
         The Jacobian in psi of the estimate's line-of-sight tag-anchor ranges (row-major
         over the links kept), unscaled, for the bias learner; None when not computed (a
         method not held to the chain).
+    likelier : ndarray, shape (p, 3), optional
+        The estimate with the joint of the likeliest rival position (``rival_margin``)
+        moved there, the others kept, metres: where a solve may find a fit the frame
+        prefers; None without a rival position.
 
     """
 
@@ -198,6 +202,7 @@ class Verdict:
     values: dict = field(default_factory=dict)
     angles: tuple = field(default=None, repr=False, compare=False)
     los_rows: np.ndarray = field(default=None, repr=False, compare=False)
+    likelier: np.ndarray = field(default=None, repr=False, compare=False)
 
     @property
     def valid(self):
@@ -590,12 +595,13 @@ class Integrity:
 
     def _joint_rivals(self, joints, measurements, joint_std, slew, reach):
         """
-        Return :meth:`fold_spread`, :meth:`ambiguous_joints` and the likeliest rival's margin.
+        Return :meth:`fold_spread`, :meth:`ambiguous_joints` and the likeliest rival.
 
         The folds :meth:`fold_spread` weighs are the first of :meth:`ambiguous_joints`'
-        candidates; each joint's cost is then computed once, not twice. The margin is how
-        much less likely, in nats, the likeliest of the candidates far enough and within
-        reach is than the estimate's joint (negative: likelier; inf without one).
+        candidates; each joint's cost is then computed once, not twice. The likeliest of
+        the candidates far enough and within reach is returned as its margin, how much
+        less likely it is than the estimate's joint in nats (negative: likelier), and its
+        (joint, position (3,)); inf and None without one.
         """
         p = self.model.n_sections
         positions, which, keep = self._candidates(joints, joint_std, slew, reach)
@@ -605,7 +611,11 @@ class Integrity:
         counted = keep[scored]
         found = self._found(positions[scored][counted], which[scored][counted],
                             margin[counted])
-        return spread, found, float(margin[counted].min()) if counted.any() else np.inf
+        if not counted.any():
+            return spread, found, np.inf, None
+        best = np.argmin(margin[counted])
+        return (spread, found, float(margin[counted][best]),
+                (int(which[scored][counted][best]), positions[scored][counted][best]))
 
     def _candidates(self, joints, joint_std, slew, reach):
         """
@@ -664,9 +674,15 @@ class Integrity:
             mirrored.append(image)
         return np.array(mirrored)
 
-    def posture_cost(self, postures, measurements):
-        """Loss of every measurement of the frame at each posture (n, p, 3): shape (n,)."""
-        cost = self._bound_loss(measurements).at_points(postures, measurements.ranges,
+    def posture_cost(self, postures, measurements, scored=None):
+        """
+        Loss of every measurement of the frame at each posture (n, p, 3): shape (n,).
+
+        ``scored`` (p, m) bool: the tag-anchor ranges counted, by default all.
+        """
+        ranges = measurements.ranges if scored is None else \
+            np.where(scored, measurements.ranges, np.nan)
+        cost = self._bound_loss(measurements).at_points(postures, ranges,
                                                         self.model.anchors).sum(axis=1)
         tag_valid = np.isfinite(measurements.tag_ranges)
         if tag_valid.any():
@@ -786,6 +802,7 @@ class Integrity:
                 'posture fits about as well'))
         verdict = _verdict(checks, values)
         verdict.angles, verdict.los_rows = angles, assessed.los_rows
+        verdict.likelier = assessed.likelier
         return verdict
 
     def _assessed(self, joints, measurements, reference, elapsed, reference_std, chain,
@@ -837,12 +854,16 @@ class Integrity:
         separated = []
         if chain and all(level < ERROR for level, _, _ in checks):
             separated = self.separated(joints, measurements, kept)
-        spread, found, values['rival_margin'] = self._joint_rivals(
+        spread, found, values['rival_margin'], likeliest = self._joint_rivals(
             seen, measurements, joint_std, angles[0], reach)
+        likelier = None
+        if likeliest is not None:           # the joint moved there, the others kept
+            likelier = np.array(joints, dtype=float)
+            likelier[likeliest[0]] += likeliest[1] - seen[likeliest[0]]
         values['reach_std'] = np.maximum(joint_std, spread)
         values['reach_turn_std'] = np.maximum(turn_std, self._direction_std(spread))
         assessment = _Assessment(tuple(checks), values, angles, los_rows, joint_std, seen,
-                                 reach, separated, found)
+                                 reach, separated, found, likelier)
         self._assessments = [(key, assessment)] + self._assessments[:self.ASSESSMENTS_KEPT - 1]
         return assessment
 
@@ -961,6 +982,7 @@ class _Assessment(NamedTuple):
     reach: Optional[tuple]      #: (reference, distances (p,)) or None
     separated: list             #: the solution separation's postures, (p, 3) each
     found: dict                 #: joint -> a position about as likely, elsewhere
+    likelier: Optional[np.ndarray]  #: (p, 3) the likeliest of those in place, or None
 
 
 class _AssessmentKey:

@@ -21,9 +21,11 @@ in a run and then every tenth, so that garbage does not cost a search per frame;
 that calls half a tag's links blocked, at most once a period; while the last search left
 the frame ambiguous, every frame from the rival it found; for a method with a state of its
 own, which gets no such second opinion, a fit a rival outweighs, spaced as rejected frames
-are) and when the warm start is dropped (after ``reset_after_failures`` failures in a row;
-then the last fit is only a provisional start, and what it leads to stands only if a search
-finds it too). ``PostureEstimator`` does the solving.
+are, where the others solve it again, warm, from the rival position, and follow it once
+a run of such frames proves it) and when the warm start is dropped (after
+``reset_after_failures`` failures in a row; then the last fit is only a provisional
+start, and what it leads to stands only if a search finds it too). ``PostureEstimator``
+does the solving.
 """
 import numpy as np
 
@@ -48,6 +50,7 @@ class Reacquisition:
         self.reset_after_failures = reset_after_failures
         self.failures = 0
         self.outweighed_frames = 0      # since the last valid frame: fits a rival outweighed
+        self.rival_evidence = 0.0       # nats for the rival's basin, outweighed frames in a row
         self._dropped = False           # the warm start was dropped in this run of failures
         self.in_doubt = False           # the last search found another fit about as likely
         self.rival = None               # that fit, (p, 3), followed from frame to frame
@@ -74,6 +77,21 @@ class Reacquisition:
         """
         self.outweighed_frames += 1
         return _spaced(self.outweighed_frames)
+
+    def outweighed_by(self, nats):
+        """
+        Add a frame's evidence for the rival's basin over the warm fit's; return the total.
+
+        ``nats``: how much likelier the frame makes the fit solved from the rival position
+        than the warm fit (negative: less likely), or None to start over (a frame not
+        outweighed, or the rival taken). A cumulative sum held at zero or above (CUSUM):
+        the estimator follows the rival once it reaches the ambiguity odds, so that a
+        rival one frame's noise favours by a few nats is not followed (a static tip whose
+        other pitch a frame in ten favoured made the estimate flap between the two), and
+        one that frame after frame favours is.
+        """
+        self.rival_evidence = 0.0 if nats is None else max(0.0, self.rival_evidence + nats)
+        return self.rival_evidence
 
     def suspicious(self, nlos_links, ranges, stamp):
         """

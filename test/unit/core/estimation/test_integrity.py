@@ -593,6 +593,29 @@ def test_a_long_range_the_other_links_barely_check_widens_the_bound_to_cover_it(
         assert not result.valid or result.predicted_rmse >= error / 3.0
 
 
+def test_the_verdict_hands_on_the_likeliest_rival_position_in_place():
+    """
+    A fit with a joint on its wrong fold: the verdict puts that joint back, the rest kept.
+
+    Where a solve from there may find the fit the frame prefers (``PostureEstimator``).
+    """
+    slew, pitches = 0.3, np.radians([60.0, 30.0, 10.0, -10.0, -60.0])
+    truth = MODEL.forward_kinematics(slew, pitches)
+    integrity = Integrity(MODEL, SensorNoise(0.1), NlosMixture(0.05, 1.0))
+    folded = truth.copy()
+    folded[3] = fold_alternatives(MODEL, truth)[3]          # joint 4 the other way
+    assert np.linalg.norm(folded[3] - truth[3]) > 5.0
+    frame = Measurements.ranges_only(MODEL.ranges(truth))
+    verdict = integrity.judge(folded, frame)
+    assert verdict.values['rival_margin'] < 0.0
+    np.testing.assert_allclose(verdict.likelier[3], truth[3], atol=1e-9)
+    kept = np.arange(MODEL.n_sections) != 3
+    np.testing.assert_array_equal(verdict.likelier[kept], folded[kept])
+    std = np.full(MODEL.n_sections, 0.01)
+    verdict = integrity.judge(truth, frame, truth, 0.0, std)     # none within reach
+    assert verdict.likelier is None and verdict.values['rival_margin'] == np.inf
+
+
 def test_a_posture_the_frame_prefers_beyond_the_reach_of_its_reference_is_a_rival():
     """
     Beyond the reference's reach, a posture is a rival only where the frame prefers it.
