@@ -616,6 +616,26 @@ def test_the_verdict_hands_on_the_likeliest_rival_position_in_place():
     assert verdict.likelier is None and verdict.values['rival_margin'] == np.inf
 
 
+def test_a_postures_cost_counts_the_links_scored_and_only_those():
+    """Each range's share of the loss is its own: masked, it is the frame without it."""
+    rng = np.random.default_rng(5)
+    postures = np.array([random_posture(MODEL, rng)[2] for _ in range(3)])
+    ranges = MODEL.ranges(postures[0]) + rng.normal(0.0, 0.1, (5, 6))
+    ranges[0, 0] += 2.0                                     # one blocked link
+    integrity = Integrity(MODEL, SensorNoise(0.1), NlosMixture(0.05, 1.0))
+    frame = Measurements.ranges_only(ranges)
+    every = integrity.posture_cost(postures, frame)
+    np.testing.assert_allclose(
+        integrity.posture_cost(postures, frame, np.ones((5, 6), dtype=bool)), every)
+    scored = rng.random((5, 6)) < 0.6
+    fewer = ranges.copy()
+    fewer[~scored] = np.nan
+    np.testing.assert_allclose(integrity.posture_cost(postures, frame, scored),
+                               integrity.posture_cost(postures,
+                                                      Measurements.ranges_only(fewer)))
+    assert np.all(integrity.posture_cost(postures, frame, np.zeros((5, 6), dtype=bool)) == 0)
+
+
 def test_a_posture_the_frame_prefers_beyond_the_reach_of_its_reference_is_a_rival():
     """
     Beyond the reference's reach, a posture is a rival only where the frame prefers it.
