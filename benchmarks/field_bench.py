@@ -46,9 +46,9 @@ from epp_ros.core.estimation import IntegrityLimits, wrong_frames
 from epp_ros.core.estimation.methods import angles_from_joints, ChainMethod
 from epp_ros.core.model import crlb, posterior_crlb
 from epp_ros.core.model import Measurements, Residuals, SensorNoise
-from epp_ros.core.simulation import (FIELD_EFFECTS, field_effects, FieldEffects, JoystickMotion,
-                                     Motion, simulate_field, truck_outriggers, truck_pump,
-                                     WorkingMotion, xie3dim)
+from epp_ros.core.simulation import (BOOM_52M, FIELD_EFFECTS, field_effects, FieldEffects,
+                                     JoystickMotion, Motion, simulate_field, truck_outriggers,
+                                     truck_pump, WorkingMotion, xie3dim)
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -74,10 +74,6 @@ CASES = {
 }
 CALIBRATION = ('offsets', 'anchors_moved', 'real_uwb')
 TARGETS = {'chain': 1.15, 'cepp': 1.3, 'track': 0.7}
-
-
-#: A longer pump than the truck's: six sections, 52 m, the pivot 4 m up.
-BOOM_52M = {'arm_lengths': (10.0, 9.0, 9.0, 8.0, 8.0, 8.0), 'base_height': 4.0}
 
 
 def _real_uwb_family():

@@ -14,15 +14,16 @@
 
 """The simulated pump: geometry, motion, range noise and field effects."""
 from .link_errors import bias_at_range, LinkErrors, markov_step
-from .simulate import (AngleNoise, FIELD_EFFECTS, field_effects, FieldEffects, FieldFrame,
-                       FieldSimulator, JoystickMotion, make_motion, Motion, MOTIONS, observe,
-                       random_posture, RangeNoise, simulate_field, StillMotion, STOP_PROBABILITY,
-                       Trajectory, TRUCK_BODY_ANCHORS, truck_body_anchors, truck_outriggers,
-                       truck_pump, working_cycle, WorkingMotion, XIE3DIM, xie3dim)
+from .simulate import (AngleNoise, BOOM_52M, FIELD_EFFECTS, field_effects, FieldEffects,
+                       FieldFrame, FieldSimulator, JoystickMotion, make_motion, Motion, MOTIONS,
+                       observe, random_posture, RangeNoise, simulate_field, StillMotion,
+                       STOP_PROBABILITY, Trajectory, TRUCK_BODY_ANCHORS, truck_body_anchors,
+                       truck_outriggers, truck_pump, working_cycle, WorkingMotion, XIE3DIM,
+                       xie3dim)
 
 __all__ = ['LinkErrors', 'bias_at_range', 'markov_step', 'XIE3DIM', 'xie3dim', 'truck_pump',
-           'TRUCK_BODY_ANCHORS', 'truck_body_anchors', 'truck_outriggers', 'random_posture',
-           'RangeNoise', 'AngleNoise', 'observe', 'Trajectory', 'working_cycle', 'Motion',
-           'WorkingMotion', 'StillMotion', 'JoystickMotion', 'STOP_PROBABILITY', 'MOTIONS',
-           'make_motion', 'FieldEffects', 'FIELD_EFFECTS', 'field_effects', 'FieldFrame',
-           'FieldSimulator', 'simulate_field']
+           'BOOM_52M', 'TRUCK_BODY_ANCHORS', 'truck_body_anchors', 'truck_outriggers',
+           'random_posture', 'RangeNoise', 'AngleNoise', 'observe', 'Trajectory',
+           'working_cycle', 'Motion', 'WorkingMotion', 'StillMotion', 'JoystickMotion',
+           'STOP_PROBABILITY', 'MOTIONS', 'make_motion', 'FieldEffects', 'FIELD_EFFECTS',
+           'field_effects', 'FieldFrame', 'FieldSimulator', 'simulate_field']

@@ -38,8 +38,8 @@ from epp_ros.core.model.boom import BoomModel
 from epp_ros.core.simulation.link_errors import bias_at_range, LinkErrors, markov_step
 import numpy as np
 
-__all__ = ['XIE3DIM', 'xie3dim', 'truck_pump', 'TRUCK_BODY_ANCHORS', 'truck_body_anchors',
-           'truck_outriggers', 'random_posture', 'RangeNoise', 'AngleNoise',
+__all__ = ['XIE3DIM', 'xie3dim', 'truck_pump', 'BOOM_52M', 'TRUCK_BODY_ANCHORS',
+           'truck_body_anchors', 'truck_outriggers', 'random_posture', 'RangeNoise', 'AngleNoise',
            'observe', 'Trajectory', 'working_cycle', 'Motion', 'WorkingMotion', 'StillMotion',
            'JoystickMotion', 'STOP_PROBABILITY', 'MOTIONS', 'make_motion', 'FieldEffects',
            'FIELD_EFFECTS', 'field_effects', 'FieldFrame', 'FieldSimulator', 'simulate_field']
@@ -93,6 +93,10 @@ def truck_outriggers(model):
 def truck_body_anchors(model):
     """Return the indices of :func:`truck_pump`'s anchors on the truck body in ``model``."""
     return tuple(j for j in TRUCK_BODY_ANCHORS if j < model.n_anchors)
+
+
+#: ``truck_pump``'s keywords for a longer pump: six sections, 52 m, the pivot 4 m up.
+BOOM_52M = {'arm_lengths': (10.0, 9.0, 9.0, 8.0, 8.0, 8.0), 'base_height': 4.0}
 
 
 def truck_pump(arm_lengths=(9.0, 7.0, 7.0, 9.0, 9.0), base_height=3.5, n_anchors=6):

@@ -19,8 +19,8 @@ from epp_ros.core import PostureEstimator
 from epp_ros.core.estimation.metrics import COVERED_FRACTION, frame_rmse, WRONG_M
 from epp_ros.core.estimation.reacquisition import Reacquisition
 from epp_ros.core.model.folds import fold_alternatives
-from epp_ros.core.simulation.simulate import field_effects, JoystickMotion, random_posture, \
-    simulate_field, truck_outriggers, truck_pump, WorkingMotion
+from epp_ros.core.simulation.simulate import BOOM_52M, field_effects, JoystickMotion, \
+    random_posture, simulate_field, truck_outriggers, truck_pump, WorkingMotion
 import numpy as np
 
 
@@ -200,7 +200,7 @@ def test_a_search_in_doubt_is_weighed_with_the_rival_followed():
     two agreed, the doubt ended, and CEPP published frames 6 m off at a predicted RMSE of
     1.2-1.8 m. The rival is solved again and weighed with them.
     """
-    model = truck_pump(arm_lengths=(10.0, 9.0, 9.0, 8.0, 8.0, 8.0), base_height=4.0)
+    model = truck_pump(**BOOM_52M)
     rng = np.random.default_rng([1, 99])
     effects = replace(field_effects('real_uwb,nlos_persistent,tdma,dropouts'),
                       moving_anchors=truck_outriggers(model))
