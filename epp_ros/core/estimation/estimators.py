@@ -45,6 +45,7 @@ from epp_ros.core.model.bounds import RangeBiasPrior
 from epp_ros.core.model.measurements import Measurements, plausible_limits, Residuals, SensorNoise
 from epp_ros.core.model.nlos import NlosMixture, OUTLIER_FRACTION
 from epp_ros.core.model.noise import DEFAULT_NOISE, link_bias_stds, NoiseModel
+from epp_ros.core.model.vectors import norms
 from epp_ros.core.solvers.multilateration import cold_start_guess
 import numpy as np
 
@@ -750,7 +751,12 @@ class PostureEstimator:
         a site with a third of its ranges outliers, the likelier of a warm fit and a
         followed rival was published 7 m off, where a search found the truth's fold); nor
         on a search alone: the rival is weighed with it. The doubt lasts while a joint is
-        ambiguous. Returns (joints, info), verdict, and whether the other fit won.
+        ambiguous, and for the frame after a jump to another basin (the fit left further
+        than ``ambiguity_distance``), weighed with the fit left: on a seven-anchor pump
+        a jump to joint 4's other fold on a frame that preferred it by 11 nats was
+        published on the next two, which preferred the basin left by 7, 6.5 m off at a
+        predicted RMSE of 0.94 m. Returns (joints, info), verdict, and whether the other
+        fit won.
         """
         rival = self._reacquisition.rival_start(stamp)
         fresh = self._solve(measurements, warm=rival is not None, prior=rival)
@@ -776,7 +782,10 @@ class PostureEstimator:
                     moved, other = True, loser
         # In doubt while the other fit makes a joint ambiguous, whatever else refused the
         # frame: a likelier one beyond the reach of a drifted reference is followed so.
-        ambiguous = bool(verdict.values.get('ambiguous_joints'))
+        # And on the frame after a jump to another basin: one frame's word is not enough.
+        jumped = moved and np.max(norms(best[0] - other[0])) > \
+            self._checks.limits.ambiguity_distance
+        ambiguous = bool(verdict.values.get('ambiguous_joints')) or jumped
         if searched:
             self._reacquisition.searched(stamp, ambiguous, other[0])
         else:
