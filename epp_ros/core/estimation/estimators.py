@@ -671,17 +671,17 @@ class PostureEstimator:
         Solve the frame from where its verdict puts a joint likelier; follow it once proven.
 
         A warm fit on a joint's wrong fold, refused as ambiguous, is still the next frame's
-        start: on a four-anchor pump on the joystick the chain's followed the boom for a
-        second with its other joints sliding, until the fold the judge weighs (the joint
-        reflected between its neighbours) was no longer near the truth, and frames were
-        published 5-6 m off at a predicted RMSE of 1 m. Solved from the likelier position,
-        those frames found the truth. The fit so solved is taken (the likelier of the two,
-        the other its alternative) once the evidence for it, summed over the frames in a
-        row it outweighs (``Reacquisition.outweighed_by``), reaches the ambiguity odds;
-        each frame's counts only the links neither fit sets aside: where a tip's ranges
-        were blocked for seconds, its flipped fold was 9 nats likelier by the mixture's
-        prior of blockage and 2.5 by the links both called clear. Returns (joints, info),
-        verdict and whether the new fit won.
+        start: on a four-anchor pump on the joystick the chain's warm fit followed the
+        boom for a second with its other joints sliding, until the fold the judge weighs
+        (the joint reflected between its neighbours) was no longer near the truth, and
+        frames were published 5-6 m off at a predicted RMSE of 1 m. Solved from the
+        likelier position, those frames found the truth. The fit so solved is taken (the
+        likelier of the two, the other its alternative) once the evidence for it, summed
+        over the frames in a row it outweighs (``Reacquisition.outweighed_by``), reaches
+        the ambiguity odds; each frame's counts only the links neither fit sets aside:
+        where a tip's ranges were blocked for seconds, its flipped fold was 9 nats likelier
+        by the mixture's prior of blockage and 2.5 by the links both called clear.
+        Returns (joints, info), verdict and whether the new fit won.
         """
         fresh = self._solve(measurements, warm=True, prior=verdict.likelier)
         if isinstance(fresh, str):

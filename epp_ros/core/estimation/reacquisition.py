@@ -86,9 +86,9 @@ class Reacquisition:
         than the warm fit (negative: less likely), or None to start over (a frame not
         outweighed, or the rival taken). A cumulative sum held at zero or above (CUSUM):
         the estimator follows the rival once it reaches the ambiguity odds, so that a
-        rival one frame's noise favours by a few nats is not followed (a static tip whose
-        other pitch a frame in ten favoured made the estimate flap between the two), and
-        one that frame after frame favours is.
+        rival one frame's noise favours by a nat or two is not followed (taken on one
+        frame's word, a static tip's other pitch made the estimate flap between the two),
+        and one that frame after frame favours is.
         """
         self.rival_evidence = 0.0 if nats is None else max(0.0, self.rival_evidence + nats)
         return self.rival_evidence
