@@ -43,6 +43,15 @@ def _run_never_confidently_wrong(estimator, frames, count):
     return counted
 
 
+def _joystick_stream(method, spec, seed, **pump):
+    """Return a ``truck_pump(**pump)`` estimator and 40 s on the joystick, outriggers free."""
+    model = truck_pump(**pump)
+    rng = np.random.default_rng(seed)
+    effects = replace(field_effects(spec), moving_anchors=truck_outriggers(model))
+    frames = simulate_field(model, JoystickMotion(model, 40.0, rng), 40.0, effects, rng)
+    return PostureEstimator(model, method, moving_anchors=truck_outriggers(model)), frames
+
+
 def test_rejected_frames_are_searched_first_often_then_every_tenth():
     """Across the drop of the warm start too: garbage costs a search per ten frames."""
     policy = Reacquisition(reset_after_failures=10)
@@ -184,11 +193,7 @@ def test_a_fit_the_frame_prefers_beyond_a_drifted_references_reach_keeps_the_dou
     1.5-2 m. Now such a fit makes the joints it moves ambiguous and keeps the stream in
     doubt: the rival is followed until a frame takes it.
     """
-    model = truck_pump(n_anchors=4)
-    rng = np.random.default_rng([0, 99])
-    effects = replace(field_effects('tdma'), moving_anchors=truck_outriggers(model))
-    frames = simulate_field(model, JoystickMotion(model, 40.0, rng), 40.0, effects, rng)
-    estimator = PostureEstimator(model, 'chain', moving_anchors=truck_outriggers(model))
+    estimator, frames = _joystick_stream('chain', 'tdma', [0, 99], n_anchors=4)
     published = _run_never_confidently_wrong(estimator, frames,
                                              lambda _, result: result.valid)
     assert published > len(frames) / 2
@@ -203,12 +208,8 @@ def test_a_search_in_doubt_is_weighed_with_the_rival_followed():
     two agreed, the doubt ended, and CEPP published frames 6 m off at a predicted RMSE of
     1.2-1.8 m. The rival is solved again and weighed with them.
     """
-    model = truck_pump(**BOOM_52M)
-    rng = np.random.default_rng([1, 99])
-    effects = replace(field_effects('real_uwb,nlos_persistent,tdma,dropouts'),
-                      moving_anchors=truck_outriggers(model))
-    frames = simulate_field(model, JoystickMotion(model, 40.0, rng), 40.0, effects, rng)
-    estimator = PostureEstimator(model, 'cepp', moving_anchors=truck_outriggers(model))
+    estimator, frames = _joystick_stream(
+        'cepp', 'real_uwb,nlos_persistent,tdma,dropouts', [1, 99], **BOOM_52M)
     doubted = _run_never_confidently_wrong(
         estimator, frames, lambda estimator, _: estimator._reacquisition.in_doubt)
     assert doubted > 0                              # the frames this is about
@@ -223,11 +224,7 @@ def test_a_fit_a_likelier_fold_outweighs_is_solved_again_from_there():
     longer near the truth: frames published 5-6 m off at a predicted RMSE of 1 m. Solved
     again from the likelier position, the frame finds the truth.
     """
-    model = truck_pump(n_anchors=4)
-    rng = np.random.default_rng([0, 2755])
-    effects = replace(field_effects('real_uwb,tdma'), moving_anchors=truck_outriggers(model))
-    frames = simulate_field(model, JoystickMotion(model, 40.0, rng), 40.0, effects, rng)
-    estimator = PostureEstimator(model, 'chain', moving_anchors=truck_outriggers(model))
+    estimator, frames = _joystick_stream('chain', 'real_uwb,tdma', [0, 2755], n_anchors=4)
     published = _run_never_confidently_wrong(estimator, frames,
                                              lambda _, result: result.valid)
     assert published > 0.75 * len(frames)
@@ -242,12 +239,8 @@ def test_a_jump_to_another_basin_is_weighed_again_on_the_next_frame():
     new one, 6.5 m off at a predicted RMSE of 0.94 m. The fit left is now the rival
     followed on the frame after such a jump.
     """
-    model = truck_pump(n_anchors=7)
-    rng = np.random.default_rng([1, 99])
-    effects = replace(field_effects('real_uwb,nlos_persistent,tdma,dropouts'),
-                      moving_anchors=truck_outriggers(model))
-    frames = simulate_field(model, JoystickMotion(model, 40.0, rng), 40.0, effects, rng)
-    estimator = PostureEstimator(model, 'cepp', moving_anchors=truck_outriggers(model))
+    estimator, frames = _joystick_stream(
+        'cepp', 'real_uwb,nlos_persistent,tdma,dropouts', [1, 99], n_anchors=7)
     jumps = _run_never_confidently_wrong(
         estimator, frames, lambda estimator, result: result.reacquired
         and estimator._reacquisition.in_doubt)
@@ -263,11 +256,7 @@ def test_a_fit_leaving_a_tag_three_clear_ranges_gets_a_second_opinion():
     It was published 8-12 m off at a predicted RMSE of 1.5 m, while a search found the
     truth 13 nats likelier.
     """
-    model = truck_pump(n_anchors=4)
-    rng = np.random.default_rng([2, 99])
-    effects = replace(field_effects('real_uwb'), moving_anchors=truck_outriggers(model))
-    frames = simulate_field(model, JoystickMotion(model, 40.0, rng), 40.0, effects, rng)
-    estimator = PostureEstimator(model, 'chain', moving_anchors=truck_outriggers(model))
+    estimator, frames = _joystick_stream('chain', 'real_uwb', [2, 99], n_anchors=4)
     reacquired = _run_never_confidently_wrong(estimator, frames,
                                               lambda _, result: result.reacquired)
     assert reacquired > 0                           # the frames this is about
