@@ -23,10 +23,10 @@ while the last search left the frame ambiguous, every frame from the rival it fo
 a method with a state of its own, which gets no such second opinion, a fit a rival
 outweighs, spaced as rejected frames are, where the others solve it again, warm, from the
 rival position, and follow it once a run of such frames proves it; and its doubted fits
-a search beside them, at most once a period, taken where the frame proves it) and when the warm
-start is dropped (after ``reset_after_failures`` failures in a row; then the last fit is
-only a provisional start, and what it leads to stands only if a search finds it too).
-``PostureEstimator`` does the solving.
+a search beside them, at most once a period, taken where the frame proves it) and when
+the warm start is dropped (after ``reset_after_failures`` failures in a row; then the last
+fit is only a provisional start, and what it leads to stands only if a search finds it
+too). ``PostureEstimator`` does the solving.
 """
 import numpy as np
 

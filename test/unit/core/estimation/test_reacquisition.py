@@ -20,8 +20,7 @@ from epp_ros.core.estimation.metrics import COVERED_FRACTION, frame_rmse, WRONG_
 from epp_ros.core.estimation.reacquisition import Reacquisition
 from epp_ros.core.model.folds import fold_alternatives
 from epp_ros.core.simulation.simulate import BOOM_52M, field_effects, FieldEffects, \
-    JoystickMotion, \
-    random_posture, simulate_field, truck_outriggers, truck_pump, WorkingMotion
+    JoystickMotion, random_posture, simulate_field, truck_outriggers, truck_pump, WorkingMotion
 import numpy as np
 
 
