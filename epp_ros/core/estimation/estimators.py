@@ -742,15 +742,10 @@ class PostureEstimator:
         fresh = self._solve(measurements, warm=False)
         if isinstance(fresh, str):
             return solved, verdict
-        costs = self._checks.posture_cost(np.array([solved[0], fresh[0]]), measurements)
-        if costs[0] - costs[1] >= math.log(self._checks.limits.ambiguity_odds):
-            _add_alternatives(fresh, [solved[0]])
-            verdict = self._judge(fresh, measurements, stamp)
-            if verdict.status != 'implausible':
-                diagnostics['reacquired'] = True
-                return fresh, verdict
-        _add_alternatives(solved, [fresh[0]])
-        return solved, self._judge(solved, measurements, stamp)
+        best, _, verdict = self._weighed(solved, fresh, measurements, stamp,
+                                         math.log(self._checks.limits.ambiguity_odds))
+        diagnostics['reacquired'] = best is fresh
+        return best, verdict
 
     @property
     def _has_state(self):
@@ -822,15 +817,16 @@ class PostureEstimator:
             self._reacquisition.followed(ambiguous, other[0])
         return best, verdict, moved
 
-    def _weighed(self, solved, fresh, measurements, stamp):
+    def _weighed(self, solved, fresh, measurements, stamp, margin=0.0):
         """
         Return the likelier of two fits of a frame, the other, and the likelier's verdict.
 
-        The other joins the likelier's alternatives, with its own. Not to a posture the boom
-        cannot be in (beyond its reach since the last one).
+        ``fresh`` wins only where more than ``margin`` nats likelier. The other joins the
+        likelier's alternatives, with its own. Not to a posture the boom cannot be in
+        (beyond its reach since the last one).
         """
         costs = self._checks.posture_cost(np.array([solved[0], fresh[0]]), measurements)
-        moved = bool(costs[1] < costs[0]) and \
+        moved = bool(costs[0] - costs[1] > margin) and \
             self._judge(fresh, measurements, stamp).status != 'implausible'
         best, other = (fresh, solved) if moved else (solved, fresh)
         _add_alternatives(best, [other[0], *other[1].get('alternatives', [])])
