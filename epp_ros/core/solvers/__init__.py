@@ -14,8 +14,9 @@
 
 """Numerical solvers: nearest EDM, EDM helpers, multilateration, SDP, one Levenberg–Marquardt."""
 from .block_arrow import damped_step, eliminate, least_squares, normal_equations
-from .edm import (align_to_known, centering_matrix, classical_mds, double_centre, project_edm_cone,
-                  rank_penalty, refine_stress, squared_distances, symmetric_eigh)
+from .edm import (align_to_known, centering_matrix, classical_mds, double_centre, gram_spectrum,
+                  project_edm_cone, rank_penalty, refine_stress, squared_distances,
+                  symmetric_eigh)
 from .levenberg_marquardt import (levenberg_marquardt, levenberg_marquardt_batch,
                                   LevenbergMarquardtResult, marquardt_step)
 from .multilateration import cold_start_guess, intersect_spheres, srls
@@ -26,6 +27,7 @@ __all__ = ['levenberg_marquardt', 'levenberg_marquardt_batch', 'LevenbergMarquar
            'marquardt_step',
            'normal_equations', 'eliminate', 'damped_step', 'least_squares', 'symmetric_eigh',
            'squared_distances', 'centering_matrix', 'double_centre', 'project_edm_cone',
-           'rank_penalty', 'classical_mds', 'align_to_known', 'refine_stress', 'srls',
+           'gram_spectrum', 'rank_penalty', 'classical_mds', 'align_to_known', 'refine_stress',
+           'srls',
            'intersect_spheres', 'cold_start_guess', 'nearest_edm', 'project_constrained_edm',
            'NearestEDMResult', 'ProjectionResult', 'SDPLocalizer']

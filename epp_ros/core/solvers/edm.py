@@ -23,8 +23,8 @@ from scipy.linalg import lapack
 from scipy.optimize import least_squares
 
 __all__ = ['symmetric_eigh', 'squared_distances', 'centering_matrix', 'double_centre',
-           'project_edm_cone', 'rank_penalty', 'classical_mds', 'align_to_known',
-           'refine_stress']
+           'project_edm_cone', 'gram_spectrum', 'rank_penalty', 'classical_mds',
+           'align_to_known', 'refine_stress']
 
 
 def symmetric_eigh(matrix):
@@ -102,13 +102,26 @@ def project_edm_cone(matrix, q=None):
     return matrix - (eigenvectors * positive) @ eigenvectors.T
 
 
-def rank_penalty(edm, rank):
+def gram_spectrum(edm):
+    """
+    Eigenvalues, largest first, and eigenvectors of ``-J D J`` for an EDM ``D`` (n, n).
+
+    The one eigendecomposition behind :func:`rank_penalty` and :func:`classical_mds`: an
+    iterate that needs both computes it once.
+    """
+    gram = -double_centre(edm)
+    eigenvalues, eigenvectors = symmetric_eigh(0.5 * (gram + gram.T))
+    return eigenvalues[::-1], eigenvectors[:, ::-1]
+
+
+def rank_penalty(edm, rank, spectrum=None):
     """
     Rank penalty ``p(D) = sum_{i > r} lambda_i(-J D J)`` and the top-r eigenvectors.
 
     Zero iff the points generating ``edm`` (an EDM or near one) span at most ``rank``
     dimensions. It is concave in D: linearising it at D^k gives the majorisation used by
     the penalty method, ``p(D) <= <D, -J (I - U) J>`` with ``U = P1 P1^T``.
+    ``spectrum``: ``gram_spectrum(edm)``, when known.
 
     Returns
     -------
@@ -120,15 +133,12 @@ def rank_penalty(edm, rank):
         Eigenvectors of the r largest eigenvalues.
 
     """
-    gram = -double_centre(edm)
-    eigenvalues, eigenvectors = symmetric_eigh(0.5 * (gram + gram.T))
-    eigenvalues = eigenvalues[::-1]
-    eigenvectors = eigenvectors[:, ::-1]
+    eigenvalues, eigenvectors = gram_spectrum(edm) if spectrum is None else spectrum
     positive = np.maximum(eigenvalues, 0.0)
     return float(positive[rank:].sum()), float(positive.sum()), eigenvectors[:, :rank]
 
 
-def classical_mds(edm, dim):
+def classical_mds(edm, dim, spectrum=None):
     """
     Classical multidimensional scaling (Torgerson): points whose EDM is nearest ``edm``.
 
@@ -138,6 +148,8 @@ def classical_mds(edm, dim):
         Squared distances.
     dim : int
         Embedding dimension r.
+    spectrum : tuple of ndarray, optional
+        ``gram_spectrum(edm)``, when known.
 
     Returns
     -------
@@ -146,10 +158,9 @@ def classical_mds(edm, dim):
         the origin; negative eigenvalues are clipped to zero.
 
     """
-    gram = -0.5 * double_centre(edm)
-    eigenvalues, eigenvectors = symmetric_eigh(0.5 * (gram + gram.T))
-    order = np.argsort(eigenvalues)[::-1][:dim]
-    return eigenvectors[:, order] * np.sqrt(np.maximum(eigenvalues[order], 0.0))
+    eigenvalues, eigenvectors = gram_spectrum(edm) if spectrum is None else spectrum
+    # Halving is exact: -1/2 J D J has the same eigenvectors, to the last bit.
+    return eigenvectors[:, :dim] * np.sqrt(np.maximum(0.5 * eigenvalues[:dim], 0.0))
 
 
 def align_to_known(points, known_index, known_positions, pivot=None, up_axis=-1):

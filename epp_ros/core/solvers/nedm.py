@@ -41,11 +41,11 @@ holds one problem's fixed data and takes its MM steps and SQUAREM cycles; the it
 ``_Iterate`` values, and the multipliers carried between subproblems a ``_DualState``.
 """
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import NamedTuple, Optional
 
-from epp_ros.core.solvers.edm import (centering_matrix, classical_mds, rank_penalty,
-                                      squared_distances, symmetric_eigh)
+from epp_ros.core.solvers.edm import (centering_matrix, classical_mds, gram_spectrum,
+                                      rank_penalty, squared_distances, symmetric_eigh)
 from epp_ros.core.solvers.point_newton import PointProblem
 import numpy as np
 from scipy.linalg import lapack
@@ -269,17 +269,19 @@ _NEWTON_ATTEMPTS = 2
 
 
 class _Iterate(NamedTuple):
-    """An EDM of the penalty iterations with what one eigendecomposition tells of its rank."""
+    """An EDM of the penalty iterations with what one eigendecomposition tells of it."""
 
     edm: np.ndarray             #: (n, n) squared distances, scaled units
     penalty: float              #: p(D) = sum_{i>r} lambda_i(-JDJ), scaled units
     trace: float                #: sum of the positive eigenvalues of -JDJ, scaled units
     leading: np.ndarray         #: (n, r) eigenvectors of the r largest: U = P1 P1^T
+    points: np.ndarray          #: (n, r) its classical-MDS embedding
 
     @classmethod
     def at(cls, edm, rank):
-        """Return ``edm`` with its rank penalty, trace and leading eigenvectors (one eigh)."""
-        return cls._make((edm, *rank_penalty(edm, rank)))
+        """Return ``edm`` with its rank penalty, trace, leading eigenvectors and points."""
+        spectrum = gram_spectrum(edm)
+        return cls(edm, *rank_penalty(edm, rank, spectrum), classical_mds(edm, rank, spectrum))
 
     @property
     def rank_error(self):
@@ -329,20 +331,28 @@ class _PenaltySolver:
     NEWTON_STEPS = 8
 
     def __init__(self, goal, weights, fixed, rank, tau, inner_tol):
-        n = goal.shape[0]
         self.goal, self.rank, self.inner_tol = goal, rank, inner_tol
+        self.weights, self.tau = weights, tau
         self.sq_weights = weights ** 2
         self.fixed_pairs = np.argwhere(np.triu(fixed, 1))
-        rows, cols = _constraint_operator(n, self.fixed_pairs)
-        majorizer = np.maximum(tau, weights.max(axis=1))      # w_i w_j >= H_ij^2
-        q = np.sqrt(majorizer)
-        self.w_outer = np.outer(majorizer, majorizer)
-        self.q_outer = np.outer(q, q)
-        # Fixed entries of D, as entries of Y = W^1/2 D W^1/2.
-        self.constraint_values = goal[rows, cols] * self.q_outer[rows, cols]
-        self.projector = _Projector(q, rows, cols)
-        self.centering = centering_matrix(np.ones(n))
         self.points = PointProblem(goal, self.sq_weights, self.fixed_pairs)
+
+    @cached_property
+    def _majorant(self):
+        """
+        Return the MM steps' fixed data: (w w^T, q q^T, the fixed entries of Y, projector, J).
+
+        Built at the first step: from a warm start Newton's method usually finishes alone.
+        """
+        n = self.goal.shape[0]
+        rows, cols = _constraint_operator(n, self.fixed_pairs)
+        majorizer = np.maximum(self.tau, self.weights.max(axis=1))      # w_i w_j >= H_ij^2
+        q = np.sqrt(majorizer)
+        q_outer = np.outer(q, q)
+        # Fixed entries of D, as entries of Y = W^1/2 D W^1/2.
+        constraint_values = self.goal[rows, cols] * q_outer[rows, cols]
+        return (np.outer(majorizer, majorizer), q_outer, constraint_values,
+                _Projector(q, rows, cols), centering_matrix(np.ones(n)))
 
     def iterate(self, edm):
         """Return ``edm`` (n, n) as an :class:`_Iterate` of this problem's rank."""
@@ -352,15 +362,15 @@ class _PenaltySolver:
         """Return ``f(D) = 1/2 ||H o (D - G)||^2``, scaled units."""
         return 0.5 * np.sum(self.sq_weights * (edm - self.goal) ** 2)
 
-    def stationarity(self, edm):
+    def stationarity(self, iterate):
         """
-        Return the relative KKT residual of the rank-r problem at ``classical_mds(edm)``.
+        Return the relative KKT residual of the rank-r problem at ``iterate``'s points.
 
         See :meth:`PointProblem.stationarity`. It measures the problem itself, not the
         penalty iterations (whose map crawls once c is large and reports no motion far
         from a minimum).
         """
-        return self.points.stationarity(classical_mds(edm, self.rank))
+        return self.points.stationarity(iterate.points)
 
     def newton(self, iterate, tol, stationarity):
         """
@@ -370,7 +380,7 @@ class _PenaltySolver:
         ``f``: only descent steps are kept), its stationarity and the Newton steps taken.
         """
         points, stationarity, steps = self.points.refine(
-            classical_mds(iterate.edm, self.rank), tol, self.NEWTON_STEPS, stationarity)
+            iterate.points, tol, self.NEWTON_STEPS, stationarity)
         return self.iterate(squared_distances(points)), stationarity, steps
 
     def merit(self, iterate, c):
@@ -386,15 +396,16 @@ class _PenaltySolver:
         projection, warm-started from the last multipliers. Returns the new iterate and
         ``duals`` with this projection's multipliers, Newton iterations and residual.
         """
+        w_outer, q_outer, constraint_values, projector, centering = self._majorant
         edm = iterate.edm
-        basis = self.centering @ iterate.leading if c > 0 else np.zeros((edm.shape[0], 0))
-        complement = self.centering - basis @ basis.T          # J (I - U) J
-        shifted = edm - (self.sq_weights * (edm - self.goal) - c * complement) / self.w_outer
-        projected = self.projector(shifted * self.q_outer, self.constraint_values,
-                                   duals.multipliers, tol=self.inner_tol)
+        basis = centering @ iterate.leading if c > 0 else np.zeros((edm.shape[0], 0))
+        complement = centering - basis @ basis.T          # J (I - U) J
+        shifted = edm - (self.sq_weights * (edm - self.goal) - c * complement) / w_outer
+        projected = projector(shifted * q_outer, constraint_values, duals.multipliers,
+                              tol=self.inner_tol)
         duals = _DualState(projected.multipliers, duals.inner_iterations + projected.iterations,
                            projected.kkt_residual)
-        return self.iterate(projected.matrix / self.q_outer), duals
+        return self.iterate(projected.matrix / q_outer), duals
 
     def squarem_cycle(self, iterate, c, duals):
         """
@@ -500,7 +511,7 @@ def _next_penalty(c, rank_error, rank, rank_tol):
 
 def _stationarity(solver, iterate, rank_tol):
     """Return the KKT residual of ``iterate``, or inf while its rank error is above rank_tol."""
-    return solver.stationarity(iterate.edm) if iterate.rank_error <= rank_tol else np.inf
+    return solver.stationarity(iterate) if iterate.rank_error <= rank_tol else np.inf
 
 
 def _penalty_iterations(solver, iterate, duals, c, tol, rank_tol, max_iter):
@@ -626,7 +637,7 @@ def nearest_edm(target, weights=None, *, rank=3, fixed=None, initial=None, tol=1
             and solver.fixed_pairs.size):
         # A start stationary within tol came back as it was, its fixed distances off by up
         # to tol: they are known. Moved the least onto them, it is judged again.
-        points = solver.points.onto_fixed(classical_mds(outcome.iterate.edm, solver.rank))
+        points = solver.points.onto_fixed(outcome.iterate.points)
         outcome = _penalty_iterations(solver, solver.iterate(squared_distances(points)),
                                       outcome.duals, c, tol, rank_tol, max_iter)
     return _result(solver, outcome, scale, {'tol': tol, 'rank_tol': rank_tol})

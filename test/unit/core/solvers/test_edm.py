@@ -13,8 +13,9 @@
 # limitations under the License.
 
 from epp_ros.core.solvers.edm import (align_to_known, centering_matrix, classical_mds,
-                                      double_centre, project_edm_cone, rank_penalty, refine_stress,
-                                      squared_distances, symmetric_eigh)
+                                      double_centre, gram_spectrum, project_edm_cone,
+                                      rank_penalty, refine_stress, squared_distances,
+                                      symmetric_eigh)
 import numpy as np
 
 
@@ -78,6 +79,26 @@ def test_classical_mds_recovers_points_up_to_rigid_motion():
     embedded = classical_mds(squared_distances(points), 3)
     np.testing.assert_allclose(squared_distances(embedded), squared_distances(points),
                                atol=1e-9)
+
+
+def test_one_spectrum_gives_the_rank_penalty_and_the_embedding_of_a_matrix_near_an_edm():
+    rng = np.random.default_rng(5)
+    edm = squared_distances(rng.standard_normal((9, 3)) * 5)
+    noisy = edm + rng.normal(0.0, 0.5, edm.shape)
+    noisy = 0.5 * (noisy + noisy.T)
+    np.fill_diagonal(noisy, 0.0)
+    eigenvalues, eigenvectors = np.linalg.eigh(-0.5 * double_centre(noisy))
+    top = eigenvectors[:, -2:] * np.sqrt(eigenvalues[-2:])
+    embedded = classical_mds(noisy, 2)
+    # The Gram matrix of the top two: the same whatever the eigenvectors' signs.
+    np.testing.assert_allclose(embedded @ embedded.T, top @ top.T, atol=1e-9)
+    spectrum = gram_spectrum(noisy)
+    np.testing.assert_allclose(spectrum[0], 2.0 * eigenvalues[::-1], atol=1e-9)
+    assert np.array_equal(classical_mds(noisy, 2, spectrum), embedded)
+    assert rank_penalty(noisy, 2, spectrum)[:2] == rank_penalty(noisy, 2)[:2]
+    penalty, trace, _ = rank_penalty(noisy, 2)
+    positive = np.maximum(2.0 * eigenvalues[::-1], 0.0)
+    assert np.isclose(penalty, positive[2:].sum()) and np.isclose(trace, positive.sum())
 
 
 def test_alignment_undoes_rotation_reflection_and_translation():
