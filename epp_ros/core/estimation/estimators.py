@@ -761,7 +761,7 @@ class PostureEstimator:
         return blocked | outlying
 
     def _suspicious(self, verdict, measurements, stamp):
-        """Judge whether a fit sets too many of a tag's links aside, or as outliers (``Reacquisition``)."""
+        """Judge whether a fit sets too many of a tag's links aside (``Reacquisition``)."""
         set_aside = self._set_aside(verdict)
         return set_aside is not None and self._reacquisition.suspicious(
             set_aside, measurements.ranges, stamp, verdict.values.get('outlier_links'))
