@@ -42,7 +42,7 @@ from typing import NamedTuple, Optional
 from epp_ros.core.estimation.bias_learning import bias_design
 from epp_ros.core.estimation.methods.chain import angles_from_joints, ChainMethod
 from epp_ros.core.model.bounds import frame_bounds, RangeBiasPrior
-from epp_ros.core.model.folds import fold_alternatives, tip_circle
+from epp_ros.core.model.folds import fold_alternatives, tip_circle, tip_minima
 from epp_ros.core.model.measurements import Measurements, Residuals, wrap_angle
 from epp_ros.core.model.vectors import norms
 import numpy as np
@@ -736,6 +736,67 @@ class Integrity:
         hinge = joints[-2] if self.model.n_sections > 1 else self.model.pivot(slew)
         return tip_circle(self.model, hinge, slew)[1]
 
+    #: Bends of the last joint but one tried, and for each the tip's, at most.
+    TAIL_BENDS = 2
+
+    def tail_bends(self, joints, measurements, slew, near):
+        """
+        Return the boom with its last two joints at other bends their ranges favour (k, p, 3).
+
+        The judge's other candidates move one joint, or the whole boom: where the outer
+        joints are barely seen (a long boom folded low, its anchors 30-40 m away and
+        within 4 m of one height) the last two sections can fit another pair of bends
+        about as well, each joint metres off. The last joint but one is turned all round
+        its hinge, and at the ``TAIL_BENDS`` lowest minima of its own ranges' loss further
+        than ``near`` (p,) from where it is, the tip all round it, kept at its own
+        ``TAIL_BENDS`` lowest: the postures so placed, the other joints where they are. A
+        bend whose own ranges cost more than the tip's at the estimate and the ambiguity
+        odds together is not tried: no tip makes up for it.
+        """
+        p = self.model.n_sections
+        if p < 2:
+            return np.zeros((0, p, 3))
+        loss = self._bound_loss(measurements)
+        hinge = joints[-3] if p > 2 else self.model.pivot(slew)
+        _, bends = tip_circle(self.model, hinge, slew, section=-2)
+        cost, fitted = np.split(loss.at_points(
+            np.vstack([bends, joints[-2:]]), measurements.ranges, self.model.anchors,
+            tags=np.r_[np.full(len(bends), p - 2), p - 2, p - 1]), [len(bends)])
+        # A bend the tip cannot make up for (its ranges cost >= 0 anywhere) is no rival.
+        hopeless = cost - fitted[0] > fitted[1] + math.log(self.limits.ambiguity_odds)
+        away = (norms(bends - joints[-2]) > near[-2]) & ~hopeless
+        postures = []
+        for bend in bends[tip_minima(cost, away)[:self.TAIL_BENDS]]:
+            _, tips = tip_circle(self.model, bend, slew)
+            tip_cost = loss.at_points(tips, measurements.ranges, self.model.anchors,
+                                      tags=np.full(len(tips), p - 1))
+            for tip in tips[tip_minima(tip_cost, np.ones(len(tips), bool))[:self.TAIL_BENDS]]:
+                posture = np.array(joints, dtype=float)
+                posture[-2:] = bend, tip
+                postures.append(posture)
+        return np.array(postures).reshape(-1, p, 3)
+
+    def _tail_rivals(self, joints, measurements, joint_std, slew, reach):
+        """
+        Return the likeliest of the :meth:`tail_bends` within ``reach``, and it as found.
+
+        Its margin (how much less likely it is than ``joints`` on the frame, nats;
+        negative: likelier) and posture, or inf and None; ``found`` maps each of the last
+        two joints to its position there where the margin is within the ambiguity odds.
+        """
+        tails = self.tail_bends(joints, measurements, slew, self._near(joint_std))
+        if reach is not None and len(tails):
+            tails = tails[np.all(norms(tails[:, -2:] - reach[0][-2:]) <= reach[1][-2:], axis=1)]
+        if not len(tails):
+            return {}, np.inf, None
+        costs = self.posture_cost(np.concatenate([joints[None], tails]), measurements)
+        margins = costs[1:] - costs[0]
+        best = int(np.argmin(margins))
+        p = self.model.n_sections
+        found = {p - 2: tails[best, -2], p - 1: tails[best, -1]} \
+            if margins[best] < math.log(self.limits.ambiguity_odds) else {}
+        return found, float(margins[best]), tails[best]
+
     # -- the verdict ----------------------------------------------------------------------
     def judge(self, joints, measurements, reference=None, elapsed=None, reference_std=None,
               alternatives=(), chain=True, timed_joints=None, rivals=(),
@@ -860,6 +921,12 @@ class Integrity:
         if likeliest is not None:           # the joint moved there, the others kept
             likelier = np.array(joints, dtype=float)
             likelier[likeliest[0]] += likeliest[1] - seen[likeliest[0]]
+        tail_found, tail_margin, tail = self._tail_rivals(seen, measurements, joint_std,
+                                                          angles[0], reach)
+        found = {**tail_found, **found}
+        if tail is not None and tail_margin < values['rival_margin']:
+            values['rival_margin'] = tail_margin
+            likelier = np.array(joints, dtype=float) + (tail - seen)   # the two moved
         values['reach_std'] = np.maximum(joint_std, spread)
         values['reach_turn_std'] = np.maximum(turn_std, self._direction_std(spread))
         assessment = _Assessment(tuple(checks), values, angles, los_rows, joint_std, seen,

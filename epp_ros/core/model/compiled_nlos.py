@@ -17,11 +17,12 @@ The NLOS loss compiled: its formulas for one link, and tags' losses at candidate
 
 ``LinkLoss`` (``core.model.nlos``) is the reference; :func:`link_loss` repeats its
 formulas for one range, from the constants :func:`loss_terms` collects, for the compiled
-fit (``estimation.methods.compiled_chain``) and for :func:`tag_losses`: a tag's ranges
-scored at each of many candidate positions (a joint's other folds, the tip all round its
-hinge, a whole posture), which in numpy is a dozen calls on arrays of a few hundred
-elements per candidate set (issue #30). Imported at first use only
-(``solvers.compiled``).
+fit (``estimation.methods.compiled_chain``), and :func:`link_cost` its cost alone for
+:func:`tag_losses`: a tag's ranges scored at each of many candidate positions (a joint's
+other folds, the tip all round its hinge, a whole posture), which in numpy is a dozen
+calls on arrays of a few hundred elements per candidate set (issue #30). The slope's
+three exponentials are a third of a range's time, and the compiler does not drop them
+when only the cost is read. Imported at first use only (``solvers.compiled``).
 """
 from functools import lru_cache
 import math
@@ -29,7 +30,7 @@ import math
 from epp_ros.core.solvers.compiled import compiled
 import numpy as np
 
-__all__ = ['link_loss', 'log_ndtr', 'loss_terms', 'tag_losses']
+__all__ = ['link_cost', 'link_loss', 'log_ndtr', 'loss_terms', 'tag_losses']
 
 _SQRT1_2 = math.sqrt(0.5)
 _HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
@@ -80,8 +81,8 @@ def _logaddexp(x, y):
 
 
 @compiled
-def link_loss(s, terms, i):
-    """Return (cost, slope) of excess ``s`` on link ``i``: ``LinkLoss.__call__``'s formulas."""
+def _log_total(s, terms, i):
+    """Return the log of the mixture's density at excess ``s`` on link ``i``, z, log cdf(z)."""
     inverse_g, los_offset, blocked_offset = terms[0, i], terms[1, i], terms[2, i]
     outlier_ratio, outlier_offset = terms[3, i], terms[4, i]
     z = s - inverse_g
@@ -89,7 +90,21 @@ def link_loss(s, terms, i):
     los = los_offset - 0.5 * s ** 2
     blocked = blocked_offset - inverse_g * s + log_cdf
     outlier = outlier_offset - 0.5 * (outlier_ratio * s) ** 2
-    total = _logaddexp(_logaddexp(los, blocked), outlier)
+    return _logaddexp(_logaddexp(los, blocked), outlier), los, blocked, outlier, z, log_cdf
+
+
+@compiled
+def link_cost(s, terms, i):
+    """Return the cost of excess ``s`` on link ``i``: :func:`link_loss`'s, without its slope."""
+    total = _log_total(s, terms, i)[0]
+    return -total - terms[5, i] - terms[6, i] * s
+
+
+@compiled
+def link_loss(s, terms, i):
+    """Return (cost, slope) of excess ``s`` on link ``i``: ``LinkLoss.__call__``'s formulas."""
+    inverse_g, outlier_ratio = terms[0, i], terms[3, i]
+    total, _, blocked, outlier, z, log_cdf = _log_total(s, terms, i)
     nlos, outlying = math.exp(blocked - total), math.exp(outlier - total)
     mills = math.exp(-0.5 * z ** 2 - _HALF_LOG_2PI - log_cdf)
     slope = ((1.0 - nlos - outlying) * s + nlos * (inverse_g - mills)
@@ -122,7 +137,7 @@ def tag_losses(points, tags, ranges, sigma, anchors, terms):
             if terms.shape[0] == 0:
                 total += 0.5 * s * s
             else:
-                total += link_loss(s, terms, k * m + j if terms.shape[1] > 1 else 0)[0]
+                total += link_cost(s, terms, k * m + j if terms.shape[1] > 1 else 0)
         out[i] = total
     return out
 

@@ -89,7 +89,7 @@ def folded_angles(model, psi):
     return folded
 
 
-def tip_circle(model, hinge, slew, pitches=TIP_PITCHES):
+def tip_circle(model, hinge, slew, pitches=TIP_PITCHES, section=-1):
     """
     Return the tip's positions at ``pitches`` pitches all round its ``hinge``, in the plane.
 
@@ -103,17 +103,19 @@ def tip_circle(model, hinge, slew, pitches=TIP_PITCHES):
         The boom's plane, radians.
     pitches : int
         How many, evenly spaced from -pi.
+    section : int
+        The section turned round its inner joint, ``hinge``: the tip's by default.
 
     Returns
     -------
     grid : ndarray, shape (pitches,)
-        The tip section's pitches, radians (read-only: one array for every call).
+        The section's pitches, radians (read-only: one array for every call).
     ends : ndarray, shape (pitches, 3)
-        The tip there, metres.
+        Its outer joint there, metres.
 
     """
     grid, cos, sin = _circle(pitches)
-    ends = hinge + model.arm_lengths[-1] * (
+    ends = hinge + model.arm_lengths[section] * (
         cos * [np.cos(slew), np.sin(slew), 0.0] + sin * [0.0, 0.0, 1.0])
     return grid, ends
 

@@ -616,6 +616,34 @@ def test_the_verdict_hands_on_the_likeliest_rival_position_in_place():
     assert verdict.likelier is None and verdict.values['rival_margin'] == np.inf
 
 
+def test_the_last_two_joints_at_other_bends_their_ranges_favour_are_a_rival():
+    """
+    A fit with the last two sections at another pair of bends: no one joint moved fits.
+
+    Turning the last joint but one round its hinge, then the tip round it, finds the
+    truth, likelier: the rival the verdict hands on, the other joints kept.
+    """
+    slew, pitches = 0.3, np.radians([60.0, 30.0, 10.0, -10.0, -60.0])
+    truth = MODEL.forward_kinematics(slew, pitches)
+    bent = MODEL.forward_kinematics(slew, pitches + np.radians([0.0, 0.0, 0.0, 55.0, 80.0]))
+    assert np.all(np.linalg.norm(bent[3:] - truth[3:], axis=1) > 7.0)
+    integrity = Integrity(MODEL, SensorNoise(0.1), NlosMixture(0.05, 1.0))
+    frame = Measurements.ranges_only(MODEL.ranges(truth))
+    tails = integrity.tail_bends(bent, frame, slew, np.full(MODEL.n_sections, 1.0))
+    assert len(tails) and np.all(tails[:, :3] == bent[:3])
+    gaps = np.linalg.norm(tails[:, 3:] - truth[3:], axis=2).max(axis=1)
+    assert gaps.min() < 1.0                         # on the grid of 5 degrees
+    std = np.full(MODEL.n_sections, 0.3)            # as a fit in that basin would predict
+    found, margin, likeliest = integrity._tail_rivals(bent, frame, std, slew, None)
+    assert margin < 0.0 and set(found) == {3, 4}
+    np.testing.assert_array_equal(likeliest[:3], bent[:3])
+    assert np.linalg.norm(likeliest[3:] - truth[3:], axis=1).max() < 1.0
+    reach = (bent, np.full(MODEL.n_sections, 2.0))  # the truth beyond the boom's reach
+    assert integrity._tail_rivals(bent, frame, std, slew, reach) == ({}, np.inf, None)
+    verdict = integrity.judge(truth, frame)         # the truth: its tail alone
+    assert verdict.valid and verdict.values['rival_margin'] > 10.0
+
+
 def test_a_postures_cost_counts_the_links_scored_and_only_those():
     """Each range's share of the loss is its own: masked, it is the frame without it."""
     rng = np.random.default_rng(5)
