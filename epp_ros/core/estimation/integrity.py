@@ -749,9 +749,10 @@ class Integrity:
         about as well, each joint metres off. The last joint but one is turned all round
         its hinge, and at the ``TAIL_BENDS`` lowest minima of its own ranges' loss further
         than ``near`` (p,) from where it is, the tip all round it, kept at its own
-        ``TAIL_BENDS`` lowest: the postures so placed, the other joints where they are. A
-        bend whose own ranges cost more than the tip's at the estimate and the ambiguity
-        odds together is not tried: no tip makes up for it.
+        ``TAIL_BENDS`` lowest: the postures so placed, the other joints where they are.
+        (No bend is ruled out by its own ranges' cost: the mixture's loss of a range can
+        fall below its value at zero excess, by up to 8 nats where the learned shares are
+        large, so what the tip's ranges could make up for has no cheap bound.)
         """
         p = self.model.n_sections
         if p < 2:
@@ -759,14 +760,11 @@ class Integrity:
         loss = self._bound_loss(measurements)
         hinge = joints[-3] if p > 2 else self.model.pivot(slew)
         _, bends = tip_circle(self.model, hinge, slew, section=-2)
-        cost, fitted = np.split(loss.at_points(
-            np.vstack([bends, joints[-2:]]), measurements.ranges, self.model.anchors,
-            tags=np.r_[np.full(len(bends), p - 2), p - 2, p - 1]), [len(bends)])
-        # A bend the tip cannot make up for (its ranges cost >= 0 anywhere) is no rival.
-        hopeless = cost - fitted[0] > fitted[1] + math.log(self.limits.ambiguity_odds)
-        away = (norms(bends - joints[-2]) > near[-2]) & ~hopeless
+        cost = loss.at_points(bends, measurements.ranges, self.model.anchors,
+                              tags=np.full(len(bends), p - 2))
         postures = []
-        for bend in bends[tip_minima(cost, away)[:self.TAIL_BENDS]]:
+        for bend in bends[tip_minima(cost, norms(bends - joints[-2]) > near[-2])
+                          [:self.TAIL_BENDS]]:
             _, tips = tip_circle(self.model, bend, slew)
             tip_cost = loss.at_points(tips, measurements.ranges, self.model.anchors,
                                       tags=np.full(len(tips), p - 1))
