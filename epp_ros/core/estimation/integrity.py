@@ -631,7 +631,7 @@ class Integrity:
         which = np.concatenate([np.arange(p - 1), np.full(len(tip), p - 1)])
         keep = norms(positions - joints[which]) > near[which]
         if reach is not None:
-            keep &= norms(positions - reach[0][which]) <= reach[1][which]
+            keep &= _within_reach(reach, positions, which)
         return positions, which, keep
 
     def _margins(self, joints, measurements, slew, positions, which):
@@ -727,7 +727,7 @@ class Integrity:
         odds = math.log(self.limits.ambiguity_odds)
         rivals = costs[1:] - costs[0] < odds
         if reach is not None:
-            within = np.all(norms(candidates[keep] - reach[0]) <= reach[1], axis=1)
+            within = np.all(_within_reach(reach, candidates[keep]), axis=1)
             rivals &= within | (costs[1:] - costs[0] < -odds)
         return set(np.flatnonzero(far[keep][rivals].any(axis=0)).tolist())
 
@@ -784,7 +784,8 @@ class Integrity:
         """
         tails = self.tail_bends(joints, measurements, slew, self._near(joint_std))
         if reach is not None and len(tails):
-            tails = tails[np.all(norms(tails[:, -2:] - reach[0][-2:]) <= reach[1][-2:], axis=1)]
+            tails = tails[np.all(_within_reach(reach, tails[:, -2:], slice(-2, None)),
+                                 axis=1)]
         if not len(tails):
             return {}, np.inf, None
         costs = self.posture_cost(np.concatenate([joints[None], tails]), measurements)
@@ -1033,6 +1034,16 @@ class Integrity:
         if over.size:
             checks.append((ERROR, 'implausible', f'section {over[0] + 1} turned '
                            f'{turned[over[0]]:.2f} rad in {elapsed:.2f} s'))
+
+
+def _within_reach(reach, positions, joints=slice(None)):
+    """
+    Return whether each of ``positions`` (..., 3) is within ``reach`` of its joint.
+
+    ``reach``: (reference (p, 3), distances (p,)), :meth:`Integrity.reach`'s; ``joints``:
+    which joint each position is (indices, or a slice of the last axis but one).
+    """
+    return norms(positions - reach[0][joints]) <= reach[1][joints]
 
 
 class _Assessment(NamedTuple):
