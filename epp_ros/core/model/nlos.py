@@ -278,6 +278,7 @@ class LinkLoss:
 
     def __init__(self, mixture, sigma, prior=None):
         self.sigma = np.asarray(sigma, dtype=float)
+        self._kernel_sigmas = None
         self.gaussian = mixture.gaussian
         self.off_line = 0.0
         if self.gaussian:
@@ -328,22 +329,29 @@ class LinkLoss:
         if self.sigma.size != 1 and self.sigma.shape != ranges.shape:
             raise ValueError(f'a loss bound to sigmas of shape {self.sigma.shape} scores '
                              f'ranges of shape {ranges.shape}: one sigma, or one per range')
-        sigma = np.broadcast_to(self.sigma, ranges.shape)
         compiled = kernel(KERNEL)
         if compiled is None:
+            sigma = np.broadcast_to(self.sigma, ranges.shape)
             if rows is None:
                 return np.sum(self(range_excess(points, anchors, ranges, sigma))[0], axis=-1)
             excess = range_excess(points, anchors, ranges[rows], sigma[rows])   # (n, m)
             return np.sum(self._rows(rows)(excess)[0], axis=-1)
         if rows is None:
             shape = points.shape[:-1]
-            rows = np.broadcast_to(np.arange(ranges.shape[0]), shape).ravel()
+            rows = np.arange(points.size // 3) % ranges.shape[0]
             points = points.reshape(-1, 3)
         else:
             shape = rows.shape
         return compiled.tag_losses(plain(points), plain(rows, np.int64), plain(ranges),
-                                   plain(sigma), plain(anchors),
+                                   self._kernel_sigma(ranges.shape), plain(anchors),
                                    compiled.loss_terms(self)).reshape(shape)
+
+    def _kernel_sigma(self, shape):
+        """Return the sigmas broadcast to ``shape`` (q, m) as the kernel reads them; kept."""
+        kept = self._kernel_sigmas
+        if kept is None or kept.shape != shape:
+            kept = self._kernel_sigmas = plain(np.broadcast_to(self.sigma, shape))
+        return kept
 
     def _rows(self, rows):
         """Return this loss for the links of ``rows`` of its (q, m) sigmas: (n, m) each."""
