@@ -51,6 +51,8 @@ from scipy.special import betainc, gammaincc, gammainccinv
 __all__ = ['OK', 'WARN', 'ERROR', 'Thresholds', 'IntegrityLimits', 'Verdict', 'Integrity']
 
 OK, WARN, ERROR = 0, 1, 2
+#: nats: a bound is not taken closer than the rounding of the sums it compares.
+_ROUNDING = 1e-9
 
 
 def _chi_square_limit(alpha, dof):
@@ -736,63 +738,88 @@ class Integrity:
         hinge = joints[-2] if self.model.n_sections > 1 else self.model.pivot(slew)
         return tip_circle(self.model, hinge, slew)[1]
 
-    #: Bends of the last joint but one tried, and for each the tip's, at most.
+    #: Bends tried of each joint turned round its hinge, and the most outer joints turned.
     TAIL_BENDS = 2
+    TAIL_JOINTS = 3
 
     def tail_bends(self, joints, measurements, slew, near):
         """
-        Return the boom with its last two joints at other bends their ranges favour (k, p, 3).
+        Return the boom with its outer joints at other bends their ranges favour (k, p, 3).
 
         The judge's other candidates move one joint, or the whole boom: where the outer
         joints are barely seen (a long boom folded low, its anchors 30-40 m away and
-        within 4 m of one height) the last two sections can fit another pair of bends
-        about as well, each joint metres off. The last joint but one is turned all round
-        its hinge, and at the ``TAIL_BENDS`` lowest minima of its own ranges' loss further
-        than ``near`` (p,) from where it is, the tip all round it, kept at its own
-        ``TAIL_BENDS`` lowest: the postures so placed, the other joints where they are.
-        (No bend is ruled out by its own ranges' cost: the mixture's loss of a range can
-        fall below its value at zero excess, by up to 8 nats where the learned shares are
-        large, so what the tip's ranges could make up for has no cheap bound.)
+        within 4 m of one height) the last two or three sections can fit other bends
+        about as well, each joint metres off. From each of the last ``TAIL_JOINTS`` joints
+        but the tip: it is turned all round its hinge, and at the ``TAIL_BENDS`` lowest
+        minima of its own ranges' loss further than ``near`` (p,) from where it is, the
+        next joint round it, kept at its own ``TAIL_BENDS`` lowest, and so on to the tip:
+        the postures so placed, the joints within where they are. A bend is not followed
+        where its ranges and the least the joints beyond it could cost (``LinkLoss.floor``)
+        already make it ``ambiguity_odds`` times less likely than the estimate.
         """
         p = self.model.n_sections
         if p < 2:
             return np.zeros((0, p, 3))
         loss = self._bound_loss(measurements)
-        hinge = joints[-3] if p > 2 else self.model.pivot(slew)
-        _, bends = tip_circle(self.model, hinge, slew, section=-2)
-        cost = loss.at_points(bends, measurements.ranges, self.model.anchors,
-                              tags=np.full(len(bends), p - 2))
-        postures = []
-        for bend in bends[tip_minima(cost, norms(bends - joints[-2]) > near[-2])
-                          [:self.TAIL_BENDS]]:
-            _, tips = tip_circle(self.model, bend, slew)
-            tip_cost = loss.at_points(tips, measurements.ranges, self.model.anchors,
-                                      tags=np.full(len(tips), p - 1))
-            for tip in tips[tip_minima(tip_cost, np.ones(len(tips), bool))[:self.TAIL_BENDS]]:
-                posture = np.array(joints, dtype=float)
-                posture[-2:] = bend, tip
-                postures.append(posture)
-        return np.array(postures).reshape(-1, p, 3)
+        own = loss.at_points(joints[None], measurements.ranges, self.model.anchors)[0]
+        floors = np.sum(np.where(np.isfinite(measurements.ranges), loss.floor, 0.0), axis=1)
+        # The estimate's other terms (tag ranges, angles): a tail's may all be 0.
+        allowed = (math.log(self.limits.ambiguity_odds) + _ROUNDING
+                   + self.posture_cost(joints[None], measurements)[0] - own.sum())
+        tails = [self._bent_from(first, joints, measurements, slew, near, loss, own, floors,
+                                 allowed)
+                 for first in range(p - 2, max(p - 1 - self.TAIL_JOINTS, -1), -1)]
+        return np.concatenate(tails) if tails else np.zeros((0, p, 3))
+
+    def _bent_from(self, first, joints, measurements, slew, near, loss, own, floors,
+                   allowed):
+        """
+        Return :meth:`tail_bends`' postures turned from joint ``first`` out (k, p, 3).
+
+        ``own`` and ``floors`` (p,): each joint's ranges' cost at ``joints`` and the least
+        it could be anywhere; ``allowed``: nats, the most the joints turned may cost more
+        than at ``joints``, less what the joints beyond could cost less.
+        """
+        postures, spent = np.array(joints, dtype=float)[None], np.zeros(1)
+        for k in range(first, self.model.n_sections):
+            hinges = postures[:, k - 1] if k else self.model.pivot(slew)[None]
+            ends = tip_circle(self.model, hinges, slew, section=k)[1]     # (n, pitches, 3)
+            costs = loss.at_points(ends.reshape(-1, 3), measurements.ranges,
+                                   self.model.anchors, tags=np.full(ends[..., 0].size, k))
+            costs = costs.reshape(ends.shape[:2])
+            away = norms(ends - joints[k]) > near[k] if k == first else \
+                np.ones(ends.shape[:2], dtype=bool)
+            rows, bends = np.array([(i, j) for i in range(len(postures))
+                                    for j in tip_minima(costs[i], away[i])[:self.TAIL_BENDS]],
+                                   dtype=int).reshape(-1, 2).T
+            spent = spent[rows] + costs[rows, bends] - own[k]
+            hopeful = spent - np.sum(own[k + 1:] - floors[k + 1:]) <= allowed
+            postures = postures[rows[hopeful]]
+            postures[:, k] = ends[rows[hopeful], bends[hopeful]]
+            spent = spent[hopeful]
+            if not len(postures):
+                break
+        return postures
 
     def _tail_rivals(self, joints, measurements, joint_std, slew, reach):
         """
         Return the likeliest of the :meth:`tail_bends` within ``reach``, and it as found.
 
         Its margin (how much less likely it is than ``joints`` on the frame, nats;
-        negative: likelier) and posture, or inf and None; ``found`` maps each of the last
-        two joints to its position there where the margin is within the ambiguity odds.
+        negative: likelier) and posture, or inf and None; ``found`` maps each joint it
+        turned to its position there where the margin is within the ambiguity odds.
         """
         tails = self.tail_bends(joints, measurements, slew, self._near(joint_std))
+        turned = np.any(tails != joints, axis=2)                            # (k, p)
         if reach is not None and len(tails):
-            tails = tails[np.all(_within_reach(reach, tails[:, -2:], slice(-2, None)),
-                                 axis=1)]
+            within = np.all(_within_reach(reach, tails) | ~turned, axis=1)
+            tails, turned = tails[within], turned[within]
         if not len(tails):
             return {}, np.inf, None
         costs = self.posture_cost(np.concatenate([joints[None], tails]), measurements)
         margins = costs[1:] - costs[0]
         best = int(np.argmin(margins))
-        p = self.model.n_sections
-        found = {p - 2: tails[best, -2], p - 1: tails[best, -1]} \
+        found = {int(k): tails[best, k] for k in np.flatnonzero(turned[best])} \
             if margins[best] < math.log(self.limits.ambiguity_odds) else {}
         return found, float(margins[best]), tails[best]
 

@@ -22,7 +22,9 @@ fit (``estimation.methods.compiled_chain``), and :func:`link_cost` its cost alon
 other folds, the tip all round its hinge, a whole posture), which in numpy is a dozen
 calls on arrays of a few hundred elements per candidate set (issue #30). The slope's
 three exponentials are a third of a range's time, and the compiler does not drop them
-when only the cost is read. Imported at first use only (``solvers.compiled``).
+when only the cost is read. :func:`link_floors`: the least a link's range can cost
+(``LinkLoss.floor``), which rules out candidates no better placed joint could save.
+Imported at first use only (``solvers.compiled``).
 """
 from functools import lru_cache
 import math
@@ -30,7 +32,7 @@ import math
 from epp_ros.core.solvers.compiled import compiled
 import numpy as np
 
-__all__ = ['link_cost', 'link_loss', 'log_ndtr', 'loss_terms', 'tag_losses']
+__all__ = ['link_cost', 'link_floors', 'link_loss', 'log_ndtr', 'loss_terms', 'tag_losses']
 
 _SQRT1_2 = math.sqrt(0.5)
 _HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
@@ -113,6 +115,43 @@ def link_loss(s, terms, i):
 
 
 @compiled
+def blocked_peak(a):
+    """
+    Return the most ``log Phi(t) - a t`` reaches over t, for ``a`` > 0.
+
+    Where ``pdf(t) / cdf(t) = a``: Newton's method on the log of that ratio, concave and
+    falling, lands right of the root from ``-a`` and then falls to it.
+    """
+    t = -a
+    for _ in range(60):
+        mills = math.exp(-0.5 * t * t - _HALF_LOG_2PI - log_ndtr(t))
+        step = (math.log(mills) - math.log(a)) / (-t - mills)
+        t -= step
+        if abs(step) <= 1e-12 * (1.0 + abs(t)):
+            break
+    return log_ndtr(t) - a * t
+
+
+@compiled
+def link_floors(terms):
+    """Return ``LinkLoss.floor`` of each column of :func:`loss_terms`, shape (n,)."""
+    out = np.empty(terms.shape[1])
+    for i in range(terms.shape[1]):
+        inverse_g, los_offset, blocked_offset = terms[0, i], terms[1, i], terms[2, i]
+        outlier_ratio, outlier_offset = terms[3, i], terms[4, i]
+        zero_cost, zero_slope = terms[5, i], terms[6, i]
+        a = inverse_g - zero_slope
+        if a <= 0.0:                # never so (the slope at zero is <= 0): no floor
+            out[i] = -math.inf
+            continue
+        los = los_offset + 0.5 * zero_slope ** 2
+        blocked = blocked_offset - a * inverse_g + blocked_peak(a)
+        outlier = outlier_offset + 0.5 * (zero_slope / outlier_ratio) ** 2
+        out[i] = -_logaddexp(_logaddexp(los, blocked), outlier) - zero_cost
+    return out
+
+
+@compiled
 def tag_losses(points, tags, ranges, sigma, anchors, terms):
     """
     Return the loss of tag ``tags[i]``'s ranges were it at ``points[i]``, shape (n,).
@@ -143,8 +182,9 @@ def tag_losses(points, tags, ranges, sigma, anchors, terms):
 
 
 def compile_now():
-    """Compile :func:`tag_losses` (and the loss it calls) for both kinds of terms."""
+    """Compile :func:`tag_losses` for both kinds of terms, and :func:`link_floors`."""
     points, tags = np.zeros((1, 3)), np.zeros(1, dtype=np.int64)
     ranges, sigma, anchors = np.ones((1, 1)), np.ones((1, 1)), np.ones((1, 3))
     tag_losses(points, tags, ranges, sigma, anchors, np.zeros((0, 0)))
     tag_losses(points, tags, ranges, sigma, anchors, np.ones((7, 1)))
+    link_floors(np.ones((7, 1)))

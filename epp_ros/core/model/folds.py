@@ -97,8 +97,9 @@ def tip_circle(model, hinge, slew, pitches=TIP_PITCHES, section=-1):
     ----------
     model : BoomModel
         The boom: its tip section's length.
-    hinge : ndarray, shape (3,)
-        The joint the tip section hangs from (the pivot for a one-section boom), metres.
+    hinge : ndarray, shape (..., 3)
+        The joint the tip section hangs from (the pivot for a one-section boom), metres;
+        or several, each with its own circle.
     slew : float
         The boom's plane, radians.
     pitches : int
@@ -110,12 +111,12 @@ def tip_circle(model, hinge, slew, pitches=TIP_PITCHES, section=-1):
     -------
     grid : ndarray, shape (pitches,)
         The section's pitches, radians (read-only: one array for every call).
-    ends : ndarray, shape (pitches, 3)
+    ends : ndarray, shape (..., pitches, 3)
         Its outer joint there, metres.
 
     """
     grid, cos, sin = _circle(pitches)
-    ends = hinge + model.arm_lengths[section] * (
+    ends = np.asarray(hinge, dtype=float)[..., None, :] + model.arm_lengths[section] * (
         cos * [np.cos(slew), np.sin(slew), 0.0] + sin * [0.0, 0.0, 1.0])
     return grid, ends
 
@@ -147,7 +148,8 @@ def tip_minima(loss, away):
         Indices into the grid.
 
     """
-    minima = np.flatnonzero((loss <= np.roll(loss, 1)) & (loss <= np.roll(loss, -1)))
+    wrapped = np.concatenate((loss[-1:], loss, loss[:1]))       # the grid is a circle
+    minima = np.flatnonzero((loss <= wrapped[:-2]) & (loss <= wrapped[2:]))
     minima = minima[away[minima]]
     return minima[np.argsort(loss[minima], kind='stable')]
 

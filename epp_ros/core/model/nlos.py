@@ -230,6 +230,23 @@ class NlosMixture:
         return np.where(s > 0.0, np.minimum(cost, inverse_g * s - offset), cost)
 
 
+def _blocked_peak(a, iterations=60):
+    """
+    Return the most ``log Phi(t) - a t`` reaches over t, for each ``a`` > 0.
+
+    Where ``pdf(t) / cdf(t) = a``: Newton's method on the log of that ratio, concave and
+    falling, lands right of the root from ``-a`` and then falls to it.
+    """
+    t = -np.asarray(a, dtype=float)
+    for _ in range(iterations):
+        mills = np.exp(-0.5 * t ** 2 - _HALF_LOG_2PI - log_ndtr(t))
+        step = (np.log(mills) - np.log(a)) / (-t - mills)
+        t = t - step
+        if np.all(np.abs(step) <= 1e-12 * (1.0 + np.abs(t))):
+            break
+    return log_ndtr(t) - a * t
+
+
 def _candidates(points, ranges, anchors, tags):
     """
     Return :meth:`LinkLoss.at_points`' arguments as arrays, their shapes checked.
@@ -352,6 +369,32 @@ class LinkLoss:
         if kept is None or kept.shape != shape:
             kept = self._kernel_sigmas = plain(np.broadcast_to(self.sigma, shape))
         return kept
+
+    @cached_property
+    def floor(self):
+        """
+        No excess costs a link less than this, nats (shaped like the sigmas; 0: Gaussian).
+
+        The tilted loss (:meth:`__call__`) falls below zero where a link's learned shares
+        are large: its tilt, the slope at zero, grows with them. Its mixture's density is
+        at most the sum of each term's own peak, the tilt added: the line of sight's at
+        the slope at zero, the outlier's likewise in its own sigmas, the blocked one where
+        the normal's pdf / cdf at ``s - inverse_g`` equals ``inverse_g`` less the slope.
+        A bound from below, close where one term outweighs the others.
+        """
+        if self.gaussian:
+            return np.zeros(self.sigma.shape)
+        zero_cost, zero_slope = self.at_zero
+        compiled = kernel(KERNEL)
+        if compiled is not None:
+            return compiled.link_floors(compiled.loss_terms(self)).reshape(zero_cost.shape)
+        a = self.inverse_g - zero_slope         # > 0: the slope at zero is never positive
+        peak = _blocked_peak(np.where(a > 0.0, a, 1.0))
+        los = self.los_offset + 0.5 * zero_slope ** 2
+        blocked = self.blocked_offset - a * self.inverse_g + peak
+        outlier = self.outlier_offset + 0.5 * (zero_slope / self.outlier_ratio) ** 2
+        floor = -np.logaddexp(np.logaddexp(los, blocked), outlier) - zero_cost
+        return np.where(a > 0.0, floor, -np.inf)
 
     def _rows(self, rows):
         """Return this loss for the links of ``rows`` of its (q, m) sigmas: (n, m) each."""

@@ -630,8 +630,9 @@ def test_the_last_two_joints_at_other_bends_their_ranges_favour_are_a_rival():
     integrity = Integrity(MODEL, SensorNoise(0.1), NlosMixture(0.05, 1.0))
     frame = Measurements.ranges_only(MODEL.ranges(truth))
     tails = integrity.tail_bends(bent, frame, slew, np.full(MODEL.n_sections, 1.0))
-    assert len(tails) and np.all(tails[:, :3] == bent[:3])
-    gaps = np.linalg.norm(tails[:, 3:] - truth[3:], axis=2).max(axis=1)
+    pairs = np.all(tails[:, :3] == bent[:3], axis=(1, 2))       # the last two turned
+    assert pairs.any() and np.all(tails[:, :2] == bent[:2])     # or the last three
+    gaps = np.linalg.norm(tails[pairs, 3:] - truth[3:], axis=2).max(axis=1)
     assert gaps.min() < 1.0                         # on the grid of 5 degrees
     std = np.full(MODEL.n_sections, 0.3)            # as a fit in that basin would predict
     found, margin, likeliest = integrity._tail_rivals(bent, frame, std, slew, None)
@@ -642,6 +643,56 @@ def test_the_last_two_joints_at_other_bends_their_ranges_favour_are_a_rival():
     assert integrity._tail_rivals(bent, frame, std, slew, reach) == ({}, np.inf, None)
     verdict = integrity.judge(truth, frame)         # the truth: its tail alone
     assert verdict.valid and verdict.values['rival_margin'] > 10.0
+
+
+def test_the_last_three_joints_at_other_bends_their_ranges_favour_are_a_rival():
+    """
+    The last three sections at other bends: neither one joint nor the last two moved fits.
+
+    Turned from the last joint but two, joint by joint, the tails find the truth, likelier:
+    the rival the verdict hands on, the two joints within kept.
+    """
+    slew, pitches = 0.3, np.radians([60.0, 30.0, 10.0, -10.0, -60.0])
+    truth = MODEL.forward_kinematics(slew, pitches)
+    bent = MODEL.forward_kinematics(slew, pitches + np.radians([0.0, 0.0, 40.0, -30.0, 70.0]))
+    assert np.all(np.linalg.norm(bent[2:] - truth[2:], axis=1) > 4.0)
+    integrity = Integrity(MODEL, SensorNoise(0.1), NlosMixture(0.05, 1.0))
+    frame = Measurements.ranges_only(MODEL.ranges(truth))
+    std = np.full(MODEL.n_sections, 0.3)
+    found, margin, likeliest = integrity._tail_rivals(bent, frame, std, slew, None)
+    assert margin < 0.0 and set(found) == {2, 3, 4}
+    np.testing.assert_array_equal(likeliest[:2], bent[:2])
+    assert np.linalg.norm(likeliest[2:] - truth[2:], axis=1).max() < 1.0
+
+
+def test_a_tail_is_dropped_only_where_no_bend_beyond_could_bring_it_within_the_odds():
+    """
+    Against every tail weighed without the bound: none dropped from the wrong fit.
+
+    Some from the truth's fit, each one the frame makes more than ``ambiguity_odds``
+    times less likely than the estimate, by the judge's own loss (blocked links and
+    outliers common).
+    """
+    slew, pitches = 0.3, np.radians([60.0, 30.0, 10.0, -10.0, -60.0])
+    truth = MODEL.forward_kinematics(slew, pitches)
+    bent = MODEL.forward_kinematics(slew, pitches + np.radians([0.0, 0.0, 40.0, -30.0, 70.0]))
+    rng = np.random.default_rng(3)
+    frame = Measurements.ranges_only(MODEL.ranges(truth) + rng.normal(0.0, 1.0, (5, 6)))
+    mixture, near = NlosMixture(0.3, 1.0).judged(0.1), np.full(MODEL.n_sections, 1.0)
+    integrity = Integrity(MODEL, SensorNoise(1.0), mixture)
+    unbounded = Integrity(MODEL, SensorNoise(1.0), mixture,
+                          limits=IntegrityLimits(ambiguity_odds=1e300))
+    for estimate, rivals in ((truth, False), (bent, True)):
+        every = unbounded.tail_bends(estimate, frame, slew, near)
+        kept = integrity.tail_bends(estimate, frame, slew, near)
+        known = [tail.tobytes() for tail in kept]
+        assert set(known) <= {tail.tobytes() for tail in every}
+        assert len(kept) == len(every) > 0 if rivals else len(kept) < len(every)
+        dropped = np.array([tail for tail in every if tail.tobytes() not in known])
+        if not len(dropped):
+            continue
+        costs = integrity.posture_cost(np.concatenate([estimate[None], dropped]), frame)
+        assert np.all(costs[1:] - costs[0] > np.log(integrity.limits.ambiguity_odds))
 
 
 def test_a_postures_cost_counts_the_links_scored_and_only_those():

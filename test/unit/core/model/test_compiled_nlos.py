@@ -154,3 +154,16 @@ def test_no_candidates_score_nothing(path):
     loss = MIXTURES['nlos'].bind(np.float64(0.1))
     assert loss.at_points(np.zeros((0, 3)), ranges, anchors, tags=[]).shape == (0,)
     assert loss.at_points(np.zeros((0, len(tags), 3)), ranges, anchors).shape == (0, len(tags))
+
+
+@pytest.mark.parametrize('name', list(MIXTURES))
+def test_the_floor_is_the_same_compiled_and_in_numpy(name, monkeypatch):
+    sigma = np.array([[0.02, 0.1, 0.3], [1.0, 0.05, 0.2]])
+    priors = (None, np.array([[0.0, 0.3, 0.9], [0.5, 1e-3, 0.2]]))
+    for prior in priors:
+        compiled_floor = LinkLoss(MIXTURES[name], sigma, prior).floor
+        monkeypatch.setattr(compiled, 'COMPILED', False)
+        numpy_floor = LinkLoss(MIXTURES[name], sigma, prior).floor
+        monkeypatch.setattr(compiled, 'COMPILED', True)
+        assert compiled_floor.shape == sigma.shape and np.all(np.isfinite(compiled_floor))
+        np.testing.assert_allclose(compiled_floor, numpy_floor, rtol=1e-12, atol=1e-12)

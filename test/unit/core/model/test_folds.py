@@ -63,6 +63,10 @@ def test_the_tip_circle_is_the_tip_section_round_its_hinge_in_the_plane():
     horizontal = ends[:, :2] - JOINTS[-2, :2]           # along the slew: in the plane
     across = horizontal[:, 0] * np.sin(PSI[0]) - horizontal[:, 1] * np.cos(PSI[0])
     np.testing.assert_allclose(across, 0.0, atol=1e-9)
+    _, each = tip_circle(MODEL, JOINTS[:3], PSI[0], section=2)      # a circle per hinge
+    assert each.shape == (3, TIP_PITCHES, 3)
+    for hinge, circle in zip(JOINTS[:3], each):
+        np.testing.assert_array_equal(circle, tip_circle(MODEL, hinge, PSI[0], section=2)[1])
 
 
 def test_tip_minima_are_the_circles_local_minima_lowest_first_where_away():

@@ -188,3 +188,25 @@ def test_cold_start_finds_the_global_fit_with_blocked_links():
         recall.append((flagged & blocked).sum() / max(blocked.sum(), 1))
         assert (flagged & ~blocked).sum() <= 1       # LOS links are rarely taken for NLOS
     assert np.mean(recall) > 0.5
+
+
+@pytest.mark.parametrize('fraction, gamma, share', [(0.05, 1.0, 0.005), (0.3, 0.3, 0.05),
+                                                    (0.6, 2.5, 0.2), (0.0, 1.0, 0.01)])
+def test_no_excess_costs_a_link_less_than_its_floor(fraction, gamma, share):
+    """
+    The floor bounds the tilted loss from below, learned shares and all.
+
+    Within a few hundredths of a nat where one term of the mixture rules: the line of
+    sight's at the loss's own default shares.
+    """
+    rng = np.random.default_rng(7)
+    sigma = rng.uniform(0.02, 0.5, (3, 4))
+    excess = np.linspace(-40.0, 40.0, 16001)[:, None, None]
+    for prior in (None, rng.uniform(0.0, 0.9, (3, 4))):
+        loss = LinkLoss(NlosMixture(fraction, gamma).judged(share), sigma, prior)
+        least = loss(np.broadcast_to(excess, excess.shape[:1] + sigma.shape))[0].min(axis=0)
+        assert loss.floor.shape == sigma.shape and np.all(loss.floor <= least)
+        if fraction <= 0.05 and prior is None:
+            assert np.all(loss.floor >= least - 0.05)
+    gaussian = LinkLoss(NlosMixture(0.0, 1.0), sigma)
+    assert np.all(gaussian.floor == 0.0) and gaussian.floor.shape == sigma.shape
