@@ -115,7 +115,7 @@ def link_loss(s, terms, i):
 
 
 @compiled
-def blocked_peak(a):
+def _blocked_peak(a):
     """
     Return the most ``log Phi(t) - a t`` reaches over t, for ``a`` > 0.
 
@@ -145,7 +145,7 @@ def link_floors(terms):
             out[i] = -math.inf
             continue
         los = los_offset + 0.5 * zero_slope ** 2
-        blocked = blocked_offset - a * inverse_g + blocked_peak(a)
+        blocked = blocked_offset - a * inverse_g + _blocked_peak(a)
         outlier = outlier_offset + 0.5 * (zero_slope / outlier_ratio) ** 2
         out[i] = -_logaddexp(_logaddexp(los, blocked), outlier) - zero_cost
     return out
