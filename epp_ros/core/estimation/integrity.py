@@ -757,6 +757,11 @@ class Integrity:
         where its ranges and the least the joints beyond it could cost (``LinkLoss.floor``)
         already make it ``ambiguity_odds`` times less likely than the estimate.
         """
+        return self._tail_bends(joints, measurements, slew, near,
+                                self.posture_cost(joints[None], measurements)[0])
+
+    def _tail_bends(self, joints, measurements, slew, near, cost):
+        """Return :meth:`tail_bends`, ``cost`` the estimate's :meth:`posture_cost`."""
         p = self.model.n_sections
         if p < 2:
             return np.zeros((0, p, 3))
@@ -764,8 +769,7 @@ class Integrity:
         own = loss.at_points(joints[None], measurements.ranges, self.model.anchors)[0]
         floors = np.sum(np.where(np.isfinite(measurements.ranges), loss.floor, 0.0), axis=1)
         # The estimate's other terms (tag ranges, angles): a tail's may all be 0.
-        allowed = (math.log(self.limits.ambiguity_odds) + _ROUNDING
-                   + self.posture_cost(joints[None], measurements)[0] - own.sum())
+        allowed = math.log(self.limits.ambiguity_odds) + _ROUNDING + cost - own.sum()
         tails = [self._bent_from(first, joints, measurements, slew, near, loss, own, floors,
                                  allowed)
                  for first in range(p - 2, max(p - 1 - self.TAIL_JOINTS, -1), -1)]
@@ -809,15 +813,15 @@ class Integrity:
         negative: likelier) and posture, or inf and None; ``found`` maps each joint it
         turned to its position there where the margin is within the ambiguity odds.
         """
-        tails = self.tail_bends(joints, measurements, slew, self._near(joint_std))
+        cost = self.posture_cost(joints[None], measurements)[0]
+        tails = self._tail_bends(joints, measurements, slew, self._near(joint_std), cost)
         turned = np.any(tails != joints, axis=2)                            # (k, p)
         if reach is not None and len(tails):
             within = np.all(_within_reach(reach, tails) | ~turned, axis=1)
             tails, turned = tails[within], turned[within]
         if not len(tails):
             return {}, np.inf, None
-        costs = self.posture_cost(np.concatenate([joints[None], tails]), measurements)
-        margins = costs[1:] - costs[0]
+        margins = self.posture_cost(tails, measurements) - cost
         best = int(np.argmin(margins))
         found = {int(k): tails[best, k] for k in np.flatnonzero(turned[best])} \
             if margins[best] < math.log(self.limits.ambiguity_odds) else {}

@@ -407,6 +407,7 @@ class LinkLoss:
             elif name == 'at_zero':
                 setattr(taken, name, tuple(np.broadcast_to(v, self.sigma.shape)[rows]
                                            for v in value))
+        taken._kernel_sigmas = None         # its own sigmas' shape, were it scored compiled
         return taken
 
     def log_likelihood_ratio(self, excess):
